@@ -1,0 +1,348 @@
+"""The one declaration of every tunable parameter in leafsim.
+
+Each :class:`Param` names a value once (dotted path such as ``veins.lateral.spacing``) with
+its type, default, range, unit, help text, GUI group and whether changing it needs a rebuild
+(``rebuild=True``: outline, veins or mesh must be regenerated) or applies live while the leaf
+keeps drying.  Validation, species JSON, the CLI ``--set KEY=VALUE`` overrides, the GUI
+widgets and the generated docs all read :data:`PARAMS`, so they cannot drift apart.
+
+Example
+-------
+>>> p = ParamSet().with_overrides({"veins.main.kappa": 4.0})
+>>> p["veins.main.kappa"]
+4.0
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping
+
+from .errors import LeafsimError
+
+
+@dataclass(frozen=True)
+class Param:
+    """Declaration of one parameter.
+
+    Parameters
+    ----------
+    name : dotted key, e.g. ``"osmosis.diffusion"``; the first component is the stage.
+    kind : ``"float"``, ``"int"``, ``"bool"`` or ``"choice"``.
+    default : value used when neither species nor user sets it.
+    lo, hi : inclusive range (numbers only).
+    unit : physical unit shown in the GUI and docs (``""`` for dimensionless).
+    help : one sentence shown as tooltip and in ``docs/parameters.md``.
+    group : GUI panel / docs section.
+    rebuild : True when a change needs outline/veins/mesh to be regenerated.
+    choices : allowed values for ``kind == "choice"``.
+    log : GUI slider on a logarithmic scale.
+    """
+
+    name: str
+    kind: str
+    default: Any
+    lo: float | None = None
+    hi: float | None = None
+    unit: str = ""
+    help: str = ""
+    group: str = ""
+    rebuild: bool = False
+    choices: tuple[str, ...] = ()
+    log: bool = False
+
+    def coerce(self, value: Any, where: str = "") -> Any:
+        """Return ``value`` converted to this parameter's type, or raise LeafsimError."""
+        at = f"{where}: " if where else ""
+        expect = self.describe()
+        if self.kind == "bool":
+            if isinstance(value, bool):
+                return value
+            if isinstance(value, str) and value.lower() in ("true", "false", "1", "0", "on", "off", "yes", "no"):
+                return value.lower() in ("true", "1", "on", "yes")
+            if isinstance(value, (int, float)) and value in (0, 1):
+                return bool(value)
+            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}")
+        if self.kind == "choice":
+            if isinstance(value, str) and value in self.choices:
+                return value
+            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}")
+        # numbers
+        if isinstance(value, bool):
+            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}")
+        try:
+            num = float(value)
+        except (TypeError, ValueError):
+            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}") from None
+        if not math.isfinite(num):
+            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected a finite {expect}")
+        if self.kind == "int":
+            if num != int(num):
+                raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}")
+            num = int(num)
+        if (self.lo is not None and num < self.lo) or (self.hi is not None and num > self.hi):
+            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r} is out of range: expected {expect}")
+        return num
+
+    def describe(self) -> str:
+        if self.kind == "bool":
+            return "true or false"
+        if self.kind == "choice":
+            return "one of " + ", ".join(self.choices)
+        unit = f" {self.unit}" if self.unit else ""
+        return f"{'an integer' if self.kind == 'int' else 'a number'} in [{self.lo:g}, {self.hi:g}]{unit}"
+
+
+_DECL: list[Param] = []
+
+
+def _f(name, default, lo, hi, unit="", help="", group="", rebuild=False, log=False):
+    _DECL.append(Param(name, "float", float(default), lo, hi, unit, help, group, rebuild, (), log))
+
+
+def _i(name, default, lo, hi, unit="", help="", group="", rebuild=False):
+    _DECL.append(Param(name, "int", int(default), lo, hi, unit, help, group, rebuild))
+
+
+def _b(name, default, help="", group="", rebuild=False):
+    _DECL.append(Param(name, "bool", bool(default), None, None, "", help, group, rebuild))
+
+
+def _c(name, default, choices, help="", group="", rebuild=False):
+    _DECL.append(Param(name, "choice", default, None, None, "", help, group, rebuild, tuple(choices)))
+
+
+# ---------------------------------------------------------------- outline (rebuild)
+G = "Outline"
+_f("outline.simplify", 0.0015, 0.0, 0.02, "× diagonal", "Douglas–Peucker tolerance as a fraction of the image diagonal.", G, True)
+_i("outline.points", 400, 40, 4000, "", "Number of points the traced contour is resampled to (equal arc length).", G, True)
+_f("outline.lobe_depth", 0.06, 0.0, 0.5, "× length", "Minimum sinus depth (relative to leaf length) that separates two lobes.", G, True)
+
+# ---------------------------------------------------------------- veins (rebuild)
+G = "Veins: main"
+_f("veins.main.step", 0.035, 0.005, 0.2, "× length", "Base segment length of main veins, relative to the leaf length.", G, True)
+_f("veins.main.scale_jitter", 0.3, 0.0, 0.9, "", "Random scale of each segment: step × U(1−j, 1+j).", G, True)
+_f("veins.main.kappa", 5.0, 0.0, 45.0, "deg", "κ: local random angle added to each segment's direction, drawn in [−κ, κ].", G, True)
+_f("veins.main.omega", 2.0, -30.0, 30.0, "deg", "ω: global angle that pushes main veins consistently left (+) or right (−).", G, True)
+_f("veins.main.threshold", 0.12, 0.0, 0.6, "× vein", "Threshold zone: the last fraction of each main vein is thin and starts no laterals.", G, True)
+_f("veins.main.width", 0.012, 0.001, 0.05, "× length", "Width of the midrib at the base, relative to the leaf length.", G, True)
+_i("veins.main.max_auto", 7, 1, 15, "", "Maximum number of main veins found automatically from lobe tips.", G, True)
+_f("veins.main.auto_min_angle", 18.0, 0.0, 90.0, "deg", "Automatic targets closer in angle (seen from the base) than this are merged.", G, True)
+
+G = "Veins: lateral"
+_b("veins.lateral.enabled", True, "Grow lateral (secondary) veins.", G, True)
+_i("veins.lateral.spacing", 3, 1, 20, "segments", "Start a lateral on every x-th candidate segment of a main vein.", G, True)
+_c("veins.lateral.alternation", "alternate", ("alternate", "opposite", "left", "right"), "How laterals are placed on the two sides of a main vein.", G, True)
+_f("veins.lateral.angle", 50.0, 10.0, 85.0, "deg", "Angle between a lateral's start–target line and its main vein.", G, True)
+_f("veins.lateral.angle_jitter", 5.0, 0.0, 30.0, "deg", "Random variation of the lateral angle.", G, True)
+_f("veins.lateral.kappa", 4.0, 0.0, 45.0, "deg", "κ for laterals: local random angle per segment.", G, True)
+_f("veins.lateral.step", 0.025, 0.005, 0.2, "× length", "Base segment length of laterals, relative to the leaf length.", G, True)
+_f("veins.lateral.reach", 0.97, 0.3, 1.0, "", "Laterals stop at this fraction of the way to the margin (the margin vein gap).", G, True)
+_f("veins.lateral.width", 0.45, 0.05, 1.0, "× parent", "Width of a lateral at its start relative to the parent vein there.", G, True)
+_b("veins.lateral.curve_apical", True, "Laterals bend toward the apex as they approach the margin (brochidodromous look).", G, True)
+
+G = "Veins: sublateral"
+_b("veins.sub.enabled", True, "Grow sublateral (tertiary branching) veins as Bézier curves.", G, True)
+_i("veins.sub.divisions", 4, 1, 16, "", "n_div: divisions of each lateral that start sublaterals.", G, True)
+_f("veins.sub.angle", 45.0, 5.0, 85.0, "deg", "θ_div: angle of a sublateral to its lateral.", G, True)
+_f("veins.sub.bend", 0.25, 0.0, 0.8, "", "Random perpendicular offset of the Bézier control point, relative to the chord.", G, True)
+_f("veins.sub.reach", 0.92, 0.3, 1.0, "", "Sublaterals end at this fraction of the ray to the margin.", G, True)
+_f("veins.sub.width", 0.5, 0.05, 1.0, "× parent", "Width of a sublateral relative to its lateral.", G, True)
+
+G = "Veins: net"
+_b("veins.net.enabled", False, "Grow a tertiary net: scattered points joined to the nearest vein.", G, True)
+_f("veins.net.spacing", 0.04, 0.01, 0.2, "× length", "Spacing of net points relative to the leaf length.", G, True)
+_f("veins.net.width", 0.35, 0.05, 1.0, "× parent", "Width of net veins relative to the vein they join.", G, True)
+_f("veins.taper", 0.6, 0.0, 1.0, "", "How much a vein thins from its start to its end (0 = constant).", "Veins: main", True)
+
+# ---------------------------------------------------------------- mesh (rebuild)
+G = "Mesh"
+_f("mesh.spacing", 0.028, 0.004, 0.1, "× length", "Poisson-disk spacing r of surface particles, relative to the leaf length.", G, True, log=True)
+_f("mesh.vein_spacing", 0.75, 0.3, 2.0, "× r", "Spacing of vein particles along veins relative to r.", G, True)
+_f("mesh.contour_spacing", 0.8, 0.3, 2.0, "× r", "Spacing of contour particles along the outline relative to r.", G, True)
+_f("mesh.thickness", 0.0004, 0.00005, 0.005, "m", "Blade thickness h: distance of layer V above layer T.", G, True, log=True)
+_c("mesh.veins_included", "sublateral", ("main", "lateral", "sublateral", "net"), "Highest vein order that gets vein particles.", G, True)
+
+# ---------------------------------------------------------------- mass (rebuild)
+G = "Mass"
+_f("mass.weight_main", 1.0, 0.01, 1e4, "", "Dijkstra edge weight factor of main-vein springs.", G, True, log=True)
+_f("mass.weight_lateral", 50.0, 0.01, 1e4, "", "Dijkstra edge weight factor of lateral springs.", G, True, log=True)
+_f("mass.weight_sub", 200.0, 0.01, 1e4, "", "Dijkstra edge weight factor of sublateral/net springs.", G, True, log=True)
+_f("mass.weight_surface", 1000.0, 0.01, 1e5, "", "Dijkstra edge weight factor of surface springs.", G, True, log=True)
+_i("mass.D", 1, 1, 3, "", "Dispersion exponent D in τ = (1 − d/d_max)^D.", G, True)
+_f("mass.m_min", 0.1, 1e-6, 10.0, "mg", "Smallest particle mass (far from veins).", G, True, log=True)
+_f("mass.m_max", 1.0, 1e-4, 100.0, "mg", "Largest particle mass (along the midrib near the petiole).", G, True, log=True)
+_f("mass.water_fraction", 0.7, 0.05, 0.95, "", "Fraction of the initial mass that is water (rest is cytosol).", G, True)
+
+# ---------------------------------------------------------------- osmosis (live)
+G = "Osmosis"
+_f("osmosis.diffusion", 1e-3, 0.0, 1e5, "m²/s", "Osmotic diffusivity λ in physical units (≈1e-3 gives margin-first drying).", G, False, log=True)
+_f("osmosis.loss_top", 0.3, 0.0, 1e3, "1/s", "Evaporation rate of the top layer V (fraction of initial water per second).", G, False, log=True)
+_f("osmosis.loss_bottom", 0.15, 0.0, 1e3, "1/s", "Evaporation rate of the bottom layer T.", G, False, log=True)
+_c("osmosis.solver", "auto", ("auto", "direct", "cg", "jacobi"), "Linear solver of the implicit osmosis step.", G, False)
+_f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True)
+
+# ---------------------------------------------------------------- shrink (live)
+G = "Shrink"
+_f("shrink.sigma_surface_top", 0.18, 0.0, 3.0, "", "σ of surface springs in the top layer V.", G, False)
+_f("shrink.sigma_surface_bottom", 0.15, 0.0, 3.0, "", "σ of surface springs in the bottom layer T.", G, False)
+_f("shrink.sigma_vein", 0.05, 0.0, 3.0, "", "σ of vein springs.", G, False)
+_f("shrink.sigma_link", 0.15, 0.0, 3.0, "", "σ of link springs between the layers.", G, False)
+_f("shrink.alpha", 1.0, 0.1, 4.0, "", "Exponent α of (1 − v_rel) in the shrink law.", G, False)
+_f("shrink.l_min", 0.5, 0.0, 1.0, "× l⁰", "Rest lengths never go below l_min · l⁰.", G, False)
+
+# ---------------------------------------------------------------- dynamics (live)
+G = "Dynamics"
+_f("dynamics.dt", 0.002, 1e-5, 0.1, "s", "Time step Δt.", G, False, log=True)
+_f("dynamics.gravity", 9.81, 0.0, 50.0, "m/s²", "Gravity magnitude (acts along −z).", G, False)
+_f("dynamics.damping", 0.01, 0.0, 1.0, "per frame", "Fraction of velocity removed each frame.", G, False)
+_i("dynamics.iterations", 10, 1, 200, "", "Maximum constraint-projection iterations per frame.", G, False)
+_f("dynamics.tolerance", 1e-4, 1e-9, 1.0, "", "Stop iterating when the largest position change per iteration falls below this × leaf length.", G, False, log=True)
+_f("dynamics.compliance_surface", 1e-7, 0.0, 1.0, "m/N", "XPBD compliance of surface and link springs (0 = rigid).", G, False, log=True)
+_f("dynamics.compliance_vein", 1e-9, 0.0, 1.0, "m/N", "XPBD compliance of vein springs (veins are stiffer).", G, False, log=True)
+_f("dynamics.bending", 0.5, 0.0, 10.0, "", "Bending stiffness: strength of the bending constraints relative to stretching.", G, False)
+_f("dynamics.bending_drying", 4.0, 0.0, 50.0, "", "Factor by which bending stiffness grows as tissue dries out.", G, False)
+_f("dynamics.plasticity", 0.0, 0.0, 1.0, "1/s", "Rate at which bending rest shapes follow the current shape (lasting curl).", G, False)
+_c("dynamics.voronoi", "free", ("free", "replace"), "Layer V: free particles (stable) or re-placed over their triangle each frame (thesis).", G, False)
+_c("dynamics.scene", "ground", ("ground", "hanging", "free"), "Scene: lying on the ground, hanging from a pinned petiole, or free.", G, False)
+_f("dynamics.friction", 0.6, 0.0, 2.0, "", "Coulomb friction coefficient against the ground.", G, False)
+_f("dynamics.collision_margin", 0.5, 0.05, 3.0, "× h", "Self-collision thickness relative to the blade thickness h.", G, False)
+
+# ---------------------------------------------------------------- effects (live)
+G = "Effects"
+for _name, _on, _help in [
+    ("osmosis", True, "Osmotic water flow and evaporation."),
+    ("shrink", True, "Rest lengths shrink as water is lost."),
+    ("gravity", True, "Gravity."),
+    ("pbd", True, "Position-based constraint projection (the blade's elasticity)."),
+    ("bending", True, "Bending stiffness constraints."),
+    ("ground", True, "Ground-plane collision with friction."),
+    ("self_collision", True, "Self-collision so a curling leaf never passes through itself."),
+    ("colour", True, "Pigment aging and colour change."),
+]:
+    _b(f"effects.{_name}", _on, _help, G, False)
+
+# ---------------------------------------------------------------- colour (live)
+G = "Colour"
+_f("colour.age_rate", 0.05, 0.0, 10.0, "1/s", "Senescence rate: how fast the leaf ages through the season.", G, False, log=True)
+_f("colour.season", 0.0, 0.0, 1.0, "", "Starting season: 0 = summer, 1 = late autumn.", G, False)
+_f("colour.chlorophyll_decay", 1.0, 0.0, 20.0, "", "Chlorophyll breakdown per unit of age.", G, False)
+_f("colour.water_sensitivity", 2.0, 0.0, 20.0, "", "How strongly losing water speeds chlorophyll breakdown and browning.", G, False)
+_f("colour.anthocyanin", 0.0, 0.0, 3.0, "", "Anthocyanin made during senescence (reds/purples; maple, pokeweed).", G, False)
+_f("colour.carotenoid", 1.0, 0.0, 3.0, "", "Carotenoid content unmasked when chlorophyll breaks down (yellow/orange).", G, False)
+_f("colour.browning", 1.0, 0.0, 5.0, "", "Browning rate of dead dry tissue (oxidised phenolics).", G, False)
+_f("colour.variation", 0.1, 0.0, 1.0, "", "Random per-leaf variation of the palette (by seed).", G, False)
+
+# ---------------------------------------------------------------- render (live)
+G = "Render"
+_f("render.vein_alpha", 0.8, 0.0, 1.0, "", "Opacity of drawn veins.", G, False)
+_f("render.translucency", 0.35, 0.0, 1.0, "", "Back-lit translucency of the blade.", G, False)
+_f("render.specular", 0.25, 0.0, 1.0, "", "Specular strength of the blade.", G, False)
+_b("render.texture", True, "Use the species photo as the blade's albedo when the species has one.", G, False)
+
+PARAMS: dict[str, Param] = {p.name: p for p in _DECL}
+GROUPS: list[str] = list(dict.fromkeys(p.group for p in _DECL))
+
+
+def unknown_key_message(key: str, where: str = "") -> str:
+    """One-line error for a key that is not declared, with the closest declared names."""
+    import difflib
+
+    near = difflib.get_close_matches(key, PARAMS.keys(), n=3, cutoff=0.6)
+    hint = f" (did you mean {', '.join(near)}?)" if near else f" (see `leafsim params` for the {len(PARAMS)} declared names)"
+    at = f"{where}: " if where else ""
+    return f"{at}unknown parameter '{key}'{hint}"
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Flatten nested dicts ``{"veins": {"main": {"kappa": 5}}}`` to dotted keys."""
+    out: dict[str, Any] = {}
+    for k, v in tree.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if isinstance(v, Mapping) and key not in PARAMS:
+            out.update(flatten(v, key))
+        else:
+            out[key] = v
+    return out
+
+
+class ParamSet(Mapping[str, Any]):
+    """Immutable, validated mapping of every declared parameter to its value."""
+
+    __slots__ = ("_values",)
+
+    def __init__(self, values: Mapping[str, Any] | None = None, where: str = ""):
+        vals = {name: p.default for name, p in PARAMS.items()}
+        for key, value in flatten(values or {}).items():
+            if key not in PARAMS:
+                raise LeafsimError(unknown_key_message(key, where))
+            vals[key] = PARAMS[key].coerce(value, where)
+        if vals["mass.m_min"] > vals["mass.m_max"]:
+            raise LeafsimError(f"{where + ': ' if where else ''}parameter 'mass.m_min' = {vals['mass.m_min']:g} must not exceed 'mass.m_max' = {vals['mass.m_max']:g}")
+        self._values = vals
+
+    def __getitem__(self, key: str) -> Any:
+        try:
+            return self._values[key]
+        except KeyError:
+            raise LeafsimError(unknown_key_message(key)) from None
+
+    def __iter__(self):
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def with_overrides(self, overrides: Mapping[str, Any] | None, where: str = "") -> "ParamSet":
+        """A new ParamSet with ``overrides`` applied and validated."""
+        merged = dict(self._values)
+        merged.update(flatten(overrides or {}))
+        return ParamSet(merged, where)
+
+    def changed(self) -> dict[str, Any]:
+        """Only the values that differ from the declared defaults."""
+        return {k: v for k, v in self._values.items() if v != PARAMS[k].default}
+
+    def rebuild_differs(self, other: "ParamSet") -> bool:
+        """True when any rebuild-needing parameter differs between two sets."""
+        return any(self._values[k] != other._values[k] for k, p in PARAMS.items() if p.rebuild)
+
+    def group(self, prefix: str) -> dict[str, Any]:
+        """Values whose key starts with ``prefix.``, keyed by the remainder."""
+        n = len(prefix) + 1
+        return {k[n:]: v for k, v in self._values.items() if k.startswith(prefix + ".")}
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self._values)
+
+    def __repr__(self) -> str:
+        return f"ParamSet({self.changed()!r})"
+
+
+def parse_set_args(items: Iterable[str]) -> dict[str, Any]:
+    """Parse CLI ``KEY=VALUE`` strings; keys are validated against the declaration."""
+    out: dict[str, Any] = {}
+    for item in items or ():
+        if "=" not in item:
+            raise LeafsimError(f"--set {item!r}: expected KEY=VALUE, e.g. --set osmosis.diffusion=1e-3")
+        key, value = item.split("=", 1)
+        key = key.strip()
+        if key not in PARAMS:
+            raise LeafsimError("--set: " + unknown_key_message(key))
+        out[key] = PARAMS[key].coerce(value.strip(), "--set")
+    return out
+
+
+def markdown_table() -> str:
+    """The parameter reference (docs/parameters.md) generated from the declaration."""
+    lines = ["# leafsim parameters", "", "Generated from `leafsim/params.py` by `leafsim params --markdown`.", ""]
+    for g in GROUPS:
+        lines += [f"## {g}", "", "| name | default | range | unit | rebuild | help |", "|---|---|---|---|---|---|"]
+        for p in _DECL:
+            if p.group != g:
+                continue
+            rng = ", ".join(p.choices) if p.kind == "choice" else ("true/false" if p.kind == "bool" else f"{p.lo:g} … {p.hi:g}")
+            lines.append(f"| `{p.name}` | {p.default} | {rng} | {p.unit} | {'yes' if p.rebuild else 'live'} | {p.help} |")
+        lines.append("")
+    return "\n".join(lines)
