@@ -1,0 +1,245 @@
+"""Command line: ``leafsim [gui|species|params|outline|veins|build|run|bench] ...``.
+
+Every command prints a one-line error and exits with status 2 on bad input; ``--json``
+prints one JSON object on stdout and nothing else.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+from .errors import LeafsimError
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that raises LeafsimError (one line) instead of printing usage + exiting."""
+
+    def error(self, message):  # noqa: D401
+        raise LeafsimError(f"{self.prog}: {message}")
+
+
+def _common(p: argparse.ArgumentParser, seed=True):
+    p.add_argument("--species", default=None, help="species key from the config (see `leafsim species`)")
+    p.add_argument("--config", default=None, help="species config JSON (default: configs/leaves.json)")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a declared parameter, e.g. --set veins.main.kappa=4 (repeatable)")
+    if seed:
+        p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = _Parser(prog="leafsim", description="Procedural leaves and how they age.")
+    sub = ap.add_subparsers(dest="cmd", parser_class=_Parser)
+
+    g = sub.add_parser("gui", help="interactive application (default)")
+    _common(g)
+    g.add_argument("--frames", type=int, default=None, help="run N frames then exit (scripted checks)")
+    g.add_argument("--screenshot", default=None, help="save the final window to this PNG (with --frames)")
+    g.add_argument("--play", action="store_true", help="start with the simulation playing")
+
+    s = sub.add_parser("species", help="list the species library")
+    s.add_argument("--config", default=None)
+    s.add_argument("--json", action="store_true")
+
+    pr = sub.add_parser("params", help="list every declared parameter")
+    pr.add_argument("--json", action="store_true")
+    pr.add_argument("--markdown", action="store_true", help="print the docs/parameters.md table")
+
+    o = sub.add_parser("outline", help="trace a leaf outline from a photo")
+    o.add_argument("image")
+    o.add_argument("--out", default=None, help="PNG with the traced outline, base, apex and lobe tips")
+    o.add_argument("--json", action="store_true")
+    o.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
+
+    v = sub.add_parser("veins", help="grow the venation of a species")
+    _common(v)
+    v.add_argument("--out", default=None, help="PNG of the veins over the photo / outline")
+    v.add_argument("--json", action="store_true")
+
+    b = sub.add_parser("build", help="build the two-layer blade model")
+    _common(b)
+    b.add_argument("--json", action="store_true")
+
+    r = sub.add_parser("run", help="simulate headless")
+    _common(r)
+    r.add_argument("--frames", type=int, required=True)
+    r.add_argument("--effects", default=None, help="comma-separated effects to enable (others off), e.g. osmosis,shrink,pbd")
+    r.add_argument("--stats", default=None, help="write per-frame statistics (JSON lines) here")
+    r.add_argument("--out", default=None, help="folder for final positions (.npz) and PNG frames")
+    r.add_argument("--every", type=int, default=0, help="render a PNG frame every K frames into --out")
+    r.add_argument("--json", action="store_true")
+
+    be = sub.add_parser("bench", help="benchmark the simulation kernels")
+    be.add_argument("--json", action="store_true")
+    be.add_argument("--quick", action="store_true", help="small sizes only")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help"):
+        argv = ["gui"] + argv
+    try:
+        args = build_parser().parse_args(argv)
+        return COMMANDS[args.cmd](args) or 0
+    except LeafsimError as e:
+        print(f"leafsim: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("leafsim: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+    except Exception as e:  # never a traceback for the user
+        if os.environ.get("LEAFSIM_DEBUG"):
+            raise
+        print(f"leafsim: internal error: {type(e).__name__}: {e} (set LEAFSIM_DEBUG=1 for a traceback)", file=sys.stderr)
+        return 1
+
+
+def _emit(args, obj: dict, text: str) -> None:
+    if getattr(args, "json", False):
+        print(json.dumps(obj, sort_keys=True))
+    else:
+        print(text)
+
+
+def _load(args):
+    """Species + validated parameters (species values, then --set overrides)."""
+    from .params import parse_set_args
+    from .species import DEFAULT_SPECIES, get_species
+
+    overrides = parse_set_args(args.sets)
+    sp = get_species(args.species or DEFAULT_SPECIES, args.config)
+    params = sp.params.with_overrides(overrides, where="--set")
+    return sp, params
+
+
+# ------------------------------------------------------------------ commands
+
+def cmd_species(args):
+    from .species import load_library
+
+    lib = load_library(args.config)
+    rows = [sp.summary() for sp in lib.values()]
+    lines = [f"{'key':16s} {'name':32s} {'length':>7s}  photo"]
+    for r in rows:
+        lines.append(f"{r['key']:16s} {r['name']:32s} {r['length_m']:6.3f}m  {r['photo'] or '(drawn outline)'}")
+    _emit(args, {"species": rows}, "\n".join(lines))
+
+
+def cmd_params(args):
+    from .params import PARAMS, markdown_table
+
+    if args.markdown:
+        print(markdown_table())
+        return
+    rows = [{"name": p.name, "kind": p.kind, "default": p.default, "lo": p.lo, "hi": p.hi, "unit": p.unit,
+             "group": p.group, "rebuild": p.rebuild, "choices": list(p.choices), "help": p.help} for p in PARAMS.values()]
+    text = "\n".join(f"{r['name']:36s} {str(r['default']):>10s} {r['unit']:10s} {'rebuild' if r['rebuild'] else 'live':7s} {r['help']}" for r in rows)
+    _emit(args, {"params": rows}, text)
+
+
+def cmd_outline(args):
+    from .outline import draw_outline, load_image, outline_report, trace_outline
+    from .params import ParamSet, parse_set_args
+
+    params = ParamSet(parse_set_args(args.sets))
+    traced = trace_outline(args.image, params)
+    rep = outline_report(traced)
+    if args.out:
+        draw_outline(traced, load_image(args.image), args.out)
+    _emit(args, rep, f"{args.image}: {rep['points']} points, area {rep['area_px']:.0f} px, base {rep['base']}, apex {rep['apex']}, "
+                     f"{len(rep['lobes'])} lobe tips, IoU {rep['iou']:.4f}" + (f" -> {args.out}" if args.out else ""))
+
+
+def cmd_veins(args):
+    from .draw2d import draw_veins, write_png_atomic
+    from .leaf import leaf_shape, species_veins
+
+    sp, params = _load(args)
+    t0 = time.perf_counter()
+    shape = leaf_shape(sp, params)
+    graph = species_veins(sp, shape, params, args.seed)
+    dt = time.perf_counter() - t0
+    rep = {"species": sp.key, "seed": args.seed, "length_m": sp.length_m, **graph.stats}
+    if args.out:
+        photo = None
+        if sp.image is not None:
+            from .outline import load_image
+
+            photo = load_image(sp.image)
+        write_png_atomic(args.out, draw_veins(shape, graph, photo=photo))
+    c = graph.stats["counts"]
+    _emit(args, rep, f"{sp.key} seed {args.seed}: main {c['main']}, lateral {c['lateral']}, sublateral {c['sublateral']}, net {c['net']}; "
+                     f"crossings {graph.stats['crossings']}, outside {graph.stats['outside_length']:.3g} m ({dt * 1000:.0f} ms)"
+                     + (f" -> {args.out}" if args.out else ""))
+
+
+def _model(args):
+    from .blade import build_blade
+    from .leaf import leaf_shape, species_veins
+
+    sp, params = _load(args)
+    shape = leaf_shape(sp, params)
+    graph = species_veins(sp, shape, params, args.seed)
+    model = build_blade(shape, graph, params, args.seed)
+    return sp, params, shape, graph, model
+
+
+def cmd_build(args):
+    sp, params, shape, graph, model = _model(args)
+    rep = {"species": sp.key, "seed": args.seed, **model.to_report()}
+    _emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
+
+
+def cmd_run(args):
+    from .sim.run import run_cli
+
+    if args.frames < 0:
+        raise LeafsimError(f"--frames {args.frames}: expected a non-negative number of frames")
+    if args.every < 0:
+        raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
+    if args.every and not args.out:
+        raise LeafsimError("--every needs --out DIR for the PNG frames")
+    if args.out:
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise LeafsimError(f"--out {out}: exists and is not a folder")
+        if not out.parent.exists():
+            raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
+    sp, params = _load(args)
+    rep = run_cli(sp, params, args)
+    _emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
+
+
+def cmd_bench(args):
+    from .bench import main as bench_main
+
+    return bench_main(json_out=args.json, quick=args.quick)
+
+
+def cmd_gui(args):
+    from .params import parse_set_args
+
+    if args.screenshot and args.frames is None:
+        raise LeafsimError("--screenshot needs --frames N")
+    overrides = parse_set_args(args.sets)
+    from .gui.app import run_app
+
+    return run_app(species=args.species, config=args.config, seed=args.seed, overrides=overrides,
+                   frames=args.frames, screenshot=args.screenshot, play=args.play)
+
+
+COMMANDS = {
+    "gui": cmd_gui, "species": cmd_species, "params": cmd_params, "outline": cmd_outline, "veins": cmd_veins,
+    "build": cmd_build, "run": cmd_run, "bench": cmd_bench,
+}
+
+if __name__ == "__main__":
+    sys.exit(main())

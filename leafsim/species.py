@@ -1,0 +1,257 @@
+"""Species library: strict loading of ``configs/leaves.json``.
+
+Each entry names a leaf: its photo (or a drawn outline), real length, base/apex, main-vein
+targets (explicit or ``"auto"``), the lateral length profile and any parameter values that
+differ from the declared defaults.  Errors name the file, the species and the key.
+
+Coordinates given in an entry (``outline.points``, ``targets``) are *leaf-normalised*:
+base (petiole junction) at (0, 0), apex at (0, 1); they are scaled by ``length_m``.
+Photo coordinates (``base_px``, ``apex_px``) are pixels of the photo.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import ROOT
+from .errors import LeafsimError
+from .params import ParamSet
+
+DEFAULT_CONFIG = ROOT / "configs" / "leaves.json"
+DEFAULT_SPECIES = "maple"
+
+_ENTRY_KEYS = {
+    "name", "latin", "description", "image", "has_photo", "length_m", "base_px", "apex_px",
+    "outline", "targets", "main_origin", "lateral_profile", "params", "photo_note",
+}
+_OUTLINE_KEYS = {"points", "smooth", "teeth"}
+_TEETH_KEYS = {"count", "depth", "skip_base"}
+
+
+@dataclass(frozen=True)
+class Species:
+    """One validated species entry."""
+
+    key: str
+    name: str
+    latin: str
+    length_m: float
+    image: Path | None
+    base_px: tuple[float, float] | None
+    apex_px: tuple[float, float] | None
+    outline_points: np.ndarray | None  # (n, 2) leaf-normalised, None when from photo
+    outline_smooth: int
+    teeth: dict | None
+    targets: np.ndarray | None  # (k, 2) leaf-normalised, None = auto
+    main_origin: str  # "base" (palmate) or "midrib" (pinnate lobes)
+    lateral_profile: np.ndarray  # (k, 2): position along the vein in % -> length factor
+    params: ParamSet
+    description: str = ""
+    overrides: dict = field(default_factory=dict)
+
+    @property
+    def has_photo(self) -> bool:
+        return self.image is not None
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "key": self.key,
+            "name": self.name,
+            "latin": self.latin,
+            "length_m": self.length_m,
+            "photo": str(self.image.relative_to(ROOT)) if self.image and self.image.is_relative_to(ROOT) else (str(self.image) if self.image else None),
+            "targets": "auto" if self.targets is None else len(self.targets),
+            "main_origin": self.main_origin,
+            "overrides": len(self.overrides),
+        }
+
+
+def _err(path: Path, species: str | None, key: str | None, msg: str) -> LeafsimError:
+    where = str(path)
+    if species is not None:
+        where += f": species '{species}'"
+    if key is not None:
+        where += f", key '{key}'"
+    return LeafsimError(f"{where}: {msg}")
+
+
+def _points(path, sp, key, value, min_len=1) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise _err(path, sp, key, "expected a list of [x, y] number pairs") from None
+    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < min_len or not np.isfinite(arr).all():
+        raise _err(path, sp, key, f"expected a list of at least {min_len} [x, y] number pairs")
+    return arr
+
+
+def _pair(path, sp, key, value):
+    if value is None or value == "auto":
+        return None
+    arr = _points(path, sp, key, [value])
+    return (float(arr[0, 0]), float(arr[0, 1]))
+
+
+def load_library(path: str | Path | None = None) -> dict[str, Species]:
+    """Load and validate every species of a config file."""
+    path = Path(path) if path is not None else DEFAULT_CONFIG
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise LeafsimError(f"{path}: species config not found") from None
+    except OSError as e:
+        raise LeafsimError(f"{path}: cannot read species config ({e.strerror})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("species"), dict) or not data["species"]:
+        raise LeafsimError(f"{path}: expected an object with a non-empty 'species' object")
+    return {k: _parse_entry(path, k, v) for k, v in data["species"].items()}
+
+
+def _parse_entry(path: Path, key: str, e: Any) -> Species:
+    if not isinstance(e, dict):
+        raise _err(path, key, None, "expected an object")
+    unknown = set(e) - _ENTRY_KEYS
+    if unknown:
+        raise _err(path, key, sorted(unknown)[0], f"unknown key (expected one of {', '.join(sorted(_ENTRY_KEYS))})")
+    length = e.get("length_m")
+    if isinstance(length, bool) or not isinstance(length, (int, float)) or not (0.005 <= length <= 2.0):
+        raise _err(path, key, "length_m", f"expected the real leaf length in metres in [0.005, 2], got {length!r}")
+
+    image = None
+    if e.get("image") is not None:
+        if not isinstance(e["image"], str):
+            raise _err(path, key, "image", "expected a path string relative to the config's project")
+        image = Path(e["image"])
+        if not image.is_absolute():
+            base_dir = path.parent.parent if path.parent.name == "configs" else path.parent
+            image = (base_dir / image).resolve()
+        if not image.is_file():
+            raise _err(path, key, "image", f"photo {image} not found")
+
+    outline_pts, smooth, teeth = None, 0, None
+    if "outline" in e:
+        o = e["outline"]
+        if not isinstance(o, dict) or "points" not in o:
+            raise _err(path, key, "outline", "expected an object with 'points' (leaf-normalised [x, y] pairs)")
+        bad = set(o) - _OUTLINE_KEYS
+        if bad:
+            raise _err(path, key, f"outline.{sorted(bad)[0]}", f"unknown key (expected {', '.join(sorted(_OUTLINE_KEYS))})")
+        outline_pts = _points(path, key, "outline.points", o["points"], 3)
+        smooth = o.get("smooth", 0)
+        if isinstance(smooth, bool) or not isinstance(smooth, int) or not 0 <= smooth <= 6:
+            raise _err(path, key, "outline.smooth", "expected an integer 0–6 (Chaikin smoothing passes)")
+        if o.get("teeth") is not None:
+            teeth = o["teeth"]
+            if not isinstance(teeth, dict) or set(teeth) - _TEETH_KEYS:
+                raise _err(path, key, "outline.teeth", "expected {count, depth, skip_base}")
+            c, d = teeth.get("count", 0), teeth.get("depth", 0.0)
+            if not isinstance(c, int) or not 0 <= c <= 400 or not isinstance(d, (int, float)) or not 0 <= d <= 0.2:
+                raise _err(path, key, "outline.teeth", "expected count 0–400 and depth 0–0.2")
+    if image is None and outline_pts is None:
+        raise _err(path, key, None, "needs either 'image' (a photo) or 'outline' (drawn points)")
+
+    targets = e.get("targets", "auto")
+    targets = None if targets == "auto" else _points(path, key, "targets", targets, 1)
+    origin = e.get("main_origin", "base")
+    if origin not in ("base", "midrib"):
+        raise _err(path, key, "main_origin", f"expected 'base' or 'midrib', got {origin!r}")
+    prof = _points(path, key, "lateral_profile", e.get("lateral_profile", [[0, 1], [100, 1]]), 2)
+    if (np.diff(prof[:, 0]) <= 0).any() or prof[0, 0] < 0 or prof[-1, 0] > 100 or (prof[:, 1] < 0).any() or (prof[:, 1] > 1.5).any():
+        raise _err(path, key, "lateral_profile", "expected [percent, factor] pairs with increasing percent in 0–100 and factor in 0–1.5")
+    overrides = e.get("params", {})
+    if not isinstance(overrides, dict):
+        raise _err(path, key, "params", "expected an object of parameter values")
+    params = ParamSet(overrides, where=f"{path}: species '{key}'")
+    return Species(
+        key=key,
+        name=str(e.get("name", key)),
+        latin=str(e.get("latin", "")),
+        length_m=float(length),
+        image=image,
+        base_px=_pair(path, key, "base_px", e.get("base_px")),
+        apex_px=_pair(path, key, "apex_px", e.get("apex_px")),
+        outline_points=outline_pts,
+        outline_smooth=smooth,
+        teeth=teeth,
+        targets=targets,
+        main_origin=origin,
+        lateral_profile=prof,
+        params=params,
+        description=str(e.get("description", "")),
+        overrides=dict(overrides),
+    )
+
+
+def get_species(name: str, path: str | Path | None = None) -> Species:
+    lib = load_library(path)
+    if name not in lib:
+        raise LeafsimError(f"unknown species '{name}' (known: {', '.join(sorted(lib))})")
+    return lib[name]
+
+
+# ------------------------------------------------------------------ outline of a species
+
+def chaikin(pts: np.ndarray, passes: int, pin: np.ndarray | None = None) -> np.ndarray:
+    """Chaikin corner cutting of a closed polygon (rounds corners, keeps the shape).
+
+    A vertex equal to ``pin`` (the petiole junction) is kept exactly, so the base stays on
+    the contour.
+    """
+    for _ in range(passes):
+        q = np.roll(pts, -1, axis=0)
+        a = 0.75 * pts + 0.25 * q
+        b = 0.25 * pts + 0.75 * q
+        out = np.empty((2 * len(a), 2))
+        out[0::2] = a
+        out[1::2] = b
+        if pin is not None:
+            hit = np.flatnonzero(np.linalg.norm(pts - pin, axis=1) < 1e-12)
+            for i in hit[::-1]:
+                # vertex i's corner is cut by b[i-1] and a[i]; put the pinned vertex between them
+                out = np.insert(out, 2 * i, pin, axis=0)
+        pts = out
+    return pts
+
+
+def add_teeth(pts: np.ndarray, count: int, depth: float, skip_base: float = 0.15) -> np.ndarray:
+    """Serrate a closed leaf-normalised polygon: ``count`` teeth of ``depth`` along the margin.
+
+    Teeth are saw-shaped (pointing toward the apex); the margin within ``skip_base`` of the
+    base stays entire.
+    """
+    from .geometry import resample_closed, polygon_area
+
+    if count <= 0 or depth <= 0:
+        return pts
+    n = max(count * 12, 200)
+    p = resample_closed(pts, n)
+    if polygon_area(p) < 0:
+        p = p[::-1]
+    # outward normal of a CCW polygon
+    t = np.roll(p, -1, axis=0) - np.roll(p, 1, axis=0)
+    nrm = np.column_stack([t[:, 1], -t[:, 0]])
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
+    s = np.arange(n) / n
+    phase = (s * count) % 1.0
+    saw = np.where(phase < 0.7, phase / 0.7, (1 - phase) / 0.3)  # slow rise, sharp drop
+    keep = np.linalg.norm(p, axis=1) > skip_base
+    fade = np.clip((np.linalg.norm(p, axis=1) - skip_base) / 0.1, 0, 1) * keep
+    return p - nrm * (depth * (1 - saw) * fade)[:, None]
+
+
+def drawn_contour(sp: Species) -> np.ndarray:
+    """Leaf-normalised contour of a drawn species (smoothed and serrated as configured)."""
+    pts = sp.outline_points.copy()
+    if sp.outline_smooth:
+        pts = chaikin(pts, sp.outline_smooth, pin=np.zeros(2))
+    if sp.teeth:
+        pts = add_teeth(pts, int(sp.teeth.get("count", 0)), float(sp.teeth.get("depth", 0.0)), float(sp.teeth.get("skip_base", 0.15)))
+    return pts
