@@ -83,32 +83,60 @@ def _rot(v: np.ndarray, deg: float) -> np.ndarray:
     return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
 
 
-def detect_lobe_tips(contour: np.ndarray, length: float, min_depth: float, max_angle: float = 160.0) -> np.ndarray:
+def detect_lobe_tips(contour: np.ndarray, length: float, min_depth: float, max_angle: float = 160.0, radial: bool = True) -> np.ndarray:
     """Lobe tips of a leaf contour (world frame, base at origin, apex on +y).
 
     The contour is split at sinuses — the deepest contour point between two consecutive
     convex-hull vertices, when deeper than ``min_depth × length`` below the hull edge.
     In every piece the point farthest from the base is a lobe tip.  Pieces whose tip lies
     near the base (< 0.2 length) or points back along the petiole (angle from +y above
-    ``max_angle``) are dropped.  Returns (k, 2) tips ordered by angle from the apex.
+    ``max_angle``) are dropped.  ``radial`` (palmate leaves, lobes radiate from the base):
+    the tip is the lobe point farthest from the base; otherwise (pinnate lobes) the point
+    protruding farthest beyond the chord joining the lobe's two sinuses.
+    Returns (k, 2) tips ordered by angle from the apex.
     """
     n = len(contour)
+    thr = min_depth * length
+
+    def deepest(idx):
+        p, q = contour[idx[0]], contour[idx[-1]]
+        d = q - p
+        L = np.linalg.norm(d)
+        if L == 0 or len(idx) < 3:
+            return None
+        chain = contour[idx]
+        depth = np.abs(d[0] * (chain[:, 1] - p[1]) - d[1] * (chain[:, 0] - p[0])) / L
+        k = int(np.argmax(depth))
+        return int(idx[k]) if depth[k] > thr else None
+
+    def refine(idx, out):
+        """Sinuses inside an open chain: hull of the chain, deepest point under each hull edge."""
+        if len(idx) < 4:
+            return
+        try:
+            hv = np.sort(ConvexHull(contour[idx]).vertices)
+        except Exception:
+            return
+        for a, b in zip(hv[:-1], hv[1:]):
+            if b - a < 2:
+                continue
+            k = deepest(idx[a : b + 1])
+            if k is not None:
+                out.append(k)
+                kk = int(np.flatnonzero(idx == k)[0])
+                refine(idx[a : kk + 1], out)
+                refine(idx[kk : b + 1], out)
+
     hull = np.sort(ConvexHull(contour).vertices)
     sinuses = []
     for a, b in zip(hull, np.roll(hull, -1)):
         idx = np.arange(a, b + (n if b <= a else 0) + 1) % n
-        if len(idx) < 3:
-            continue
-        p, q = contour[a], contour[b]
-        d = q - p
-        L = np.linalg.norm(d)
-        if L == 0:
-            continue
-        chain = contour[idx]
-        depth = np.abs(d[0] * (chain[:, 1] - p[1]) - d[1] * (chain[:, 0] - p[0])) / L
-        k = int(np.argmax(depth))
-        if depth[k] > min_depth * length:
-            sinuses.append(int(idx[k]))
+        k = deepest(idx)
+        if k is not None:
+            sinuses.append(k)
+            kk = int(np.flatnonzero(idx == k)[0])
+            refine(idx[: kk + 1], sinuses)
+            refine(idx[kk:], sinuses)
     r = np.linalg.norm(contour, axis=1)
     if len(sinuses) < 2:
         return contour[[int(np.argmax(r))]]
@@ -116,7 +144,17 @@ def detect_lobe_tips(contour: np.ndarray, length: float, min_depth: float, max_a
     tips = []
     for a, b in zip(sinuses, sinuses[1:] + [sinuses[0] + n]):
         idx = np.arange(a, b + 1) % n
-        k = idx[int(np.argmax(r[idx]))]
+        # the tip protrudes farthest beyond the chord joining the lobe's two sinuses
+        p0, p1 = contour[idx[0]], contour[idx[-1]]
+        d = p1 - p0
+        prot = (d[0] * (contour[idx, 1] - p0[1]) - d[1] * (contour[idx, 0] - p0[0])) * -1.0
+        if radial or np.linalg.norm(d) < 1e-12 or prot.max() <= 0:
+            k = idx[int(np.argmax(r[idx]))]
+        else:
+            prot = prot / np.linalg.norm(d)
+            if prot.max() < thr:
+                continue
+            k = idx[int(np.argmax(prot))]
         t = contour[k]
         ang = np.degrees(np.arctan2(t[0], t[1]))
         if r[k] >= 0.2 * length and abs(ang) <= max_angle:
@@ -169,12 +207,17 @@ class _Grower:
         return float(t.min()) if len(t) else None
 
     # -- growth (Alg. 1 and 2 of the thesis)
-    def grow(self, start, target, step, kappa, omega, jitter, collide, bias_dir=None, bias=0.0):
-        """Grow from ``start`` toward ``target``; returns (points, reached)."""
+    def grow(self, start, target, step, kappa, omega, jitter, collide, initial_dir=None):
+        """Grow from ``start`` toward ``target``; returns (points, reached).
+
+        Each new direction is the mean of the direction to the target and the previous
+        direction (thesis Alg. 1), rotated by ω plus a random angle in [−κ, κ].  An
+        ``initial_dir`` other than the target direction makes the vein arc into its target.
+        """
         pts = [np.asarray(start, float)]
         p = pts[0]
         dist0 = np.linalg.norm(target - p)
-        prev = _unit(target - p)
+        prev = _unit(target - p) if initial_dir is None else _unit(initial_dir)
         travelled = 0.0
         max_steps = int(4 * dist0 / max(step * (1 - jitter), 1e-12)) + 20
         for _ in range(max_steps):
@@ -187,11 +230,6 @@ class _Grower:
                 return np.array(pts), True
             v_gr = to_t / d_t
             d = _unit(v_gr + prev)
-            if bias_dir is not None and bias > 0:
-                prog = min(travelled / max(dist0, 1e-12), 1.0)
-                db = _unit(d + bias * prog * prog * bias_dir)
-                if np.dot(db, v_gr) > 0.3:  # bend toward the apex, never back on itself
-                    d = db
             d = _rot(d, omega + self.rng.uniform(-kappa, kappa))
             seg = step * self.rng.uniform(1 - jitter, 1 + jitter)
             q = p + d * min(seg, d_t)
@@ -212,9 +250,37 @@ class _Grower:
             pts, ok = self.grow(start, target, step, k, o, jitter, collide=True)
             if ok:
                 return pts
-        # fall back to a straight, finely stepped line (always inside for star-shaped paths)
+        # route through an interior waypoint: the point farthest from the margin near the
+        # straight path (lobes that curve away from the base need it)
+        for f in (0.35, 0.5, 0.65, 0.2):
+            wp = self._waypoint(start + f * (target - start), 0.25 * np.linalg.norm(target - start))
+            if wp is None:
+                continue
+            for attempt in range(tries):
+                k = kappa * (1 - attempt / tries)
+                a, ok1 = self.grow(start, wp, step, k, 0.0, jitter, collide=True)
+                if not ok1:
+                    continue
+                self.add(a)
+                b, ok2 = self.grow(wp, target, step, k, 0.0, jitter, collide=True, initial_dir=a[-1] - a[-2])
+                self.P, self.Q = self.P[: -(len(a) - 1)], self.Q[: -(len(a) - 1)]
+                if ok2 and not self._self_hit(list(a), b[0], b[1]):
+                    return np.vstack([a, b[1:]])
+        # last resort: a straight, finely stepped line (the caller checks it for crossings)
         n = max(2, int(np.ceil(np.linalg.norm(target - start) / step)) + 1)
         return np.linspace(start, target, n)
+
+    def _waypoint(self, centre: np.ndarray, radius: float) -> np.ndarray | None:
+        from .geometry import distance_to_polygon
+
+        g = np.linspace(-radius, radius, 15)
+        gx, gy = np.meshgrid(g, g)
+        cand = centre + np.column_stack([gx.ravel(), gy.ravel()])
+        cand = cand[points_in_polygon(cand, self.C)]
+        if len(cand) == 0:
+            return None
+        score = distance_to_polygon(cand, self.C) - 0.3 * np.linalg.norm(cand - centre, axis=1)
+        return cand[int(np.argmax(score))]
 
 
 def _inside_point(shape: LeafShape, tip: np.ndarray, toward: np.ndarray, offset: float) -> np.ndarray:
@@ -228,6 +294,18 @@ def _inside_point(shape: LeafShape, tip: np.ndarray, toward: np.ndarray, offset:
         if points_in_polygon(q[None], shape.contour)[0]:
             return q
     return tip + 0.5 * d
+
+
+def _root(shape: LeafShape, g: "_Grower", d_target: np.ndarray, d_apex: np.ndarray, dist: float):
+    """First point of a palmate main vein: half a step from the base into the blade, turned
+    from the target direction toward the midrib until it is inside (bases often sit in a notch)."""
+    for w in np.linspace(0.0, 0.9, 10):
+        d = _unit((1 - w) * d_target + w * d_apex)
+        q = shape.base + d * dist
+        if points_in_polygon(q[None], shape.contour)[0] and not len(segment_hits(shape.base + 1e-9 * d, q, g.CP, g.CQ)) \
+                and not len(segment_hits(shape.base, q, g.P, g.Q)):
+            return q
+    return None
 
 
 def _widths(points: np.ndarray, w0: float, taper: float, thin_from: float | None = None) -> np.ndarray:
@@ -278,7 +356,7 @@ def grow_veins(
     inset = 0.035 * L
     apex_t = _inside_point(shape, shape.apex, np.zeros(2), inset)
     if targets is None:
-        tips = detect_lobe_tips(shape.contour, L, p["outline.lobe_depth"])
+        tips = detect_lobe_tips(shape.contour, L, p["outline.lobe_depth"], radial=main_origin == "base")
         others = []
         min_ang = p["veins.main.auto_min_angle"]
         ang_apex = 0.0
@@ -335,7 +413,9 @@ def grow_veins(
             w0 = np.interp(mid_frac[best], mid_frac, graph.veins[0].widths) * 0.7
         else:
             tgt = _inside_point(shape, t, np.zeros(2), inset)
-            start = shape.base + _unit(tgt - shape.base) * 0.5 * step_m
+            start = _root(shape, g, _unit(tgt - shape.base), _unit(apex_t - shape.base), 0.5 * step_m)
+            if start is None:
+                continue
             parent = -1
             w0 = w_main * 0.75
         pts = g.grow_main(start, tgt, step_m, kappa, np.sign(t[0]) * abs(omega) * 0.5, jit)
@@ -390,8 +470,9 @@ def grow_veins(
                         continue
                     if any(_proper(pts[i], tgt, a, b) for a, b in lat_lines):
                         continue  # start–target line test (thesis §3.3)
-                    bias = 0.8 if p["veins.lateral.curve_apical"] else 0.0
-                    lv, _ = g.grow(pts[i], tgt, lstep, lk, 0.0, jit, True, fwd, bias)
+                    # arching laterals leave the main vein more steeply and bend toward the apex
+                    d0 = _rot(fwd, side * min(ang + 25.0, 88.0)) if p["veins.lateral.curve_apical"] else None
+                    lv, _ = g.grow(pts[i], tgt, lstep, lk, 0.0, jit, True, d0)
                     if len(lv) < 3:
                         continue
                     g.add(lv)
@@ -478,8 +559,19 @@ def count_crossings(graph: VeinGraph) -> int:
     P, Q, _ = graph.segments()
     n = len(P)
     total = 0
-    for i in range(n):
-        total += len(segment_hits(P[i], Q[i], P[i + 1 :], Q[i + 1 :]))
+    eps = 1e-9
+    for k in range(0, n, 256):
+        a, b = P[k : k + 256, None, :], Q[k : k + 256, None, :]
+        r = b - a
+        s = (Q - P)[None]
+        qp = P[None] - a
+        denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (qp[..., 0] * s[..., 1] - qp[..., 1] * s[..., 0]) / denom
+            u = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
+        hit = (np.abs(denom) > 1e-18) & (t > eps) & (t < 1 - eps) & (u > eps) & (u < 1 - eps)
+        i = np.arange(k, min(k + 256, n))[:, None]
+        total += int(np.count_nonzero(hit & (np.arange(n)[None] > i)))
     return total
 
 

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Set up leafsim on a fresh Debian/Ubuntu machine: the system libraries Debian must provide
+# (Mesa EGL/GL for offscreen rendering, Xvfb for GUI tests) and a virtual environment .venv
+# installed from this project's own pyproject.toml.  Safe to run again: it only installs
+# what is missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+DEB_PKGS="libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 libglx-mesa0 xvfb xauth"
+missing=""
+for p in $DEB_PKGS; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"
+done
+if [ -n "$missing" ]; then
+  SUDO=""
+  [ "$(id -u)" = 0 ] || SUDO="sudo"
+  echo "setup: installing Debian packages:$missing"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $missing >/dev/null
+fi
+
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv"
+  "$PY" -m venv .venv
+fi
+stamp=.venv/.leafsim-installed
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  echo "setup: installing leafsim and its dependencies into .venv"
+  .venv/bin/python -m pip install -q --upgrade pip
+  .venv/bin/python -m pip install -q -e ".[test]"
+  touch "$stamp"
+fi
+echo "setup: ready (.venv/bin/leafsim)"

@@ -1,0 +1,68 @@
+import math
+
+import pytest
+
+from leafsim.errors import LeafsimError
+from leafsim.params import GROUPS, PARAMS, ParamSet, markdown_table, parse_set_args
+
+
+@pytest.mark.parametrize("name", sorted(PARAMS))
+def test_default_in_range_and_described(name):
+    p = PARAMS[name]
+    assert p.help and p.group in GROUPS
+    assert p.coerce(p.default) == p.default
+    if p.kind in ("float", "int"):
+        assert p.lo <= p.default <= p.hi
+        assert math.isfinite(p.lo) and math.isfinite(p.hi) and p.lo < p.hi
+    if p.kind == "choice":
+        assert p.default in p.choices
+
+
+def test_names_are_dotted_and_unique():
+    assert len(PARAMS) > 60
+    for name in PARAMS:
+        assert name.count(".") >= 1 and name == name.strip()
+
+
+def test_unknown_key_rejected_with_suggestion():
+    with pytest.raises(LeafsimError, match=r"unknown parameter 'veins.main.kapa'.*veins.main.kappa"):
+        ParamSet({"veins.main.kapa": 1})
+
+
+@pytest.mark.parametrize("key,value", [
+    ("mesh.spacing", -0.01), ("mesh.spacing", float("nan")), ("dynamics.tolerance", 0.0),
+    ("veins.lateral.spacing", 2.5), ("veins.lateral.alternation", "zigzag"), ("effects.pbd", "maybe"),
+    ("veins.main.kappa", "abc"), ("dynamics.dt", float("inf")), ("mass.D", True),
+])
+def test_bad_values_rejected_naming_the_key(key, value):
+    with pytest.raises(LeafsimError) as e:
+        ParamSet({key: value})
+    msg = str(e.value)
+    assert key in msg and "expected" in msg and "\n" not in msg
+
+
+def test_nested_and_flat_keys_agree_and_overrides_validate():
+    a = ParamSet({"veins": {"main": {"kappa": 7}}})
+    b = ParamSet({"veins.main.kappa": 7})
+    assert a == b and a["veins.main.kappa"] == 7.0
+    c = b.with_overrides({"osmosis.diffusion": 5e-4})
+    assert c["osmosis.diffusion"] == 5e-4 and c.changed() == {"veins.main.kappa": 7.0, "osmosis.diffusion": 5e-4}
+    assert b.rebuild_differs(ParamSet()) and not c.with_overrides({"veins.main.kappa": 7}).rebuild_differs(c)
+
+
+def test_m_min_must_not_exceed_m_max():
+    with pytest.raises(LeafsimError, match="mass.m_min"):
+        ParamSet({"mass.m_min": 5, "mass.m_max": 1})
+
+
+def test_set_args_parse_types():
+    d = parse_set_args(["veins.lateral.spacing=4", "effects.pbd=off", "dynamics.voronoi=replace"])
+    assert d == {"veins.lateral.spacing": 4, "effects.pbd": False, "dynamics.voronoi": "replace"}
+    with pytest.raises(LeafsimError, match="KEY=VALUE"):
+        parse_set_args(["novalue"])
+
+
+def test_markdown_lists_every_parameter():
+    md = markdown_table()
+    for name in PARAMS:
+        assert f"`{name}`" in md
