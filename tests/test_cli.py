@@ -1,0 +1,134 @@
+"""The command-line contract: --json prints one object, bad input gives one line and exit 2."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from leafsim.cli import main
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_species_json(capsys):
+    code, out, err = run(capsys, "species", "--json")
+    assert code == 0 and err == ""
+    data = json.loads(out)
+    assert len(data["species"]) >= 8
+
+
+def test_veins_json_and_png(capsys, tmp_path):
+    png = tmp_path / "v.png"
+    code, out, err = run(capsys, "veins", "--species", "oak", "--seed", "2", "--json", "--out", str(png))
+    assert code == 0
+    d = json.loads(out)
+    assert d["crossings"] == 0 and d["outside_length"] == 0 and d["counts"]["main"] >= 5
+    import cv2
+
+    img = cv2.imread(str(png))
+    assert img is not None and img.shape[0] > 200
+    # the right half (veins over the photo) has the red midrib colour somewhere
+    right = img[:, img.shape[1] // 2 :]
+    assert ((right[:, :, 2] > 150) & (right[:, :, 1] < 60) & (right[:, :, 0] < 60)).sum() > 100
+
+
+def test_same_seed_byte_identical_json(capsys):
+    a = run(capsys, "veins", "--species", "maple", "--seed", "7", "--json")[1]
+    b = run(capsys, "veins", "--species", "maple", "--seed", "7", "--json")[1]
+    c = run(capsys, "veins", "--species", "maple", "--seed", "8", "--json")[1]
+    assert a == b and a != c
+
+
+def test_outline_json(capsys, tmp_path):
+    code, out, err = run(capsys, "outline", "images/quercus_01.png", "--json", "--out", str(tmp_path / "o.png"))
+    d = json.loads(out)
+    assert code == 0 and d["iou"] >= 0.98 and {"points", "area_px", "base", "apex", "lobes"} <= set(d)
+    assert (tmp_path / "o.png").is_file()
+
+
+def _bad(capsys, argv, needle):
+    code, out, err = run(capsys, *argv)
+    assert code == 2, (code, err)
+    assert out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("leafsim: "), err
+    assert needle in err, err
+    assert "Traceback" not in err
+
+
+def test_missing_image(capsys):
+    _bad(capsys, ["outline", "no/such.png"], "no/such.png")
+
+
+def test_unreadable_image(capsys, tmp_path):
+    p = tmp_path / "junk.png"
+    p.write_bytes(b"\x89PNG not really")
+    _bad(capsys, ["outline", str(p)], str(p))
+
+
+def test_empty_image(capsys, tmp_path):
+    p = tmp_path / "empty.jpg"
+    p.write_bytes(b"")
+    _bad(capsys, ["outline", str(p)], str(p))
+
+
+def test_image_with_no_leaf(capsys, tmp_path):
+    import cv2
+
+    p = tmp_path / "blank.png"
+    cv2.imwrite(str(p), np.full((200, 300, 3), 255, np.uint8))
+    _bad(capsys, ["outline", str(p)], "no leaf")
+
+
+def test_malformed_json(capsys, tmp_path):
+    p = tmp_path / "leaves.json"
+    p.write_text('{"species": {"a": ')
+    _bad(capsys, ["veins", "--config", str(p), "--species", "a"], "malformed JSON")
+
+
+def test_unknown_species(capsys):
+    _bad(capsys, ["veins", "--species", "baobab"], "unknown species 'baobab'")
+
+
+def test_unknown_key_in_entry(capsys, tmp_path):
+    p = tmp_path / "leaves.json"
+    p.write_text(json.dumps({"species": {"a": {"length_m": 0.1, "outline": {"points": [[0, 0], [1, 1], [0, 1]]}, "colour": 1}}}))
+    _bad(capsys, ["veins", "--config", str(p), "--species", "a"], "key 'colour'")
+
+
+def test_value_out_of_range_in_entry(capsys, tmp_path):
+    p = tmp_path / "leaves.json"
+    p.write_text(json.dumps({"species": {"a": {"length_m": 0.1, "outline": {"points": [[0, 0], [1, 1], [0, 1]]},
+                                                "params": {"mesh.spacing": -1}}}}))
+    _bad(capsys, ["veins", "--config", str(p), "--species", "a"], "'mesh.spacing'")
+
+
+def test_set_nonexistent_parameter(capsys):
+    _bad(capsys, ["veins", "--set", "veins.wibble=3"], "unknown parameter 'veins.wibble'")
+
+
+def test_set_out_of_range(capsys):
+    _bad(capsys, ["veins", "--set", "veins.main.kappa=-5"], "out of range")
+
+
+def test_set_not_a_number(capsys):
+    _bad(capsys, ["veins", "--set", "veins.main.kappa=abc"], "'veins.main.kappa'")
+
+
+def test_unknown_command_option(capsys):
+    _bad(capsys, ["veins", "--frobnicate"], "unrecognized arguments")
+
+
+def test_unwritable_output(capsys, tmp_path):
+    _bad(capsys, ["veins", "--out", str(tmp_path / "nope" / "v.png")], "nope")
+
+
+def test_console_script_prints_no_traceback():
+    r = subprocess.run([sys.executable, "-m", "leafsim", "veins", "--species", "nope"], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
