@@ -1,0 +1,492 @@
+"""The moderngl leaf renderer: ``populate(mesh)`` once, ``update(...)`` each frame, ``render``.
+
+The same :class:`Renderer` draws on screen (a context created by the GUI, rendering into the
+currently bound framebuffer) and offscreen (see :mod:`leafsim.render.offscreen`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import moderngl
+import numpy as np
+
+from leafsim import ROOT
+from leafsim.errors import LeafsimError
+from leafsim.render.camera import look_at, orthographic
+from leafsim.render.geom import VeinRibbons, bounds, orient_up, unique_edges, vertex_normals
+from leafsim.render.mesh import validate_mesh
+from leafsim.render.options import BASIC_VIEWS, RenderOptions
+
+DEFAULT_COLOUR = np.array([0.10, 0.32, 0.05], dtype=np.float32)  # linear summer green
+GL_SRGB8_ALPHA8 = 0x8C43
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)
+
+
+def load_shader(shader_dir: Path, name: str) -> str:
+    """Read ``shader_dir/name`` and paste ``#include "file"`` lines (one level deep)."""
+    path = Path(shader_dir) / name
+    try:
+        src = path.read_text()
+    except OSError as exc:
+        raise LeafsimError(f"cannot read shader {path}: {exc.strerror or exc}") from None
+    return _INCLUDE.sub(lambda m: load_shader(shader_dir, m.group(1)), src)
+
+
+def _mat(m: np.ndarray) -> bytes:
+    return np.ascontiguousarray(np.asarray(m, dtype=np.float32).T).tobytes()
+
+
+def _set(prog, name, value):
+    u = prog.get(name, None)
+    if u is None:
+        return
+    if isinstance(value, np.ndarray) and value.shape == (4, 4):
+        u.write(_mat(value))
+    else:
+        u.value = value
+
+
+def _srgb(c) -> tuple:
+    """Linear RGB -> display sRGB (0..1) tuple."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    return tuple(float(x) for x in np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055))
+
+
+def _dilate_texture(rgba: np.ndarray) -> np.ndarray:
+    """Copy the nearest leaf texel's colour into the masked-out area (no dark fringes)."""
+    from scipy.ndimage import distance_transform_edt
+
+    out = np.array(rgba, dtype=np.uint8, copy=True)
+    outside = out[:, :, 3] < 128
+    if outside.any() and not outside.all():
+        _, (iy, ix) = distance_transform_edt(outside, return_indices=True)
+        out[:, :, :3] = out[iy, ix, :3]
+    return out
+
+
+class Renderer:
+    """Draw one leaf with a moderngl context someone else owns.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+        An OpenGL >= 3.3 core context (GUI window or EGL standalone).
+    shader_dir : path
+        Folder of the ``.vert``/``.frag``/``.glsl`` files (default ``ROOT/shaders``).
+    """
+
+    def __init__(self, ctx: moderngl.Context, shader_dir: Path | str = ROOT / "shaders"):
+        self.ctx = ctx
+        self.shader_dir = Path(shader_dir)
+        self.programs = {name: self._program(name) for name in
+                         ("blade", "vein", "ground", "shadow", "points", "lines")}
+        quad = np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype=np.float32)
+        self._ground_vbo = ctx.buffer(quad.tobytes())
+        self._ground_vao = ctx.vertex_array(self.programs["ground"], [(self._ground_vbo, "2f", "in_xy")])
+        self._white = ctx.texture((1, 1), 4, b"\xff\xff\xff\xff")
+        self._shadow_tex = None
+        self._shadow_fbo = None
+        self._objects: list = []
+        self.mesh = None
+        self.n = 0
+
+    # --- setup ----------------------------------------------------------------------------
+    def _program(self, name: str) -> moderngl.Program:
+        vs = load_shader(self.shader_dir, f"{name}.vert")
+        fs = load_shader(self.shader_dir, f"{name}.frag")
+        try:
+            return self.ctx.program(vertex_shader=vs, fragment_shader=fs)
+        except moderngl.Error as exc:
+            raise LeafsimError(f"shader {self.shader_dir / name}.vert/.frag does not compile: "
+                               f"{' '.join(str(exc).split())[:400]}") from None
+
+    def _buf(self, data: np.ndarray, dynamic=False):
+        b = self.ctx.buffer(np.ascontiguousarray(data).tobytes(), dynamic=dynamic)
+        self._objects.append(b)
+        return b
+
+    def _vao(self, prog_name, content, index=None):
+        vao = self.ctx.vertex_array(self.programs[prog_name], content, index_buffer=index,
+                                    skip_errors=True)
+        self._objects.append(vao)
+        return vao
+
+    def release_mesh(self) -> None:
+        for o in self._objects:
+            o.release()
+        self._objects = []
+        self.mesh = None
+
+    def release(self) -> None:
+        """Free every GL object this renderer made."""
+        self.release_mesh()
+        for p in self.programs.values():
+            p.release()
+        for o in (self._ground_vao, self._ground_vbo, self._white, self._shadow_fbo, self._shadow_tex):
+            if o is not None:
+                o.release()
+
+    def populate(self, mesh) -> None:
+        """Create the GL buffers, arrays and textures for ``mesh`` (a :class:`RenderMesh`)."""
+        validate_mesh(mesh)
+        self.release_mesh()
+        ctx = self.ctx
+        self.mesh = mesh
+        pos = np.ascontiguousarray(mesh.positions, dtype=np.float32)
+        n = self.n = pos.shape[0]
+        self.tri = orient_up(pos, np.asarray(mesh.triangles))
+        self.edges = unique_edges(self.tri)
+        self.pos = pos.copy()
+        self.nrm = vertex_normals(self.pos, self.tri)
+        colours = mesh.colours if getattr(mesh, "colours", None) is not None else np.broadcast_to(DEFAULT_COLOUR, (n, 3))
+        tint = getattr(mesh, "tint", None)
+        self.colours = np.ascontiguousarray(colours, dtype=np.float32).copy()
+        self.tint = np.ones((n, 3), np.float32) if tint is None else np.ascontiguousarray(tint, dtype=np.float32).copy()
+        uv = getattr(mesh, "texcoords", None)
+        self.has_uv = uv is not None
+        uv = np.zeros((n, 2), np.float32) if uv is None else np.ascontiguousarray(uv, dtype=np.float32)
+        self.scalars = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in (getattr(mesh, "scalars", None) or {}).items()}
+        self._scalar_name = None
+        top = getattr(mesh, "top_positions", None)
+        self.top = None if top is None else np.ascontiguousarray(top, dtype=np.float32).copy()
+        self.k = 0 if self.top is None else self.top.shape[0]
+
+        # blade
+        self.vbo_pos = self._buf(self.pos, dynamic=True)
+        self.vbo_nrm = self._buf(self.nrm, dynamic=True)
+        self.vbo_col = self._buf(self.colours, dynamic=True)
+        self.vbo_tint = self._buf(self.tint, dynamic=True)
+        self.vbo_uv = self._buf(uv)
+        self.vbo_scalar = self._buf(np.zeros(n, np.float32), dynamic=True)
+        self.ibo_tri = self._buf(self.tri)
+        self.vao_blade = self._vao("blade", [
+            (self.vbo_pos, "3f", "in_pos"), (self.vbo_nrm, "3f", "in_nrm"), (self.vbo_col, "3f", "in_col"),
+            (self.vbo_tint, "3f", "in_tint"), (self.vbo_uv, "2f", "in_uv"), (self.vbo_scalar, "1f", "in_scalar")],
+            self.ibo_tri)
+        self.vao_shadow = self._vao("shadow", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_uv, "2f", "in_uv")],
+                                    self.ibo_tri)
+        # wireframe
+        self.ibo_edges = self._buf(self.edges)
+        self.vbo_minus1 = self._buf(np.full(n, -1.0, np.float32))
+        self.vao_wire = self._vao("lines", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_minus1, "1f", "in_kind")],
+                                  self.ibo_edges)
+        # particles (bottom then top layer)
+        layer = np.concatenate([np.zeros(n, np.float32), np.ones(self.k, np.float32)])
+        self.vbo_particles = self._buf(np.zeros((n + self.k, 3), np.float32), dynamic=True)
+        self.vbo_layer = self._buf(layer)
+        self.vao_points = self._vao("points", [(self.vbo_particles, "3f", "in_pos"), (self.vbo_layer, "1f", "in_layer")])
+        # springs
+        springs = getattr(mesh, "springs", None)
+        self.springs = None if springs is None or len(springs) == 0 else np.asarray(springs, dtype=np.int64)
+        if self.springs is not None:
+            kind = getattr(mesh, "spring_kind", None)
+            kind = np.zeros(len(self.springs)) if kind is None else np.asarray(kind)
+            self.vbo_spring_pos = self._buf(np.zeros((2 * len(self.springs), 3), np.float32), dynamic=True)
+            self.vbo_spring_kind = self._buf(np.repeat(kind.astype(np.float32), 2))
+            self.vao_springs = self._vao("lines", [(self.vbo_spring_pos, "3f", "in_pos"),
+                                                   (self.vbo_spring_kind, "1f", "in_kind")])
+        # veins
+        self.veins = VeinRibbons(getattr(mesh, "vein_lines", None), n, uv if self.has_uv else None)
+        if self.veins.count:
+            self.vbo_vein_dyn = self._buf(self.veins.frame(self.pos, self.nrm), dynamic=True)
+            self.vbo_vein_base = self._buf(self.veins.base_colours(self.colours, self.tint), dynamic=True)
+            self.vbo_vein_static = self._buf(self.veins.static)
+            self.ibo_vein = self._buf(self.veins.indices)
+            self.vao_vein = self._vao("vein", [
+                (self.vbo_vein_dyn, "3f 3f 3f", "in_center", "in_side", "in_nrm"),
+                (self.vbo_vein_static, "1f 1f 2f 1f", "in_hw", "in_v", "in_uv", "in_order"),
+                (self.vbo_vein_base, "3f 3f", "in_base", "in_tint")], self.ibo_vein)
+        # texture
+        self.texture = None
+        self.tex_mean = (0.2, 0.3, 0.1)
+        tex = getattr(mesh, "texture_rgba", None)
+        if tex is not None:
+            rgba = _dilate_texture(tex)
+            h, w = rgba.shape[:2]
+            limit = min(int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 4096)), 4096)
+            if max(h, w) > limit:
+                import cv2
+
+                f = limit / max(h, w)
+                rgba = cv2.resize(rgba, (max(1, int(w * f)), max(1, int(h * f))), interpolation=cv2.INTER_AREA)
+                h, w = rgba.shape[:2]
+            try:
+                t = ctx.texture((w, h), 4, rgba.tobytes(), internal_format=GL_SRGB8_ALPHA8)
+                self._tex_srgb = True
+            except Exception:  # pragma: no cover - drivers without sRGB textures
+                t = ctx.texture((w, h), 4, rgba.tobytes())
+                self._tex_srgb = False
+            t.build_mipmaps()
+            t.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            t.repeat_x = t.repeat_y = False
+            self.texture = t
+            self._objects.append(t)
+            inside = tex[:, :, 3] >= 128
+            lin = (tex[:, :, :3][inside].astype(np.float64) / 255.0) ** 2.2
+            if lin.size:
+                self.tex_mean = tuple(float(x) for x in lin.mean(axis=0))
+        self._dirty_particles = True
+        self._dirty_springs = True
+        self._bounds()
+
+    # --- per frame ------------------------------------------------------------------------
+    def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None) -> None:
+        """Write new per-frame data into the GL buffers.
+
+        Parameters
+        ----------
+        positions : (n, 3) float
+            Blade vertex positions (normals are recomputed from the triangles).
+        colours : (n, 3) float, optional
+            Linear RGB albedo per vertex.
+        scalar : dict str -> (n,) float, optional
+            New heat-map fields (merged into the populated ones).
+        tint : (n, 3) float, optional
+            Albedo multiplier per vertex.
+        top_positions : (k, 3) float, optional
+            Top-layer particles for the particle / spring views.
+        """
+        if self.mesh is None:
+            raise LeafsimError("renderer: update() before populate()")
+        pos = np.asarray(positions)
+        if pos.shape != (self.n, 3):
+            raise LeafsimError(f"renderer: positions must be ({self.n}, 3), got {pos.shape}")
+        self.pos[:] = pos
+        vertex_normals(self.pos, self.tri, self.nrm)
+        self.vbo_pos.write(self.pos)
+        self.vbo_nrm.write(self.nrm)
+        self._bounds()
+        recolour = False
+        if colours is not None:
+            self.colours[:] = colours
+            self.vbo_col.write(self.colours)
+            recolour = True
+        if tint is not None:
+            self.tint[:] = tint
+            self.vbo_tint.write(self.tint)
+            recolour = True
+        if scalar is not None:
+            for k, v in scalar.items():
+                v = np.asarray(v, dtype=np.float32)
+                if v.shape != (self.n,):
+                    raise LeafsimError(f"renderer: scalar field {k!r} must be ({self.n},), got {v.shape}")
+                self.scalars[k] = v
+            self._scalar_name = None
+        if top_positions is not None and self.top is not None:
+            self.top[:] = top_positions
+        if self.veins.count:
+            self.vbo_vein_dyn.write(self.veins.frame(self.pos, self.nrm))
+            if recolour:
+                self.vbo_vein_base.write(self.veins.base_colours(self.colours, self.tint))
+        self._dirty_particles = self._dirty_springs = True
+
+    def _bounds(self):
+        self.lo, self.hi = bounds(self.pos)
+        if self.top is not None and len(self.top):
+            tlo, thi = bounds(self.top)
+            self.lo, self.hi = np.minimum(self.lo, tlo), np.maximum(self.hi, thi)
+        if not (np.all(np.isfinite(self.lo)) and np.all(np.isfinite(self.hi))):  # all NaN: keep drawable
+            self.lo, self.hi = np.full(3, -0.05), np.full(3, 0.05)
+        self.center = (self.lo + self.hi) / 2.0
+        self.radius = max(float(np.linalg.norm(self.hi - self.lo)) / 2.0, 1e-4)
+
+    def _all_positions(self):
+        return self.pos if self.top is None else np.concatenate([self.pos, self.top])
+
+    # --- drawing --------------------------------------------------------------------------
+    def _shadow_pass(self, opts: RenderOptions, L: np.ndarray) -> np.ndarray:
+        size = int(opts.shadow_size)
+        if self._shadow_tex is None or self._shadow_tex.size != (size, size):
+            for o in (self._shadow_fbo, self._shadow_tex):
+                if o is not None:
+                    o.release()
+            self._shadow_tex = self.ctx.depth_texture((size, size))
+            self._shadow_tex.compare_func = "<="
+            self._shadow_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self._shadow_tex.repeat_x = self._shadow_tex.repeat_y = False
+            self._shadow_fbo = self.ctx.framebuffer(depth_attachment=self._shadow_tex)
+        R = self.radius * 1.15
+        up = (0.0, 0.0, 1.0) if abs(L[2]) < 0.99 else (0.0, 1.0, 0.0)
+        # far plane well past the ground even for a low sun (depth precision is ample)
+        light_mat = orthographic(-R, R, -R, R, 0.0, 12.0 * R) @ look_at(self.center + L * 2.0 * R, self.center, up)
+        self._shadow_fbo.use()
+        self._shadow_fbo.viewport = (0, 0, size, size)
+        self._shadow_fbo.clear(depth=1.0)
+        sp = self.programs["shadow"]
+        _set(sp, "u_light_mat", light_mat)
+        cut = bool(opts.texture_cutout) and opts.view in ("shaded", "wireframe") and self._albedo_mode(opts) == 1
+        _set(sp, "u_cutout", int(cut))
+        _set(sp, "u_tex", 0)
+        (self.texture if cut else self._white).use(location=0)
+        self.vao_shadow.render(moderngl.TRIANGLES)
+        return light_mat
+
+    def render(self, camera, width: int, height: int, options=None, framebuffer=None,
+               viewport: tuple | None = None) -> None:
+        """Draw the leaf as seen by ``camera`` into ``framebuffer``.
+
+        Parameters
+        ----------
+        camera : OrbitCamera (anything with ``view()``, ``proj(aspect)``, ``eye``)
+        width, height : int
+            Viewport size in pixels.
+        options : RenderOptions or dict, optional
+        framebuffer : moderngl.Framebuffer, optional
+            Target; default the framebuffer bound when ``render`` is called (the GUI's).
+        viewport : (x, y, w, h), optional
+            Sub-rectangle of the target to draw in (default ``(0, 0, width, height)``);
+            the aspect ratio is taken from ``width / height``.
+        """
+        if self.mesh is None:
+            raise LeafsimError("renderer: render() before populate()")
+        opts = RenderOptions.coerce(options)
+        opts.check()
+        view = opts.view
+        heat = view not in BASIC_VIEWS
+        if heat and view not in self.scalars:
+            raise LeafsimError(f"render options: view {view!r} is neither one of {', '.join(BASIC_VIEWS)} "
+                               f"nor a scalar field of the mesh ({', '.join(sorted(self.scalars)) or 'none'})")
+        ctx = self.ctx
+        target = framebuffer if framebuffer is not None else ctx.detect_framebuffer()
+        width, height = max(int(width), 1), max(int(height), 1)
+        L = np.asarray(opts.light_dir, dtype=np.float64)
+        L = L / max(np.linalg.norm(L), 1e-12)
+
+        ctx.enable_only(moderngl.DEPTH_TEST)
+        use_shadow = bool(opts.shadows) and (opts.ground or opts.self_shadow)
+        light_mat = self._shadow_pass(opts, L) if use_shadow else np.eye(4)
+
+        self._target = target
+        target.use()
+        rect = (0, 0, width, height) if viewport is None else tuple(int(v) for v in viewport)
+        target.viewport = rect
+        if opts.clear:
+            target.clear(*opts.background, 1.0, depth=1.0, viewport=rect)
+        vp = camera.proj(width / height) @ camera.view()
+        eye = np.asarray(camera.eye, dtype=np.float64)
+        light = dict(u_eye=tuple(eye), u_light_dir=tuple(L), u_light_col=tuple(opts.light_colour),
+                     u_sky_col=tuple(opts.sky_colour), u_translucency=float(opts.translucency),
+                     u_specular=float(opts.specular), u_shininess=float(opts.shininess))
+        if use_shadow:
+            self._shadow_tex.use(location=1)
+        tex = self.texture if self.texture is not None else self._white
+        tex.use(location=0)
+
+        # ground
+        if opts.ground:
+            gz = float(self.lo[2]) - 0.004 * self.radius if opts.ground_z is None else float(opts.ground_z)
+            g = self.programs["ground"]
+            gcol = np.asarray(opts.ground_colour, np.float64)
+            sky, sun = np.asarray(opts.sky_colour, np.float64), np.asarray(opts.light_colour, np.float64)
+            lit = gcol * (sky + sun * max(L[2], 0.0))
+            shade = gcol * sky * 0.95  # the leaf also hides a little of the sky
+            for k, v in dict(u_viewproj=vp, u_center=(float(self.center[0]), float(self.center[1]), gz),
+                             u_extent=7.0 * self.radius, u_fade0=2.0 * self.radius, u_fade1=7.0 * self.radius,
+                             u_lit_srgb=_srgb(lit), u_shade_srgb=_srgb(shade), u_bg=tuple(opts.background),
+                             u_shadow=1, u_light_mat=light_mat,
+                             u_use_shadow=int(use_shadow and opts.ground), u_shadow_radius=6.0).items():
+                _set(g, k, v)
+            self._ground_vao.render(moderngl.TRIANGLE_STRIP)
+
+        if view in ("shaded", "wireframe") or heat:
+            self._draw_blade(opts, vp, light, light_mat, heat, use_shadow and opts.self_shadow)
+            if opts.veins and self.veins.count and not heat:
+                self._draw_veins(opts, vp, light, width, height, light_mat, use_shadow and opts.self_shadow)
+        elif view == "particles":
+            if self._dirty_particles:
+                self.vbo_particles.write(np.ascontiguousarray(self._all_positions(), dtype=np.float32))
+                self._dirty_particles = False
+            p = self.programs["points"]
+            _set(p, "u_viewproj", vp)
+            _set(p, "u_point_size", float(opts.point_size))
+            ctx.enable(moderngl.PROGRAM_POINT_SIZE)
+            self.vao_points.render(moderngl.POINTS)
+            ctx.disable(moderngl.PROGRAM_POINT_SIZE)
+        elif view == "springs":
+            if self.springs is not None:
+                if self._dirty_springs:
+                    allp = self._all_positions()
+                    self.vbo_spring_pos.write(np.ascontiguousarray(allp[self.springs.ravel()], dtype=np.float32))
+                    self._dirty_springs = False
+                self._draw_lines(self.vao_springs, vp, eye, opts, lift=0.0)
+            else:  # nothing to show: fall back to the mesh edges
+                self._draw_lines(self.vao_wire, vp, eye, opts, lift=0.0, colour=(0.2, 0.4, 0.9))
+        if view == "wireframe" or (opts.wireframe and view != "springs"):
+            self._draw_lines(self.vao_wire, vp, eye, opts, lift=0.002 * self.radius, colour=tuple(opts.wire_colour))
+        ctx.disable(moderngl.BLEND)
+
+    def _draw_blade(self, opts, vp, light, light_mat, heat, self_shadow):
+        b = self.programs["blade"]
+        if heat:
+            mode = 3
+            if self._scalar_name != opts.view:
+                self.vbo_scalar.write(self.scalars[opts.view])
+                self._scalar_name = opts.view
+            f = self.scalars[opts.view]
+            rng = opts.scalar_range or (float(f.min()), float(f.max()))
+            _set(b, "u_range", (float(rng[0]), float(rng[1])))
+            _set(b, "u_cmap", 0 if opts.colormap == "turbo" else 1)
+        else:
+            mode = self._albedo_mode(opts)
+        _set(b, "u_mode", mode)
+        _set(b, "u_viewproj", vp)
+        _set(b, "u_tex", 0)
+        _set(b, "u_tex_mean", self.tex_mean)
+        _set(b, "u_cutout", int(opts.texture_cutout))
+        for k, v in light.items():
+            _set(b, k, v)
+        _set(b, "u_shadow", 1)
+        _set(b, "u_light_mat", light_mat)
+        _set(b, "u_use_shadow", int(self_shadow))
+        _set(b, "u_shadow_offset", 12.0 * 2.3 * self.radius / opts.shadow_size)
+        self.vao_blade.render(moderngl.TRIANGLES)
+
+    def _albedo_mode(self, opts) -> int:
+        if opts.albedo == "colours":
+            return 0
+        if self.texture is None or not self.has_uv:
+            if opts.albedo in ("texture", "detail"):
+                raise LeafsimError(f"render options: albedo={opts.albedo!r} needs a mesh with texture_rgba and texcoords")
+            return 0
+        return {"auto": 1, "texture": 1, "detail": 2}[opts.albedo]
+
+    def _draw_veins(self, opts, vp, light, width, height, light_mat, self_shadow):
+        v = self.programs["vein"]
+        _set(v, "u_shadow", 1)
+        _set(v, "u_light_mat", light_mat)
+        _set(v, "u_use_shadow", int(self_shadow))
+        _set(v, "u_shadow_offset", 12.0 * 2.3 * self.radius / opts.shadow_size)
+        mode = self._albedo_mode(opts)
+        _set(v, "u_viewproj", vp)
+        _set(v, "u_viewport", (float(width), float(height)))
+        _set(v, "u_lift", 3e-4 * self.radius)
+        _set(v, "u_min_px", float(opts.vein_min_px))
+        _set(v, "u_width_scale", float(opts.vein_width_scale))
+        _set(v, "u_use_tex", int(mode == 1))
+        _set(v, "u_absolute", int(opts.vein_absolute))
+        _set(v, "u_cutout", int(opts.texture_cutout))
+        _set(v, "u_tex", 0)
+        cols = list(opts.vein_colours)[:4]
+        cols += [cols[-1]] * (4 - len(cols))
+        _set(v, "u_vein_cols", [tuple(float(x) for x in c) for c in cols])
+        for k, val in light.items():
+            _set(v, k, val)
+        ctx = self.ctx
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        self._target.depth_mask = False
+        self.vao_vein.render(moderngl.TRIANGLES)
+        self._target.depth_mask = True
+        ctx.disable(moderngl.BLEND)
+
+    def _draw_lines(self, vao, vp, eye, opts, lift, colour=(0.0, 0.0, 0.0)):
+        p = self.programs["lines"]
+        _set(p, "u_viewproj", vp)
+        _set(p, "u_eye", tuple(eye))
+        _set(p, "u_lift", float(lift))
+        _set(p, "u_colour", tuple(float(c) for c in colour))
+        _set(p, "u_kind_cols", [tuple(float(x) for x in c) for c in opts.spring_colours[:4]])
+        vao.render(moderngl.LINES)

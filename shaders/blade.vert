@@ -1,0 +1,26 @@
+#version 330 core
+in vec3 in_pos;
+in vec3 in_nrm;
+in vec3 in_col;
+in vec3 in_tint;
+in vec2 in_uv;
+in float in_scalar;
+
+uniform mat4 u_viewproj;
+
+out vec3 v_pos;
+out vec3 v_nrm;
+out vec3 v_col;
+out vec3 v_tint;
+out vec2 v_uv;
+out float v_scalar;
+
+void main() {
+    v_pos = in_pos;
+    v_nrm = in_nrm;
+    v_col = in_col;
+    v_tint = in_tint;
+    v_uv = in_uv;
+    v_scalar = in_scalar;
+    gl_Position = u_viewproj * vec4(in_pos, 1.0);
+}

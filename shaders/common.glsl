@@ -1,0 +1,87 @@
+// Shared helpers, pasted into other stages by the Python loader (include directive).
+
+vec3 srgb_to_linear(vec3 c) { return pow(max(c, vec3(0.0)), vec3(2.2)); }
+
+vec3 linear_to_srgb(vec3 c) {
+    c = clamp(c, 0.0, 1.0);
+    return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
+}
+
+// Turbo colour map (polynomial fit by Ruofei Du of Google's turbo); returns sRGB.
+vec3 cmap_turbo(float x) {
+    const vec4 kr4 = vec4(0.13572138, 4.61539260, -42.66032258, 132.13108234);
+    const vec4 kg4 = vec4(0.09140261, 2.19418839, 4.84296658, -14.18503333);
+    const vec4 kb4 = vec4(0.10667330, 12.64194608, -60.58204836, 110.36276771);
+    const vec2 kr2 = vec2(-152.94239396, 59.28637943);
+    const vec2 kg2 = vec2(4.27729857, 2.82956604);
+    const vec2 kb2 = vec2(-89.90310912, 27.34824973);
+    x = clamp(x, 0.0, 1.0);
+    vec4 v4 = vec4(1.0, x, x * x, x * x * x);
+    vec2 v2 = v4.zw * v4.z;
+    return clamp(vec3(dot(v4, kr4) + dot(v2, kr2), dot(v4, kg4) + dot(v2, kg2),
+                      dot(v4, kb4) + dot(v2, kb2)), 0.0, 1.0);
+}
+
+// Viridis (polynomial fit by mattz); returns sRGB.
+vec3 cmap_viridis(float t) {
+    const vec3 c0 = vec3(0.2777273272234177, 0.005407344544966578, 0.3340998053353061);
+    const vec3 c1 = vec3(0.1050930431085774, 1.404613529898575, 1.384590162594685);
+    const vec3 c2 = vec3(-0.3308618287255563, 0.214847559468213, 0.09509516302823659);
+    const vec3 c3 = vec3(-4.634230498983486, -5.799100973351585, -19.33244095627987);
+    const vec3 c4 = vec3(6.228269936347081, 14.17993336680509, 56.69055260068105);
+    const vec3 c5 = vec3(4.776384997670288, -13.74514537774601, -65.35303263337234);
+    const vec3 c6 = vec3(-5.435455855934631, 4.645852612178535, 26.3124352495832);
+    t = clamp(t, 0.0, 1.0);
+    return clamp(c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * (c5 + t * c6))))), 0.0, 1.0);
+}
+
+const vec2 POISSON16[16] = vec2[](
+    vec2(-0.94201624, -0.39906216), vec2(0.94558609, -0.76890725),
+    vec2(-0.09418410, -0.92938870), vec2(0.34495938, 0.29387760),
+    vec2(-0.91588581, 0.45771432), vec2(-0.81544232, -0.87912464),
+    vec2(-0.38277543, 0.27676845), vec2(0.97484398, 0.75648379),
+    vec2(0.44323325, -0.97511554), vec2(0.53742981, -0.47373420),
+    vec2(-0.26496911, -0.41893023), vec2(0.79197514, 0.19090188),
+    vec2(-0.24188840, 0.99706507), vec2(-0.81409955, 0.91437590),
+    vec2(0.19984126, 0.78641367), vec2(0.14383161, -0.14100790));
+
+// Soft shadow: 16 Poisson taps (rotated per pixel to trade banding for fine noise) of
+// hardware 2x2 PCF. 1 = lit, 0 = shadowed.
+float shadow_pcf(sampler2DShadow sm, mat4 light_mat, vec3 p, float radius_texels, float bias) {
+    vec4 lp = light_mat * vec4(p, 1.0);
+    vec3 c = lp.xyz / lp.w * 0.5 + 0.5;
+    if (c.x < 0.0 || c.y < 0.0 || c.x > 1.0 || c.y > 1.0 || c.z > 1.0) return 1.0;
+    vec2 texel = 1.0 / vec2(textureSize(sm, 0));
+    float ang = 6.2831853 * fract(52.9829189 * fract(dot(gl_FragCoord.xy, vec2(0.06711056, 0.00583715))));
+    mat2 rot = mat2(cos(ang), sin(ang), -sin(ang), cos(ang));
+    // cheap pre-test: 4 taps on the outer ring; if they agree we are fully lit or fully
+    // shadowed (most pixels) and skip the other 12
+    vec2 r = radius_texels * texel;
+    float q = texture(sm, vec3(c.xy + rot * vec2(r.x, 0.0), c.z - bias))
+            + texture(sm, vec3(c.xy - rot * vec2(r.x, 0.0), c.z - bias))
+            + texture(sm, vec3(c.xy + rot * vec2(0.0, r.y), c.z - bias))
+            + texture(sm, vec3(c.xy - rot * vec2(0.0, r.y), c.z - bias));
+    if (q == 0.0 || q == 4.0) return q * 0.25;
+    float s = q;
+    for (int i = 0; i < 16; ++i)
+        s += texture(sm, vec3(c.xy + rot * POISSON16[i] * r, c.z - bias));
+    return s / 20.0;
+}
+
+// Thin two-sided leaf lighting. N faces the viewer; light reaching the other side is
+// transmitted (translucency), strongest when looking towards the sun through the blade.
+vec3 shade_leaf(vec3 albedo, vec3 N, vec3 V, vec3 L, vec3 light_col, vec3 sky_col,
+                float shadow, float translucency, float specular, float shininess) {
+    float ndl = dot(N, L);
+    vec3 amb = albedo * sky_col * (0.75 + 0.25 * N.z);
+    vec3 diff = albedo * light_col * max(ndl, 0.0) * shadow;
+    vec3 H = normalize(L + V);
+    float norm = (shininess + 8.0) / 25.1327;
+    float spec = ndl > 0.0 ? specular * norm * pow(max(dot(N, H), 0.0), shininess) * 0.04 : 0.0;
+    // transmission: diffuse through the blade + forward scattering towards the viewer
+    vec3 transmit = clamp(albedo * vec3(1.5, 1.7, 0.8) + vec3(0.02, 0.02, 0.0), 0.0, 1.0);
+    float back = max(-ndl, 0.0);
+    float fwd = pow(max(dot(-V, L), 0.0), 6.0);
+    vec3 trans = transmit * light_col * translucency * (0.5 * back + 1.2 * fwd) * shadow;
+    return amb + diff + trans + spec * light_col * shadow;
+}
