@@ -198,8 +198,27 @@ def cmd_build(args):
     _emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
 
 
+def _effects_overrides(spec: str | None) -> dict:
+    """``--effects osmosis,shrink,pbd``: the listed effects on, every other one off."""
+    from .params import PARAMS
+
+    if spec is None:
+        return {}
+    known = sorted(k.split(".", 1)[1] for k in PARAMS if k.startswith("effects."))
+    wanted = {e.strip() for e in spec.split(",") if e.strip()}
+    bad = wanted - set(known)
+    if bad:
+        raise LeafsimError(f"--effects: unknown effect '{sorted(bad)[0]}' (expected a comma-separated list of {', '.join(known)})")
+    return {f"effects.{e}": e in wanted for e in known}
+
+
 def cmd_run(args):
-    from .sim.run import run_cli
+    import numpy as np
+
+    from .fileio import atomic_write_bytes
+    from .params import parse_set_args
+    from .session import Session
+    from .sim.run import frame_stats, save_npz, shape_metrics
 
     if args.frames < 0:
         raise LeafsimError(f"--frames {args.frames}: expected a non-negative number of frames")
@@ -207,14 +226,66 @@ def cmd_run(args):
         raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
     if args.every and not args.out:
         raise LeafsimError("--every needs --out DIR for the PNG frames")
-    if args.out:
-        out = Path(args.out)
+    out = Path(args.out) if args.out else None
+    if out is not None:
         if out.exists() and not out.is_dir():
             raise LeafsimError(f"--out {out}: exists and is not a folder")
         if not out.parent.exists():
             raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
-    sp, params = _load(args)
-    rep = run_cli(sp, params, args)
+    if args.stats and not Path(args.stats).parent.exists():
+        raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
+    overrides = {**parse_set_args(args.sets), **_effects_overrides(args.effects)}
+    t0 = time.perf_counter()
+    sess = Session(args.species, args.config, args.seed, overrides, build=True)
+    build_s = time.perf_counter() - t0
+    if out is not None:
+        out.mkdir(exist_ok=True)
+    renderer = camera = None
+    frames_written = 0
+
+    def snap(k):
+        nonlocal renderer, camera, frames_written
+        from .render.offscreen import OffscreenRenderer, default_camera
+
+        if renderer is None:
+            renderer = OffscreenRenderer(960, 720)
+            mesh = sess.render_mesh()
+            camera = default_camera(mesh.positions)
+            renderer.render_png(mesh, out / f"frame_{k:05d}.png", camera=camera)
+        else:
+            renderer.render_png(sess.render_update(), out / f"frame_{k:05d}.png", camera=camera)
+        frames_written += 1
+
+    stats = []
+    if args.every:
+        snap(0)
+    t1 = time.perf_counter()
+    for k in range(1, args.frames + 1):
+        sess.step(1)
+        st = frame_stats(sess.model, sess.state, sess.last_ms, sess.simulator)
+        stats.append(st)
+        if st.get("nan"):
+            break
+        if args.every and k % args.every == 0:
+            snap(k)
+    sim_s = time.perf_counter() - t1
+    if args.stats:
+        atomic_write_bytes(args.stats, "".join(json.dumps(s, sort_keys=True) + "\n" for s in stats).encode(), "statistics")
+    if out is not None:
+        save_npz(out / "final.npz", sess.model, sess.state)
+    ms = [sum(s["ms"].values()) for s in stats]
+    rep = {
+        "species": sess.species_key, "seed": args.seed, "frames": len(stats),
+        "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
+        "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
+        "water_fraction": round(sess.water_fraction(), 6),
+        "nan": bool(any(s.get("nan") for s in stats)),
+        "png_frames": frames_written,
+        **{f"shape_{k}": v for k, v in shape_metrics(sess.model, sess.state).items()},
+        **sess.counts(),
+    }
+    if rep["nan"]:
+        raise LeafsimError(f"{sess.species_key}: the simulation produced NaN at frame {len(stats)} (parameters: {sess.params.changed()})")
     _emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
 
 

@@ -2,44 +2,15 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
-from pathlib import Path
-
 import cv2
 import numpy as np
 
-from .errors import LeafsimError
+from .fileio import write_png_atomic  # noqa: F401  (re-exported for callers)
 from .geometry import LeafShape
 from .venation import VeinGraph
 
 #: BGR colour per vein order (main, lateral, sublateral, net)
 ORDER_BGR = [(20, 20, 200), (30, 140, 240), (40, 200, 250), (200, 200, 60)]
-
-
-def write_png_atomic(path: str | Path, img: np.ndarray) -> None:
-    """Write a PNG via a temporary file + rename: never a half-written output file."""
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise LeafsimError(f"{path}: cannot write PNG (folder {folder} does not exist)")
-    ok, buf = cv2.imencode(".png", img)
-    if not ok:
-        raise LeafsimError(f"{path}: cannot encode PNG")
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".png", dir=folder)
-    except OSError as e:
-        raise LeafsimError(f"{path}: cannot write PNG ({e.strerror})") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(buf.tobytes())
-        os.replace(tmp, path)
-    except OSError as e:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise LeafsimError(f"{path}: cannot write PNG ({e.strerror})") from None
 
 
 def draw_veins(shape: LeafShape, graph: VeinGraph, size: int = 900, photo: np.ndarray | None = None) -> np.ndarray:

@@ -1,0 +1,56 @@
+"""Atomic file output: a temporary file in the target folder, fsync, then os.replace.
+
+An interrupted export never leaves a half-written file; a missing or unwritable folder
+raises LeafsimError naming the path.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .errors import LeafsimError
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, what: str = "file") -> Path:
+    """Write ``data`` to ``path`` atomically; returns the path."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise LeafsimError(f"{path}: cannot write {what} (folder {folder} does not exist)")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    except OSError as e:
+        raise LeafsimError(f"{path}: cannot write {what} ({e.strerror or e})") from None
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException as e:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        if isinstance(e, OSError):
+            raise LeafsimError(f"{path}: cannot write {what} ({e.strerror or e})") from None
+        raise
+    return path
+
+
+def write_png_atomic(path: str | os.PathLike, img: np.ndarray, rgb: bool = False) -> Path:
+    """Encode ``img`` (BGR, or RGB when ``rgb``; uint8, 2D/3/4 channels) as PNG atomically."""
+    import cv2
+
+    arr = np.ascontiguousarray(img)
+    if rgb and arr.ndim == 3:
+        arr = cv2.cvtColor(arr, cv2.COLOR_RGB2BGR if arr.shape[2] == 3 else cv2.COLOR_RGBA2BGRA)
+    ok, buf = cv2.imencode(".png", arr)
+    if not ok:
+        raise LeafsimError(f"{path}: cannot encode PNG")
+    return atomic_write_bytes(path, buf.tobytes(), "PNG")
