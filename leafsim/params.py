@@ -158,7 +158,7 @@ _f("veins.taper", 0.6, 0.0, 1.0, "", "How much a vein thins from its start to it
 
 # ---------------------------------------------------------------- mesh (rebuild)
 G = "Mesh"
-_f("mesh.spacing", 0.028, 0.004, 0.1, "× length", "Poisson-disk spacing r of surface particles, relative to the leaf length.", G, True, log=True)
+_f("mesh.spacing", 0.028, 0.002, 0.1, "× length", "Poisson-disk spacing r of surface particles, relative to the leaf length.", G, True, log=True)
 _f("mesh.vein_spacing", 0.75, 0.3, 2.0, "× r", "Spacing of vein particles along veins relative to r.", G, True)
 _f("mesh.contour_spacing", 0.8, 0.3, 2.0, "× r", "Spacing of contour particles along the outline relative to r.", G, True)
 _f("mesh.thickness", 0.0004, 0.00005, 0.005, "m", "Blade thickness h: distance of layer V above layer T.", G, True, log=True)
@@ -196,15 +196,15 @@ _f("shrink.l_min", 0.5, 0.0, 1.0, "× l⁰", "Rest lengths never go below l_min 
 G = "Dynamics"
 _f("dynamics.dt", 0.002, 1e-5, 0.1, "s", "Time step Δt.", G, False, log=True)
 _f("dynamics.gravity", 9.81, 0.0, 50.0, "m/s²", "Gravity magnitude (acts along −z).", G, False)
-_f("dynamics.damping", 0.01, 0.0, 1.0, "per frame", "Fraction of velocity removed each frame.", G, False)
-_i("dynamics.substeps", 1, 1, 50, "", "Dynamics substeps per frame (small steps make stiff constraints converge far better than more iterations).", G, False)
-_i("dynamics.iterations", 10, 1, 200, "", "Maximum constraint-projection iterations per substep.", G, False)
+_f("dynamics.damping", 0.05, 0.0, 1.0, "per frame", "Fraction of velocity removed each frame (air drag and internal friction of the tissue).", G, False)
+_i("dynamics.substeps", 5, 1, 50, "", "Dynamics substeps per frame (small steps make stiff constraints converge far better than more iterations).", G, False)
+_i("dynamics.iterations", 2, 1, 200, "", "Maximum constraint-projection iterations per substep.", G, False)
 _f("dynamics.tolerance", 1e-4, 1e-9, 1.0, "", "Stop iterating when the largest position change per iteration falls below this × leaf length.", G, False, log=True)
 _f("dynamics.compliance_surface", 2.5e-4, 0.0, 1.0, "m/N", "XPBD compliance of surface, Voronoi and link springs (≈ 1/(E h), fresh lamina E ≈ 10 MPa; 0 = rigid).", G, False, log=True)
 _f("dynamics.compliance_vein", 2.5e-6, 0.0, 1.0, "m/N", "XPBD compliance of vein springs (veins are stiffer).", G, False, log=True)
 _f("dynamics.bending", 5e-5, 0.0, 1.0, "N·m", "Bending stiffness D of the fresh blade (≈ E h³/12; dihedral hinges on layer-T edges).", G, False, log=True)
 _f("dynamics.bending_drying", 20.0, 0.0, 1000.0, "", "Bending stiffness grows to D·(1 + this) as tissue dries out (dry tissue is much stiffer).", G, False, log=True)
-_f("dynamics.plasticity", 0.0, 0.0, 1.0, "1/s", "Rate at which bending rest shapes follow the current shape (lasting curl).", G, False)
+_f("dynamics.plasticity", 2.0, 0.0, 100.0, "1/s", "Rate at which drying tissue sets: bending hinges keep the largest bilayer curl they reached (0 = purely elastic, the curl relaxes when both layers are dry).", G, False, log=True)
 _c("dynamics.voronoi", "free", ("free", "replace"), "Layer V: free particles (stable) or re-placed over their triangle each frame (thesis).", G, False)
 _c("dynamics.scene", "ground", ("ground", "hanging", "free"), "Scene: lying on the ground, hanging from a pinned petiole, or free.", G, False)
 _f("dynamics.friction", 0.6, 0.0, 2.0, "", "Coulomb friction coefficient against the ground.", G, False)

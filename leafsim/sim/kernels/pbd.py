@@ -1,0 +1,623 @@
+"""XPBD kernels: prediction, coloured Gauss–Seidel projection of distance, bending (signed
+dihedral) and thickness (tetrahedron volume) constraints, ground contact with friction,
+self-collision (spatial-hash contact candidates projected inside the iteration loop), velocity update and Voronoi re-placement.
+
+Every ``*_iteration`` kernel exists twice: ``_par`` (numba prange over the constraints of one
+colour; colours run one after another = Gauss–Seidel) and ``_ser`` (one thread, same order).
+Which one runs is chosen by measurement (see :mod:`leafsim.bench`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True, fastmath=True)
+def predict(q, qd, q_old, invm, gz, dt):
+    for i in range(q.shape[0]):
+        for k in range(3):
+            q_old[i, k] = q[i, k]
+        if invm[i] > 0.0:
+            qd[i, 2] += gz * dt
+            for k in range(3):
+                q[i, k] += qd[i, k] * dt
+
+
+def _iteration(q, invm, ij, rest, salpha, slam, scs,
+               hidx, hrest, halpha, hlam, hcs,
+               vidx, vrest, vlam, vcs, ground, pen, change):
+    """One Gauss–Seidel pass over all constraints, colour by colour.  ``salpha``/``halpha`` are
+    compliances already divided by Δt².  Writes |Δx| per constraint into ``change`` (size ≥
+    max count) and returns the largest."""
+    big = 0.0
+    # ---------------- ground plane z >= 0 first (so constraints restore the thickness after)
+    if ground:
+        for i in prange(q.shape[0]):
+            if q[i, 2] < 0.0 and invm[i] > 0.0:
+                if -q[i, 2] > pen[i]:
+                    pen[i] = -q[i, 2]
+                q[i, 2] = 0.0
+    # ---------------- distance constraints
+    for c in range(scs.shape[0] - 1):
+        for s in prange(scs[c], scs[c + 1]):
+            a = ij[s, 0]
+            b = ij[s, 1]
+            wa = invm[a]
+            wb = invm[b]
+            dx = q[a, 0] - q[b, 0]
+            dy = q[a, 1] - q[b, 1]
+            dz = q[a, 2] - q[b, 2]
+            d = math.sqrt(dx * dx + dy * dy + dz * dz)
+            W = wa + wb + salpha[s]
+            if d < 1e-12 or W <= 0.0:
+                change[s] = 0.0
+                continue
+            C = d - rest[s]
+            dl = (-C - salpha[s] * slam[s]) / W
+            slam[s] += dl
+            f = dl / d
+            q[a, 0] += wa * f * dx
+            q[a, 1] += wa * f * dy
+            q[a, 2] += wa * f * dz
+            q[b, 0] -= wb * f * dx
+            q[b, 1] -= wb * f * dy
+            q[b, 2] -= wb * f * dz
+            change[s] = abs(dl) * max(wa, wb)
+    for s in range(scs[-1]):
+        if change[s] > big:
+            big = change[s]
+    # ---------------- bending hinges (c, d, a, b): signed dihedral angle, cup (wings up) > 0
+    for c in range(hcs.shape[0] - 1):
+        for e in prange(hcs[c], hcs[c + 1]):
+            i1 = hidx[e, 0]
+            i2 = hidx[e, 1]
+            i3 = hidx[e, 2]
+            i4 = hidx[e, 3]
+            ex = q[i4, 0] - q[i3, 0]
+            ey = q[i4, 1] - q[i3, 1]
+            ez = q[i4, 2] - q[i3, 2]
+            el = math.sqrt(ex * ex + ey * ey + ez * ez)
+            # n1 = (x1 - x3) x (x1 - x4), n2 = (x2 - x4) x (x2 - x3)
+            ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
+            bx = q[i1, 0] - q[i4, 0]; by = q[i1, 1] - q[i4, 1]; bz = q[i1, 2] - q[i4, 2]
+            n1x = ay * bz - az * by; n1y = az * bx - ax * bz; n1z = ax * by - ay * bx
+            cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
+            dx = q[i2, 0] - q[i3, 0]; dy = q[i2, 1] - q[i3, 1]; dz = q[i2, 2] - q[i3, 2]
+            n2x = cy * dz - cz * dy; n2y = cz * dx - cx * dz; n2z = cx * dy - cy * dx
+            l1 = n1x * n1x + n1y * n1y + n1z * n1z
+            l2 = n2x * n2x + n2y * n2y + n2z * n2z
+            if el < 1e-12 or l1 < 1e-30 or l2 < 1e-30:
+                change[e] = 0.0
+                continue
+            s1 = math.sqrt(l1)
+            s2 = math.sqrt(l2)
+            cosv = (n1x * n2x + n1y * n2y + n1z * n2z) / (s1 * s2)
+            # sin = (n2 x n1) . e / |e|
+            kx = n2y * n1z - n2z * n1y
+            ky = n2z * n1x - n2x * n1z
+            kz = n2x * n1y - n2y * n1x
+            sinv = (kx * ex + ky * ey + kz * ez) / (s1 * s2 * el)
+            th = math.atan2(sinv, cosv)
+            C = th - hrest[e]
+            if C > math.pi:
+                C -= 2 * math.pi
+            elif C < -math.pi:
+                C += 2 * math.pi
+            # gradients (Bridson et al. 2003)
+            g1 = el / l1
+            g2 = el / l2
+            t31 = (bx * ex + by * ey + bz * ez) / el  # (x1 - x4).e/|e|
+            t32 = (cx * ex + cy * ey + cz * ez) / el  # (x2 - x4).e/|e|
+            t41 = (ax * ex + ay * ey + az * ez) / el  # (x1 - x3).e/|e|
+            t42 = (dx * ex + dy * ey + dz * ez) / el  # (x2 - x3).e/|e|
+            u1x = g1 * n1x; u1y = g1 * n1y; u1z = g1 * n1z
+            u2x = g2 * n2x; u2y = g2 * n2y; u2z = g2 * n2z
+            p1 = t31 / l1; p2 = t32 / l2
+            u3x = p1 * n1x + p2 * n2x; u3y = p1 * n1y + p2 * n2y; u3z = p1 * n1z + p2 * n2z
+            r1 = -t41 / l1; r2 = -t42 / l2
+            u4x = r1 * n1x + r2 * n2x; u4y = r1 * n1y + r2 * n2y; u4z = r1 * n1z + r2 * n2z
+            w1 = invm[i1]; w2 = invm[i2]; w3 = invm[i3]; w4 = invm[i4]
+            W = (w1 * (u1x * u1x + u1y * u1y + u1z * u1z) + w2 * (u2x * u2x + u2y * u2y + u2z * u2z)
+                 + w3 * (u3x * u3x + u3y * u3y + u3z * u3z) + w4 * (u4x * u4x + u4y * u4y + u4z * u4z) + halpha[e])
+            if W <= 0.0:
+                change[e] = 0.0
+                continue
+            dl = (-C - halpha[e] * hlam[e]) / W
+            # degenerate hinges: never move a vertex by more than half the edge length
+            gm = max(w1 * math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z), w2 * math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z),
+                     w3 * math.sqrt(u3x * u3x + u3y * u3y + u3z * u3z), w4 * math.sqrt(u4x * u4x + u4y * u4y + u4z * u4z))
+            if abs(dl) * gm > 0.5 * el:
+                dl = math.copysign(0.5 * el / gm, dl)
+            hlam[e] += dl
+            q[i1, 0] += w1 * dl * u1x; q[i1, 1] += w1 * dl * u1y; q[i1, 2] += w1 * dl * u1z
+            q[i2, 0] += w2 * dl * u2x; q[i2, 1] += w2 * dl * u2y; q[i2, 2] += w2 * dl * u2z
+            q[i3, 0] += w3 * dl * u3x; q[i3, 1] += w3 * dl * u3y; q[i3, 2] += w3 * dl * u3z
+            q[i4, 0] += w4 * dl * u4x; q[i4, 1] += w4 * dl * u4y; q[i4, 2] += w4 * dl * u4z
+            change[e] = abs(dl) * max(w1 * g1 * s1, w2 * g2 * s2)
+    for e in range(hcs[-1]):
+        if change[e] > big:
+            big = change[e]
+    # ---------------- thickness: 6 × volume of (v, a, b, c) = det, keeps V on the top side
+    for c in range(vcs.shape[0] - 1):
+        for t in prange(vcs[c], vcs[c + 1]):
+            iv = vidx[t, 0]
+            ia = vidx[t, 1]
+            ib = vidx[t, 2]
+            ic = vidx[t, 3]
+            bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
+            cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
+            vx = q[iv, 0] - q[ia, 0]; vy = q[iv, 1] - q[ia, 1]; vz = q[iv, 2] - q[ia, 2]
+            gvx = by * cz - bz * cy; gvy = bz * cx - bx * cz; gvz = bx * cy - by * cx
+            gbx = cy * vz - cz * vy; gby = cz * vx - cx * vz; gbz = cx * vy - cy * vx
+            gcx = vy * bz - vz * by; gcy = vz * bx - vx * bz; gcz = vx * by - vy * bx
+            gax = -(gvx + gbx + gcx); gay = -(gvy + gby + gcy); gaz = -(gvz + gbz + gcz)
+            C = vx * gvx + vy * gvy + vz * gvz - vrest[t]
+            wv = invm[iv]; wa = invm[ia]; wb = invm[ib]; wc = invm[ic]
+            W = (wv * (gvx * gvx + gvy * gvy + gvz * gvz) + wa * (gax * gax + gay * gay + gaz * gaz)
+                 + wb * (gbx * gbx + gby * gby + gbz * gbz) + wc * (gcx * gcx + gcy * gcy + gcz * gcz))
+            if W <= 1e-300:
+                change[t] = 0.0
+                continue
+            dl = -C / W
+            gm = max(wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz), wa * math.sqrt(gax * gax + gay * gay + gaz * gaz),
+                     wb * math.sqrt(gbx * gbx + gby * gby + gbz * gbz), wc * math.sqrt(gcx * gcx + gcy * gcy + gcz * gcz))
+            lim = 0.5 * math.sqrt(math.sqrt(bx * bx + by * by + bz * bz) * math.sqrt(cx * cx + cy * cy + cz * cz))
+            if abs(dl) * gm > lim:
+                dl = math.copysign(lim / gm, dl)
+            q[iv, 0] += wv * dl * gvx; q[iv, 1] += wv * dl * gvy; q[iv, 2] += wv * dl * gvz
+            q[ia, 0] += wa * dl * gax; q[ia, 1] += wa * dl * gay; q[ia, 2] += wa * dl * gaz
+            q[ib, 0] += wb * dl * gbx; q[ib, 1] += wb * dl * gby; q[ib, 2] += wb * dl * gbz
+            q[ic, 0] += wc * dl * gcx; q[ic, 1] += wc * dl * gcy; q[ic, 2] += wc * dl * gcz
+            change[t] = abs(dl) * wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz)
+    for t in range(vcs[-1]):
+        if change[t] > big:
+            big = change[t]
+    return big
+
+
+iteration_par = njit(cache=True, parallel=True, fastmath=True)(_iteration)
+iteration_ser = njit(cache=True, parallel=False, fastmath=True)(_iteration)
+
+
+def _springs_only(q, invm, ij, rest, salpha, slam, scs, change):
+    """Distance constraints only (the benchmark's PBD pass)."""
+    for c in range(scs.shape[0] - 1):
+        for s in prange(scs[c], scs[c + 1]):
+            a = ij[s, 0]
+            b = ij[s, 1]
+            wa = invm[a]
+            wb = invm[b]
+            dx = q[a, 0] - q[b, 0]
+            dy = q[a, 1] - q[b, 1]
+            dz = q[a, 2] - q[b, 2]
+            d = math.sqrt(dx * dx + dy * dy + dz * dz)
+            W = wa + wb + salpha[s]
+            if d < 1e-12 or W <= 0.0:
+                change[s] = 0.0
+                continue
+            dl = (rest[s] - d - salpha[s] * slam[s]) / W
+            slam[s] += dl
+            f = dl / d
+            q[a, 0] += wa * f * dx
+            q[a, 1] += wa * f * dy
+            q[a, 2] += wa * f * dz
+            q[b, 0] -= wb * f * dx
+            q[b, 1] -= wb * f * dy
+            q[b, 2] -= wb * f * dz
+            change[s] = abs(dl) * max(wa, wb)
+    big = 0.0
+    for s in range(scs[-1]):
+        if change[s] > big:
+            big = change[s]
+    return big
+
+
+springs_par = njit(cache=True, parallel=True, fastmath=True)(_springs_only)
+springs_ser = njit(cache=True, parallel=False, fastmath=True)(_springs_only)
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def jacobi_springs(q, invm, ij, rest, salpha, slam, adj_ptr, adj_s, adj_sign, dq):
+    """Atomics-free Jacobi pass: per-spring correction, then per-particle gather (CSR)."""
+    ns = ij.shape[0]
+    for s in prange(ns):
+        a = ij[s, 0]
+        b = ij[s, 1]
+        dx = q[a, 0] - q[b, 0]
+        dy = q[a, 1] - q[b, 1]
+        dz = q[a, 2] - q[b, 2]
+        d = math.sqrt(dx * dx + dy * dy + dz * dz)
+        W = invm[a] + invm[b] + salpha[s]
+        if d < 1e-12 or W <= 0.0:
+            dq[s, 0] = 0.0; dq[s, 1] = 0.0; dq[s, 2] = 0.0
+            continue
+        dl = (rest[s] - d - salpha[s] * slam[s]) / W
+        slam[s] += dl
+        f = dl / d
+        dq[s, 0] = f * dx; dq[s, 1] = f * dy; dq[s, 2] = f * dz
+    for i in prange(q.shape[0]):
+        w = invm[i]
+        n = adj_ptr[i + 1] - adj_ptr[i]
+        if n == 0:
+            continue
+        sx = 0.0; sy = 0.0; sz = 0.0
+        for k in range(adj_ptr[i], adj_ptr[i + 1]):
+            s = adj_s[k]
+            g = adj_sign[k]
+            sx += g * dq[s, 0]; sy += g * dq[s, 1]; sz += g * dq[s, 2]
+        # averaged (Jacobi) with relaxation 1.5 / n
+        f = 1.5 * w / n
+        q[i, 0] += f * sx; q[i, 1] += f * sy; q[i, 2] += f * sz
+
+
+@njit(cache=True, fastmath=True)
+def ground_friction(q, q_old, pen, mu):
+    """Coulomb friction for particles that touched the ground this frame (PBD style)."""
+    for i in range(q.shape[0]):
+        p = pen[i]
+        if p <= 0.0:
+            continue
+        dx = q[i, 0] - q_old[i, 0]
+        dy = q[i, 1] - q_old[i, 1]
+        t = math.sqrt(dx * dx + dy * dy)
+        lim = mu * p
+        if t <= lim:
+            q[i, 0] = q_old[i, 0]
+            q[i, 1] = q_old[i, 1]
+        else:
+            f = lim / t
+            q[i, 0] -= f * dx
+            q[i, 1] -= f * dy
+        pen[i] = 0.0
+
+
+@njit(cache=True, fastmath=True)
+def update_velocity(q, q_old, qd, dt, keep):
+    inv = 1.0 / dt
+    for i in range(q.shape[0]):
+        for k in range(3):
+            qd[i, k] = (q[i, k] - q_old[i, k]) * inv * keep
+
+
+@njit(cache=True, fastmath=True)
+def voronoi_heights(q, vidx, hgt):
+    """Signed height of each V particle above its triangle's plane (store before projection)."""
+    for t in range(vidx.shape[0]):
+        iv, ia, ib, ic = vidx[t, 0], vidx[t, 1], vidx[t, 2], vidx[t, 3]
+        bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
+        cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
+        nx = by * cz - bz * cy; ny = bz * cx - bx * cz; nz = bx * cy - by * cx
+        nl = math.sqrt(nx * nx + ny * ny + nz * nz) + 1e-300
+        hgt[t] = ((q[iv, 0] - q[ia, 0]) * nx + (q[iv, 1] - q[ia, 1]) * ny + (q[iv, 2] - q[ia, 2]) * nz) / nl
+
+
+@njit(cache=True, fastmath=True)
+def voronoi_replace(q, vidx, hgt, hmin):
+    """Thesis re-placement: x_V = centroid + max(h_i, hmin) n_F (after the velocity update)."""
+    for t in range(vidx.shape[0]):
+        iv, ia, ib, ic = vidx[t, 0], vidx[t, 1], vidx[t, 2], vidx[t, 3]
+        bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
+        cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
+        nx = by * cz - bz * cy; ny = bz * cx - bx * cz; nz = bx * cy - by * cx
+        nl = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nl < 1e-300:
+            continue
+        h = hgt[t]
+        if h < hmin:
+            h = hmin
+        for k, nk in ((0, nx), (1, ny), (2, nz)):
+            q[iv, k] = (q[ia, k] + q[ib, k] + q[ic, k]) / 3.0 + h * nk / nl
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def residual(q, ij, rest):
+    """max |C| / l over springs."""
+    out = np.empty(ij.shape[0])
+    for s in prange(ij.shape[0]):
+        a = ij[s, 0]
+        b = ij[s, 1]
+        dx = q[a, 0] - q[b, 0]; dy = q[a, 1] - q[b, 1]; dz = q[a, 2] - q[b, 2]
+        out[s] = abs(math.sqrt(dx * dx + dy * dy + dz * dz) - rest[s]) / max(rest[s], 1e-30)
+    return out.max() if out.shape[0] else 0.0
+
+
+@njit(cache=True)
+def dihedral_angles(q, hidx):
+    """Signed dihedral angle per hinge (same convention as the projection)."""
+    out = np.empty(hidx.shape[0])
+    for e in range(hidx.shape[0]):
+        i1, i2, i3, i4 = hidx[e, 0], hidx[e, 1], hidx[e, 2], hidx[e, 3]
+        ev = q[i4] - q[i3]
+        n1 = np.cross(q[i1] - q[i3], q[i1] - q[i4])
+        n2 = np.cross(q[i2] - q[i4], q[i2] - q[i3])
+        s = np.sqrt((n1 * n1).sum() * (n2 * n2).sum()) + 1e-300
+        out[e] = math.atan2((np.cross(n2, n1) * ev).sum() / (s * np.sqrt((ev * ev).sum()) + 1e-300), (n1 * n2).sum() / s)
+    return out
+
+
+@njit(cache=True, fastmath=True)
+def uninvert(q, invm, vidx, hmin, vonly, ground):
+    """Guard against layer inversion: a V particle closer than ``hmin`` to (or below) its
+    triangle's plane is projected to height ``hmin`` (inverse-mass weighted between the V
+    particle and the triangle, so momentum is conserved; with ``ground`` a vertex resting on
+    the ground is not pushed into it).  Returns how many were corrected."""
+    moved = 0
+    for t in range(vidx.shape[0]):
+        iv, ia, ib, ic = vidx[t, 0], vidx[t, 1], vidx[t, 2], vidx[t, 3]
+        bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
+        cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
+        nx = by * cz - bz * cy; ny = bz * cx - bx * cz; nz = bx * cy - by * cx
+        nl = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nl < 1e-14:
+            continue
+        nx /= nl; ny /= nl; nz /= nl
+        h = ((q[iv, 0] - (q[ia, 0] + q[ib, 0] + q[ic, 0]) / 3.0) * nx + (q[iv, 1] - (q[ia, 1] + q[ib, 1] + q[ic, 1]) / 3.0) * ny
+             + (q[iv, 2] - (q[ia, 2] + q[ib, 2] + q[ic, 2]) / 3.0) * nz)
+        if h < hmin:
+            wa = 0.0 if vonly or (ground and nz > 0.0 and q[ia, 2] <= 1e-12) else invm[ia]
+            wb = 0.0 if vonly or (ground and nz > 0.0 and q[ib, 2] <= 1e-12) else invm[ib]
+            wc = 0.0 if vonly or (ground and nz > 0.0 and q[ic, 2] <= 1e-12) else invm[ic]
+            W = invm[iv] + (wa + wb + wc) / 9.0
+            if W <= 0.0:
+                continue
+            dl = (hmin - h) / W
+            f = invm[iv] * dl
+            q[iv, 0] += f * nx; q[iv, 1] += f * ny; q[iv, 2] += f * nz
+            for j, wj in ((ia, wa), (ib, wb), (ic, wc)):
+                g = -wj * dl / 3.0
+                q[j, 0] += g * nx; q[j, 1] += g * ny; q[j, 2] += g * nz
+            moved += 1
+    return moved
+
+
+@njit(cache=True, fastmath=True)
+def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
+    """Candidate self-contact pairs (found once per substep with a spatial hash of cell
+    ``search``): layer-T particles closer than ``search`` whose rest distance² > ``skip2``.
+    Writes up to len(pairs) pairs; returns the count."""
+    nt = table.shape[0]
+    mask = nt - 1
+    pow2 = (nt & mask) == 0  # power-of-two table: bit mask instead of a signed 64-bit modulo
+    table[:] = -1
+    inv = 1.0 / search
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        h = (int(math.floor(q[i, 0] * inv)) * 73856093 ^ int(math.floor(q[i, 1] * inv)) * 19349663
+             ^ int(math.floor(q[i, 2] * inv)) * 83492791)
+        h = (h & mask) if pow2 else h % nt
+        nxt[k] = table[h]
+        table[h] = k
+    s2 = search * search
+    n = 0
+    cap = pairs.shape[0]
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        cx = int(math.floor(q[i, 0] * inv))
+        cy = int(math.floor(q[i, 1] * inv))
+        cz = int(math.floor(q[i, 2] * inv))
+        for ox in range(-1, 2):
+            for oy in range(-1, 2):
+                for oz in range(-1, 2):
+                    h = ((cx + ox) * 73856093 ^ (cy + oy) * 19349663 ^ (cz + oz) * 83492791)
+                    h = (h & mask) if pow2 else h % nt
+                    m = table[h]
+                    while m >= 0:
+                        j = idx[m]
+                        if j > i and n < cap:
+                            dx = q[i, 0] - q[j, 0]
+                            dy = q[i, 1] - q[j, 1]
+                            dz = q[i, 2] - q[j, 2]
+                            if dx * dx + dy * dy + dz * dz < s2:
+                                ex = rest[i, 0] - rest[j, 0]
+                                ey = rest[i, 1] - rest[j, 1]
+                                if ex * ex + ey * ey > skip2:
+                                    dup = False
+                                    # the 27-cell walk can meet a pair twice through hash collisions
+                                    for t in range(max(0, n - 8), n):
+                                        if pairs[t, 0] == i and pairs[t, 1] == j:
+                                            dup = True
+                                    if not dup:
+                                        pairs[n, 0] = i
+                                        pairs[n, 1] = j
+                                        n += 1
+                        m = nxt[m]
+    return n
+
+
+@njit(cache=True, fastmath=True)
+def project_contacts(q, invm, pairs, n, radius):
+    """Unilateral distance constraints |xi − xj| ≥ radius for the candidate pairs."""
+    hits = 0
+    for k in range(n):
+        i = pairs[k, 0]
+        j = pairs[k, 1]
+        dx = q[i, 0] - q[j, 0]
+        dy = q[i, 1] - q[j, 1]
+        dz = q[i, 2] - q[j, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 < radius * radius and d2 > 1e-24:
+            W = invm[i] + invm[j]
+            if W > 0.0:
+                d = math.sqrt(d2)
+                f = (radius - d) / (d * W)
+                q[i, 0] += invm[i] * f * dx; q[i, 1] += invm[i] * f * dy; q[i, 2] += invm[i] * f * dz
+                q[j, 0] -= invm[j] * f * dx; q[j, 1] -= invm[j] * f * dy; q[j, 2] -= invm[j] * f * dz
+                hits += 1
+    return hits
+
+
+def _springs_multi(q, invm, ij, rest, salpha, slam, scs, change, niter, tol):
+    """``niter`` passes of :func:`springs_par` in one call (no Python between passes); stops
+    early when the largest change falls below ``tol``.  Returns the passes run."""
+    it = 0
+    while it < niter:
+        it += 1
+        big = _springs_only(q, invm, ij, rest, salpha, slam, scs, change)
+        if big < tol:
+            break
+    return it
+
+
+@njit(cache=True, fastmath=True)
+def springs_multi_ser(q, invm, ij, rest, salpha, slam, scs, niter, tol):
+    """Serial fused version of :func:`_springs_multi`: the largest change is tracked inline
+    (no ``change`` array, no second scan)."""
+    it = 0
+    while it < niter:
+        it += 1
+        big = 0.0
+        for s in range(scs[-1]):
+            a = ij[s, 0]
+            b = ij[s, 1]
+            wa = invm[a]
+            wb = invm[b]
+            dx = q[a, 0] - q[b, 0]
+            dy = q[a, 1] - q[b, 1]
+            dz = q[a, 2] - q[b, 2]
+            d = math.sqrt(dx * dx + dy * dy + dz * dz)
+            W = wa + wb + salpha[s]
+            if d < 1e-12 or W <= 0.0:
+                continue
+            dl = (rest[s] - d - salpha[s] * slam[s]) / W
+            slam[s] += dl
+            f = dl / d
+            q[a, 0] += wa * f * dx
+            q[a, 1] += wa * f * dy
+            q[a, 2] += wa * f * dz
+            q[b, 0] -= wb * f * dx
+            q[b, 1] -= wb * f * dy
+            q[b, 2] -= wb * f * dz
+            ch = abs(dl) * max(wa, wb)
+            if ch > big:
+                big = ch
+        if big < tol:
+            break
+    return it
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def springs_multi_par(q, invm, ij, rest, salpha, slam, scs, change, niter, tol):
+    """Coloured parallel passes, all in one call (fork/join per colour remains)."""
+    it = 0
+    while it < niter:
+        it += 1
+        for c in range(scs.shape[0] - 1):
+            for s in prange(scs[c], scs[c + 1]):
+                a = ij[s, 0]
+                b = ij[s, 1]
+                wa = invm[a]
+                wb = invm[b]
+                dx = q[a, 0] - q[b, 0]
+                dy = q[a, 1] - q[b, 1]
+                dz = q[a, 2] - q[b, 2]
+                d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                W = wa + wb + salpha[s]
+                if d < 1e-12 or W <= 0.0:
+                    change[s] = 0.0
+                    continue
+                dl = (rest[s] - d - salpha[s] * slam[s]) / W
+                slam[s] += dl
+                f = dl / d
+                q[a, 0] += wa * f * dx
+                q[a, 1] += wa * f * dy
+                q[a, 2] += wa * f * dz
+                q[b, 0] -= wb * f * dx
+                q[b, 1] -= wb * f * dy
+                q[b, 2] -= wb * f * dz
+                change[s] = abs(dl) * max(wa, wb)
+        big = 0.0
+        for s in range(scs[-1]):
+            if change[s] > big:
+                big = change[s]
+        if big < tol:
+            break
+    return it
+
+
+@njit(cache=True, fastmath=True)
+def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, inv_h2, halpha):
+    """XPBD compliance / Δt² of every hinge: k = k_bend (1 + k_dry · clip(dry, 0, 1)) · geom,
+    dry = 1 − (w_a + w_b) / (w0_a + w0_b) over the hinge's shared edge a–b."""
+    for e in range(hidx.shape[0]):
+        a = hidx[e, 2]
+        b = hidx[e, 3]
+        dry = 1.0 - (water[a] + water[b]) / max(w0[a] + w0[b], 1e-300)
+        if dry < 0.0:
+            dry = 0.0
+        elif dry > 1.0:
+            dry = 1.0
+        halpha[e] = inv_h2 / (kbend * (1.0 + kdry * dry) * hgeom[e])
+
+
+@njit(cache=True, fastmath=True)
+def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
+          ij, rest, salpha, slam, scs,
+          hidx, hrest, halpha, hlam, hcs,
+          vidx, vrest, vlam, vcs,
+          pbd, ground, pen, change, mu,
+          self_coll, qrest, T_idx, search, skip2, table, nxt, pairs, radius,
+          replace, hgt, thick, out):
+    """All ``substeps`` of one dynamics frame in one call (no Python between substeps or
+    iterations; SPEC §8 order, see :meth:`leafsim.sim.effects.Dynamics._substep`).  ``par``
+    picks the coloured-parallel projection.  Writes (iterations, contacts, uninverted) to
+    ``out`` (int64[3])."""
+    its = 0
+    for _ in range(substeps):
+        predict(q, qd, q_old, invm, gz, h)
+        if replace:
+            voronoi_heights(q_old, vidx, hgt)
+        it = 0
+        if pbd:
+            slam[:] = 0.0
+            hlam[:] = 0.0
+            ncont = 0
+            if self_coll:
+                ncont = find_contacts(q, qrest, T_idx, search, skip2, table, nxt, pairs)
+            hits = 0
+            while it < iters:
+                it += 1
+                if par:
+                    ch = iteration_par(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs,
+                                       vidx, vrest, vlam, vcs, ground, pen, change)
+                else:
+                    ch = iteration_ser(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs,
+                                       vidx, vrest, vlam, vcs, ground, pen, change)
+                if ncont:
+                    hits = project_contacts(q, invm, pairs, ncont, radius)
+                if ch < tol and hits == 0:
+                    break
+            out[1] = hits
+        if ground:
+            for i in range(q.shape[0]):
+                if q[i, 2] < 0.0:
+                    if -q[i, 2] > pen[i]:
+                        pen[i] = -q[i, 2]
+                    q[i, 2] = 0.0
+            ground_friction(q, q_old, pen, mu)
+        if pbd:
+            n_fix = 0
+            k = 0
+            for _r in range(3):
+                k = uninvert(q, invm, vidx, 0.25 * thick, False, ground)
+                n_fix += k
+                if k == 0:
+                    break
+            if k:
+                uninvert(q, invm, vidx, 0.2 * thick, True, ground)
+            out[2] = n_fix
+            if ground:
+                for i in range(q.shape[0]):
+                    if q[i, 2] < 0.0:
+                        q[i, 2] = 0.0
+        update_velocity(q, q_old, qd, h, keep)
+        if replace:
+            voronoi_replace(q, vidx, hgt, 0.25 * thick)
+            if ground:
+                for i in range(q.shape[0]):
+                    if q[i, 2] < 0.0:
+                        q[i, 2] = 0.0
+        its += it
+    out[0] = its

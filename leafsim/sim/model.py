@@ -1,0 +1,198 @@
+"""Immutable blade :class:`Model` (topology, rest state) and time-varying :class:`State`.
+
+Names carry the element type (warp.sim style): ``particle_*`` (n,), ``spring_*`` (s,),
+``tri_*`` (m,), ``hinge_*`` (h,), ``vol_*`` (m,).  Constraint arrays are stored sorted by
+graph colour; ``*_colour_start`` (k+1,) gives the colour offsets, so that every colour can be
+projected in parallel (Gauss–Seidel between colours, no write conflicts inside one).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# particle layers / kinds
+LAYER_T, LAYER_V = 0, 1
+KIND_SURFACE, KIND_CONTOUR, KIND_VEIN, KIND_VORONOI = 0, 1, 2, 3
+# spring types
+SPRING_SURFACE, SPRING_VEIN, SPRING_V, SPRING_LINK = 0, 1, 2, 3
+SPRING_TYPE_NAMES = ("surface", "vein", "voronoi", "link")
+#: particle masses are declared in mg; dynamics works in kg
+MASS_UNIT = 1e-6
+
+
+@dataclass(frozen=True)
+class State:
+    """Time-varying arrays of one leaf.
+
+    particle_q : (n, 3) float64 positions [m];  particle_qd : (n, 3) velocities [m/s];
+    particle_water : (n,) water [mg];  spring_rest : (s,) current rest lengths [m];
+    hinge_plastic : (h,) plastic rest angle of the bending hinges [rad];
+    time [s], frame.  Arrays are mutated in place by the simulator; ``copy()`` snapshots.
+    """
+
+    particle_q: np.ndarray
+    particle_qd: np.ndarray
+    particle_water: np.ndarray
+    spring_rest: np.ndarray
+    hinge_rest: np.ndarray
+    hinge_plastic: np.ndarray
+    vol_rest: np.ndarray
+    scalars: np.ndarray = field(default_factory=lambda: np.zeros(2))  # [time, frame]
+
+    @property
+    def time(self) -> float:
+        return float(self.scalars[0])
+
+    @property
+    def frame(self) -> int:
+        return int(self.scalars[1])
+
+    def copy(self) -> "State":
+        return State(*(np.array(getattr(self, f)) for f in self.__dataclass_fields__))
+
+
+@dataclass(frozen=True)
+class Model:
+    """Array-backed, immutable two-layer blade model (build with :func:`leafsim.blade.build_blade`).
+
+    Particles
+    ---------
+    particle_rest (n,3) [m], particle_layer (n,) int8 0=T 1=V, particle_kind (n,) int8,
+    particle_vein_order (n,) int8 (−1 for none), particle_cytosol (n,) [mg],
+    particle_mass0 (n,) [mg], particle_water0 (n,) [mg], particle_tau (n,),
+    particle_texcoord (n,2), particle_pinned (n,) bool (petiole, for the hanging scene).
+
+    Triangles (layer T) and Voronoi dual (layer V)
+    ----------------------------------------------
+    tri_T (m,3) CCW seen from +z, tri_V (m,) index of the V particle of each triangle.
+
+    Springs (colour-sorted)
+    -----------------------
+    spring_ij (s,2), spring_rest0 (s,), spring_type (s,) int8 (SPRING_*), spring_layer (s,)
+    0 T / 1 V / 2 link, spring_order (s,) vein order or −1, spring_colour_start.
+
+    Bending hinges on interior T edges (colour-sorted)
+    --------------------------------------------------
+    hinge_idx (h,4) = (c, d, a, b): opposite vertices c, d and shared edge a–b;
+    hinge_spring_T (h,) the T spring a–b, hinge_spring_V (h,) the V spring across it,
+    hinge_edge_len (h,), hinge_area (h,) area of the two triangles, hinge_colour_start.
+
+    Layer thickness (colour-sorted)
+    -------------------------------
+    vol_idx (m,4) = (v, a, b, c), vol_rest0 (m,) = 6 × signed volume of tetrahedron at rest,
+    vol_springs (m,3) the three T springs of the triangle, vol_colour_start.
+
+    Veins for renderers
+    -------------------
+    vein_particles (k,) concatenated particle indices, vein_start (nv+1,), vein_order (nv,),
+    vein_width (k,) [m].  contour_particles (c,) in contour order.
+    """
+
+    particle_rest: np.ndarray
+    particle_layer: np.ndarray
+    particle_kind: np.ndarray
+    particle_vein_order: np.ndarray
+    particle_cytosol: np.ndarray
+    particle_mass0: np.ndarray
+    particle_water0: np.ndarray
+    particle_tau: np.ndarray
+    particle_texcoord: np.ndarray
+    particle_pinned: np.ndarray
+    tri_T: np.ndarray
+    tri_V: np.ndarray
+    spring_ij: np.ndarray
+    spring_rest0: np.ndarray
+    spring_type: np.ndarray
+    spring_layer: np.ndarray
+    spring_order: np.ndarray
+    spring_colour_start: np.ndarray
+    hinge_idx: np.ndarray
+    hinge_spring_T: np.ndarray
+    hinge_spring_V: np.ndarray
+    hinge_edge_len: np.ndarray
+    hinge_area: np.ndarray
+    hinge_colour_start: np.ndarray
+    vol_idx: np.ndarray
+    vol_rest0: np.ndarray
+    vol_springs: np.ndarray
+    vol_colour_start: np.ndarray
+    vein_particles: np.ndarray
+    vein_start: np.ndarray
+    vein_order: np.ndarray
+    vein_width: np.ndarray
+    contour_particles: np.ndarray
+    base_particle: int
+    length: float
+    thickness: float
+    spacing: float
+    vein_edge_share: float
+
+    # ------------------------------------------------------------------ counts
+    @property
+    def particle_count(self) -> int:
+        return len(self.particle_rest)
+
+    @property
+    def spring_count(self) -> int:
+        return len(self.spring_ij)
+
+    @property
+    def tri_count(self) -> int:
+        return len(self.tri_T)
+
+    @property
+    def hinge_count(self) -> int:
+        return len(self.hinge_idx)
+
+    @property
+    def vol_count(self) -> int:
+        return len(self.vol_idx)
+
+    def vein_polylines(self) -> list[tuple[np.ndarray, np.ndarray, int]]:
+        """Per vein: (particle indices (k,), widths (k,) m, order)."""
+        out = []
+        for v in range(len(self.vein_order)):
+            a, b = self.vein_start[v], self.vein_start[v + 1]
+            out.append((self.vein_particles[a:b], self.vein_width[a:b], int(self.vein_order[v])))
+        return out
+
+    def state(self) -> State:
+        """A fresh State at rest: positions = rest, zero velocity, full water."""
+        return State(
+            particle_q=self.particle_rest.copy(),
+            particle_qd=np.zeros_like(self.particle_rest),
+            particle_water=self.particle_water0.copy(),
+            spring_rest=self.spring_rest0.copy(),
+            hinge_rest=np.zeros(self.hinge_count),
+            hinge_plastic=np.zeros(self.hinge_count),
+            vol_rest=self.vol_rest0.copy(),
+        )
+
+    def to_report(self) -> dict:
+        """Counts per layer and type plus vein_edge_share (the CLI ``build --json``)."""
+        lay = self.particle_layer
+        st = self.spring_type
+        return {
+            "particles": self.particle_count,
+            "particles_T": int((lay == LAYER_T).sum()),
+            "particles_V": int((lay == LAYER_V).sum()),
+            "springs": self.spring_count,
+            "springs_T": int(((st == SPRING_SURFACE) | (st == SPRING_VEIN)).sum()),
+            "springs_V": int((st == SPRING_V).sum()),
+            "springs_link": int((st == SPRING_LINK).sum()),
+            "springs_vein": int((st == SPRING_VEIN).sum()),
+            "triangles": self.tri_count,
+            "hinges": self.hinge_count,
+            "veins": int(len(self.vein_order)),
+            "vein_edge_share": float(self.vein_edge_share),
+            "colours": {
+                "springs": int(len(self.spring_colour_start) - 1),
+                "hinges": int(len(self.hinge_colour_start) - 1),
+                "volumes": int(len(self.vol_colour_start) - 1),
+            },
+            "length_m": self.length,
+            "thickness_m": self.thickness,
+            "spacing_m": self.spacing,
+        }
