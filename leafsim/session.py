@@ -1,0 +1,596 @@
+"""One interactive leaf: species, seed, parameters, model, state, simulator and statistics.
+
+The GUI (``leafsim.gui``) drives a :class:`Session`; it is plain Python/numpy and imports no
+OpenGL and no imgui, so it is tested without a display.
+
+Long work (outline → veins → blade) runs in a background thread (:meth:`Session.rebuild_async`)
+that reports progress; the finished model is swapped in atomically on the caller's thread by
+:meth:`Session.poll` (called by :meth:`step` and once per GUI frame), so the frame loop never
+waits for a build and never sees half a model.
+
+Example
+-------
+>>> s = Session("oak")                          # doctest: +SKIP  (synchronous first build)
+>>> s.step(10)                                  # doctest: +SKIP
+>>> s.set_params(s.params.with_overrides({"osmosis.loss_top": 2.0}))   # live: applies at once
+>>> s.set_params(s.params.with_overrides({"mesh.spacing": 0.04}))      # staged: pending_rebuild
+>>> s.apply_rebuild(); s.wait()                 # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from .errors import LeafsimError
+from .params import PARAMS, ParamSet, flatten, unknown_key_message
+
+#: stats history length (frames kept for the live plots)
+HISTORY = 2000
+#: file format tag of saved parameter sets
+PRESET_FORMAT = "leafsim-params/1"
+_PRESET_KEYS = {"format", "species", "seed", "params"}
+
+
+@dataclass
+class BuildResult:
+    """Everything one build produces (swapped into the session as a whole)."""
+
+    species: Any
+    seed: int
+    params: ParamSet
+    shape: Any
+    veins: Any
+    model: Any
+    photo_rgba: np.ndarray | None  # (H, W, 4) uint8 RGB + leaf mask, None for drawn species
+    photo_error: str | None
+    seconds: float
+
+
+def public_mode() -> int:
+    """File mode an ordinary ``open()`` would give (0o666 minus the umask); temp files from
+    ``mkstemp`` are 0o600."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def _atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` via a temp file in the same folder + ``os.replace`` (no partial file)."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise LeafsimError(f"cannot write {path}: folder {folder} does not exist")
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, public_mode())
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as exc:
+        raise LeafsimError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+    return path
+
+
+def load_photo_rgba(path) -> np.ndarray:
+    """The species photo as (H, W, 4) uint8 RGB with alpha = leaf mask (for textures and the
+    GUI's photo panel).  Raises LeafsimError naming the file when it cannot be read."""
+    import cv2
+
+    from .outline import load_image, segment_leaf
+
+    img = load_image(path)
+    mask = segment_leaf(img, str(path))
+    rgb = cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_BGR2RGB)
+    return np.ascontiguousarray(np.dstack([rgb, mask]))
+
+
+class Session:
+    """One leaf being simulated, plus what the GUI needs to show it.
+
+    Parameters
+    ----------
+    species : str — species key of the config (default ``maple``).
+    config : path of the species config (default ``configs/leaves.json``).
+    seed : int — random seed of veins, mesh and colour variation.
+    overrides : dict of dotted parameter values applied over the species' own values.
+    build : True = build the model now (synchronously); False = start empty and call
+        :meth:`rebuild_async` (the GUI does this so its first frame appears at once).
+
+    Attributes
+    ----------
+    species_key, species, seed, params (ParamSet, what the widgets show), built_params (what the
+    current model was built with), shape, veins, model, state, simulator, pigments,
+    photo_rgba, generation (increments whenever a new model is swapped in), pending_rebuild,
+    progress (0..1), progress_text, build_error, sim_error, history (dict of deques), last_ms.
+    """
+
+    def __init__(self, species: str | None = None, config=None, seed: int = 0,
+                 overrides: dict | None = None, build: bool = True):
+        from .species import DEFAULT_SPECIES, get_species
+
+        self.config = config
+        self.species_key = species or DEFAULT_SPECIES
+        self.species = get_species(self.species_key, config)
+        self.overrides = dict(overrides or {})
+        self.params: ParamSet = self.species.params.with_overrides(self.overrides, where="--set")
+        self.seed = int(seed)
+        self.built_params: ParamSet | None = None
+        self.built_seed: int | None = None
+        self.built_species: str | None = None
+        self.shape = self.veins = self.model = self.state = self.simulator = None
+        self.pigments = self.pigments0 = None
+        self.photo_rgba: np.ndarray | None = None
+        self.photo_error: str | None = None
+        self.generation = 0
+        self.progress = 0.0
+        self.progress_text = ""
+        self.build_error: str | None = None
+        self.sim_error: str | None = None
+        self.build_seconds = 0.0
+        self.last_ms: dict[str, float] = {}
+        self.history: dict[str, deque] = {}
+        #: with a photo as albedo: tint it by the pigment change (True), or leave the tint at 1
+        #: (for renderers that take the pigment colour with the photo's detail)
+        self.photo_tint = True
+        self._lock = threading.Lock()
+        self._build_id = 0
+        self._thread: threading.Thread | None = None
+        self._ready: tuple[int, BuildResult | None, str | None] | None = None
+        self._clear_history()
+        if build:
+            self._install(self._build(self.species, self.seed, self.params, lambda p, t: None, 0))
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def frame(self) -> int:
+        """Frames simulated since the last build or reset."""
+        return 0 if self.state is None else self.state.frame
+
+    @property
+    def time(self) -> float:
+        return 0.0 if self.state is None else self.state.time
+
+    @property
+    def building(self) -> bool:
+        """A background build is running (or finished but not yet swapped in)."""
+        with self._lock:
+            return (self._thread is not None and self._thread.is_alive()) or self._ready is not None
+
+    @property
+    def pending_rebuild(self) -> bool:
+        """Rebuild-needing values (parameters, seed or species) differ from the current model's."""
+        if self.built_params is None:
+            return self.model is None and not self.building
+        return (self.params.rebuild_differs(self.built_params) or self.seed != self.built_seed
+                or self.species_key != self.built_species)
+
+    @property
+    def ready(self) -> bool:
+        return self.model is not None
+
+    def counts(self) -> dict:
+        """Particle / spring / triangle counts of the current model (empty before the first build)."""
+        return {} if self.model is None else self.model.to_report()
+
+    def total_water(self) -> float:
+        """Total water [mg] now."""
+        return 0.0 if self.state is None else float(self.state.particle_water.sum())
+
+    def water_fraction(self) -> float:
+        """Water now / water at the start (1 = fresh leaf)."""
+        if self.model is None:
+            return 1.0
+        return float(self.state.particle_water.sum() / max(self.model.particle_water0.sum(), 1e-300))
+
+    # ------------------------------------------------------------------ building
+    def _build(self, sp, seed: int, params: ParamSet, report: Callable[[float, str], None], build_id: int) -> BuildResult:
+        from .blade import build_blade
+        from .leaf import leaf_shape, species_veins
+
+        t0 = time.perf_counter()
+
+        def check():
+            if build_id and build_id != self._build_id:
+                raise _Cancelled()
+
+        report(0.02, "outline: tracing the leaf contour")
+        shape = leaf_shape(sp, params)
+        check()
+        photo, photo_error = None, None
+        if sp.image is not None:
+            report(0.12, "photo: loading the species photo")
+            try:
+                photo = load_photo_rgba(sp.image)
+            except LeafsimError as e:
+                photo_error = str(e)
+            check()
+        report(0.2, "veins: growing the venation")
+        veins = species_veins(sp, shape, params, seed)
+        check()
+        report(0.5, "blade: particles, Delaunay/Voronoi layers, springs")
+        model = build_blade(shape, veins, params, seed)
+        check()
+        report(0.97, "simulator: preparing the stages")
+        return BuildResult(sp, int(seed), params, shape, veins, model, photo, photo_error, time.perf_counter() - t0)
+
+    def _install(self, res: BuildResult) -> None:
+        """Swap a finished build in (everything at once)."""
+        from .sim.simulator import Simulator
+
+        self.species = res.species
+        self.built_species = res.species.key
+        self.built_seed = res.seed
+        self.built_params = res.params
+        self.shape, self.veins, self.model = res.shape, res.veins, res.model
+        self._T, self._V, _ = self._render_index()
+        self.photo_rgba, self.photo_error = res.photo_rgba, res.photo_error
+        self.build_seconds = res.seconds
+        # live values may have changed while building: the simulator takes the current ones
+        self.simulator = Simulator(self.model, self._sim_params())
+        self._fresh_state()
+        self.generation += 1
+        self.build_error = None
+        self.progress, self.progress_text = 1.0, f"built in {res.seconds:.2f} s"
+
+    def _sim_params(self) -> ParamSet:
+        """Current live values on top of the values the model was built with."""
+        if self.built_params is None:
+            return self.params
+        live = {k: v for k, v in self.params.items() if not PARAMS[k].rebuild}
+        return self.built_params.with_overrides(live)
+
+    def rebuild_async(self) -> None:
+        """Rebuild outline → veins → blade for the current species, seed and parameters in a
+        background thread.  A newer request supersedes a running one (its result is dropped).
+        Progress is in :attr:`progress` / :attr:`progress_text`; call :meth:`poll` to swap the
+        result in (the GUI does so every frame)."""
+        with self._lock:
+            self._build_id += 1
+            build_id = self._build_id
+            self._ready = None
+        sp, seed, params = self.species, self.seed, self.params
+        self.progress, self.progress_text = 0.0, "starting"
+        self.build_error = None
+
+        def report(p, text):
+            if build_id == self._build_id:
+                self.progress, self.progress_text = float(p), text
+
+        def work():
+            res, err = None, None
+            try:
+                res = self._build(sp, seed, params, report, build_id)
+            except _Cancelled:
+                return
+            except LeafsimError as e:
+                err = str(e)
+            except Exception as e:  # never kill the GUI: report it
+                err = f"internal error while building: {type(e).__name__}: {e}"
+            with self._lock:
+                if build_id == self._build_id:
+                    self._ready = (build_id, res, err)
+
+        t = threading.Thread(target=work, name="leafsim-build", daemon=True)
+        with self._lock:
+            self._thread = t
+        t.start()
+
+    def poll(self) -> bool:
+        """Swap a finished background build in; True when a new model was installed."""
+        with self._lock:
+            ready, self._ready = self._ready, None
+        if ready is None:
+            return False
+        build_id, res, err = ready
+        if build_id != self._build_id:
+            return False
+        if err is not None:
+            self.build_error = err
+            self.progress, self.progress_text = 0.0, "build failed"
+            return False
+        self._install(res)
+        return True
+
+    def wait(self, timeout: float | None = 120.0) -> bool:
+        """Block until the running build has finished and is swapped in (tests, scripts)."""
+        t = self._thread
+        if t is not None:
+            t.join(timeout)
+            if t.is_alive():
+                return False
+        self.poll()
+        return self.build_error is None
+
+    def apply_rebuild(self) -> None:
+        """Rebuild with the staged values (background)."""
+        self.rebuild_async()
+
+    # ------------------------------------------------------------------ parameters
+    def set_params(self, new: ParamSet | dict) -> bool:
+        """Set parameters: live ones apply to the simulator at once, rebuild ones are staged
+        until :meth:`apply_rebuild` (see :attr:`pending_rebuild`).  Returns pending_rebuild.
+        A dict is read as overrides of the current values (validated)."""
+        if not isinstance(new, ParamSet):
+            new = self.params.with_overrides(new)
+        self.params = new
+        if self.simulator is not None:
+            self.simulator.set_params(self._sim_params())
+        return self.pending_rebuild
+
+    def set_seed(self, seed: int) -> bool:
+        """Stage a new seed (needs a rebuild)."""
+        self.seed = int(seed)
+        return self.pending_rebuild
+
+    def set_species(self, key: str, rebuild: bool = True) -> None:
+        """Switch species: its own parameter values (plus the session's CLI overrides) replace
+        the current ones; starts a background rebuild unless ``rebuild=False``."""
+        from .species import get_species
+
+        sp = get_species(key, self.config)
+        params = sp.params.with_overrides(self.overrides, where="--set")
+        self.species, self.species_key, self.params = sp, key, params
+        if self.simulator is not None:
+            self.simulator.set_params(self._sim_params())
+        if rebuild:
+            self.rebuild_async()
+
+    def save_params(self, path) -> Path:
+        """Write species, seed and every parameter value as JSON (atomically)."""
+        doc = {"format": PRESET_FORMAT, "species": self.species_key, "seed": self.seed,
+               "params": self.params.to_dict()}
+        return _atomic_write_bytes(path, (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())
+
+    def read_params(self, path) -> tuple[str, int, ParamSet]:
+        """Parse and validate a parameter-set JSON without touching the session.
+
+        Accepts ``{"format", "species", "seed", "params": {...}}`` (what :meth:`save_params`
+        writes; every key optional but ``params``) or a plain object of dotted values.
+        Missing values come from the (file's) species.  Raises LeafsimError naming the file.
+        """
+        from .species import get_species
+
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise LeafsimError(f"{path}: parameter file not found") from None
+        except (OSError, UnicodeDecodeError) as e:
+            raise LeafsimError(f"{path}: cannot read parameter file ({getattr(e, 'strerror', None) or e})") from None
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+        if not isinstance(doc, dict):
+            raise LeafsimError(f"{path}: expected a JSON object of parameter values")
+        if "params" in doc:
+            bad = sorted(set(doc) - _PRESET_KEYS)
+            if bad:
+                raise LeafsimError(f"{path}: unknown key '{bad[0]}' (expected {', '.join(sorted(_PRESET_KEYS))})")
+            values = doc["params"]
+            if not isinstance(values, dict):
+                raise LeafsimError(f"{path}: 'params' must be an object of parameter values")
+            species = doc.get("species", self.species_key)
+            seed = doc.get("seed", self.seed)
+            if not isinstance(species, str):
+                raise LeafsimError(f"{path}: 'species' must be a species key string")
+            if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+                raise LeafsimError(f"{path}: 'seed' must be a non-negative integer")
+        else:
+            values, species, seed = doc, self.species_key, self.seed
+        for k in flatten(values):
+            if k not in PARAMS:
+                raise LeafsimError(unknown_key_message(k, str(path)))
+        base = get_species(species, self.config).params if species != self.species_key else self.species.params
+        params = base.with_overrides(values, where=str(path))
+        return species, int(seed), params
+
+    def load_params(self, path, rebuild: bool = False) -> bool:
+        """Load a parameter set (see :meth:`read_params`); on any error the session is unchanged.
+        Live values apply at once; rebuild values are staged (or rebuilt now with
+        ``rebuild=True``).  Returns pending_rebuild."""
+        species, seed, params = self.read_params(path)
+        if species != self.species_key:
+            self.set_species(species, rebuild=False)
+        self.seed = seed
+        self.set_params(params)
+        if rebuild and self.pending_rebuild:
+            self.apply_rebuild()
+        return self.pending_rebuild
+
+    # ------------------------------------------------------------------ simulation
+    def _clear_history(self) -> None:
+        keys = ("frame", "time", "water_T", "water_V", "water", "residual", "kinetic", "iterations",
+                "ms_osmosis", "ms_shrink", "ms_dynamics", "ms_colour", "ms_total")
+        self.history = {k: deque(maxlen=HISTORY) for k in keys}
+        self.last_ms = {}
+
+    def _fresh_state(self) -> None:
+        from .sim.colour import init_pigments
+
+        m = self.model
+        self.state = m.state()
+        self.pigments = init_pigments(m.particle_count, self._sim_params(), seed=self.built_seed or 0,
+                                      rest_relative_mass=m.particle_mass0)
+        self.pigments0 = self.pigments.copy()
+        self.sim_error = None
+        self._clear_history()
+        self._record({})
+        self._colour_step(0.0)
+
+    def reset(self) -> None:
+        """Back to the fresh leaf (frame 0, full water, young colour); same model."""
+        if self.model is None:
+            return
+        from .sim.simulator import Simulator
+
+        self.simulator = Simulator(self.model, self._sim_params())
+        self._fresh_state()
+
+    def _colour_step(self, dt: float) -> float:
+        from .sim.colour import age_at, step_pigments
+
+        if self.pigments is None:
+            return 0.0
+        t0 = time.perf_counter()
+        p = self.simulator.params if self.simulator is not None else self.params
+        w = self.state.particle_water / np.maximum(self.model.particle_water0, 1e-300)
+        np.clip(w, 0.0, 1.0, out=w)
+        step_pigments(self.pigments, w.astype(np.float32), age_at(self.state.time, p), dt, p)
+        return (time.perf_counter() - t0) * 1e3
+
+    def _record(self, ms: dict) -> None:
+        from .sim.kernels.pbd import residual
+        from .sim.model import LAYER_T, LAYER_V, MASS_UNIT
+
+        m, s = self.model, self.state
+        w = s.particle_water
+        lay = m.particle_layer
+        finite = bool(np.isfinite(s.particle_q).all() and np.isfinite(w).all())
+        h = self.history
+        h["frame"].append(s.frame)
+        h["time"].append(s.time)
+        h["water_T"].append(float(w[lay == LAYER_T].sum()))
+        h["water_V"].append(float(w[lay == LAYER_V].sum()))
+        h["water"].append(float(w.sum() / max(m.particle_water0.sum(), 1e-300)))
+        h["residual"].append(float(residual(s.particle_q, m.spring_ij, s.spring_rest)) if finite else float("nan"))
+        mass = (m.particle_cytosol + w) * MASS_UNIT
+        qd = s.particle_qd
+        h["kinetic"].append(float(0.5 * (mass * (qd * qd).sum(1)).sum()) if finite else float("nan"))
+        h["iterations"].append(self.simulator.iterations if self.simulator is not None else 0)
+        tot = 0.0
+        for k in ("osmosis", "shrink", "dynamics", "colour"):
+            v = float(ms.get(k, 0.0))
+            h["ms_" + k].append(v)
+            tot += v
+        h["ms_total"].append(tot)
+        self.last_ms = dict(ms)
+        if not finite and self.sim_error is None:
+            self.sim_error = f"simulation diverged (NaN/Inf) at frame {s.frame}: press Reset or lower dynamics.dt"
+
+    def step(self, n: int = 1) -> dict:
+        """Advance ``n`` frames (enabled effects only; colour when ``effects.colour``).
+        Returns milliseconds per stage of the last frame.  Does nothing before the first build
+        or after the simulation diverged."""
+        self.poll()
+        if self.model is None or self.sim_error is not None:
+            return {}
+        ms: dict[str, float] = {}
+        for _ in range(max(int(n), 0)):
+            ms = self.simulator.step(self.state)
+            if self.params["effects.colour"]:
+                ms["colour"] = self._colour_step(self.simulator.dt)
+            if not np.isfinite(self.state.particle_q[:1]).all():
+                break
+        if n > 0:
+            self._record(ms)
+        return ms
+
+    # ------------------------------------------------------------------ rendering data
+    def _render_index(self):
+        m = self.model
+        T = np.flatnonzero(m.particle_layer == 0)
+        V = np.flatnonzero(m.particle_layer != 0)
+        remap = np.empty(m.particle_count, np.int64)
+        remap[T] = np.arange(len(T))
+        remap[V] = len(T) + np.arange(len(V))
+        return T, V, remap
+
+    def render_colours(self):
+        """(colours (nT, 3) linear RGB, tint (nT, 3) or None) of layer T from the pigments.
+        The tint (photo species only) is rgb(now) / rgb(young), clipped to [0, 4], or ones when
+        :attr:`photo_tint` is False."""
+        from .sim.colour import pigments_to_rgb, tint_for_texture
+
+        T = self._T
+        p = self.simulator.params if self.simulator is not None else self.params
+        rgb = pigments_to_rgb(self.pigments, p)[T]
+        if self.use_texture():
+            if self.photo_tint:
+                return rgb, np.clip(tint_for_texture(self.pigments, self.pigments0, p)[T], 0.0, 4.0)
+            return rgb, np.ones_like(rgb)
+        return rgb, None
+
+    def use_texture(self) -> bool:
+        return bool(self.params["render.texture"]) and self.photo_rgba is not None
+
+    def scalar_fields(self) -> dict:
+        """Per layer-T vertex heat-map fields: ``mass`` [mg] now and ``water`` (now / initial)."""
+        m, s, T = self.model, self.state, self._T
+        w = s.particle_water[T]
+        return {"mass": (m.particle_cytosol[T] + w).astype(np.float32),
+                "water": (w / np.maximum(m.particle_water0[T], 1e-300)).astype(np.float32)}
+
+    def render_mesh(self):
+        """A :class:`leafsim.render.RenderMesh` of the current model and state (populate once
+        per :attr:`generation`, then pass :meth:`render_update` to ``Renderer.update``)."""
+        from .render.mesh import SPRING_LINK as R_LINK, SPRING_SURFACE_T, SPRING_SURFACE_V, SPRING_VEIN as R_VEIN, RenderMesh
+        from .sim.model import SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN
+
+        if self.model is None:
+            raise LeafsimError("session: no model yet (the first build has not finished)")
+        m, s = self.model, self.state
+        T, V, remap = self._render_index()
+        self._T, self._V = T, V
+        kind_map = np.zeros(4, np.int8)
+        kind_map[SPRING_SURFACE], kind_map[SPRING_V] = SPRING_SURFACE_T, SPRING_SURFACE_V
+        kind_map[SPRING_LINK], kind_map[SPRING_VEIN] = R_LINK, R_VEIN
+        colours, tint = self.render_colours()
+        veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()]
+        return RenderMesh(
+            positions=s.particle_q[T].astype(np.float32),
+            triangles=remap[m.tri_T].astype(np.int32),
+            texcoords=m.particle_texcoord[T].astype(np.float32),
+            colours=colours,
+            texture_rgba=self.photo_rgba if self.use_texture() else None,
+            tint=tint,
+            vein_lines=veins,
+            springs=remap[m.spring_ij].astype(np.int32),
+            spring_kind=kind_map[m.spring_type],
+            top_positions=s.particle_q[V].astype(np.float32),
+            scalars=self.scalar_fields(),
+        )
+
+    def render_update(self) -> dict:
+        """Keyword arguments for ``Renderer.update`` with the current state."""
+        s = self.state
+        colours, tint = self.render_colours()
+        out = {"positions": s.particle_q[self._T], "colours": colours, "scalar": self.scalar_fields(),
+               "top_positions": s.particle_q[self._V]}
+        if tint is not None:
+            out["tint"] = tint
+        return out
+
+
+class _Cancelled(Exception):
+    pass
+
+
+def species_keys(config=None) -> list[str]:
+    """Keys of the species library (for the species picker)."""
+    from .species import load_library
+
+    return list(load_library(config))
+
+
+__all__ = ["Session", "BuildResult", "load_photo_rgba", "species_keys", "PRESET_FORMAT"]

@@ -1,0 +1,65 @@
+"""Shared fixtures.  ``xdisplay`` starts a private Xvfb server for GUI tests only (when no
+DISPLAY is set) and stops it at the end of the session; other tests never need it."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import time
+
+import pytest
+
+
+def _free_display() -> int:
+    for n in range(99, 300):
+        if not os.path.exists(f"/tmp/.X{n}-lock") and not os.path.exists(f"/tmp/.X11-unix/X{n}"):
+            return n
+    raise RuntimeError("no free X display number in :99..:299")
+
+
+@pytest.fixture(scope="session")
+def xdisplay():
+    """The X display GUI tests run on (``DISPLAY`` value); starts Xvfb 1280x800x24 if needed."""
+    if os.environ.get("DISPLAY"):
+        yield os.environ["DISPLAY"]
+        return
+    if shutil.which("Xvfb") is None:
+        pytest.skip("no DISPLAY and no Xvfb installed")
+    proc = None
+    for _ in range(5):
+        n = _free_display()
+        proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.time() + 10
+        while time.time() < deadline and proc.poll() is None:
+            if os.path.exists(f"/tmp/.X11-unix/X{n}"):
+                break
+            time.sleep(0.05)
+        if proc.poll() is None and os.path.exists(f"/tmp/.X11-unix/X{n}"):
+            break
+        proc.kill()
+        proc.wait()
+        proc = None
+    if proc is None:
+        pytest.skip("could not start Xvfb")
+    display = f":{n}"
+    # wait until the server answers (xdpyinfo-free: a client connection via xdotool if present)
+    if shutil.which("xdotool"):
+        for _ in range(100):
+            r = subprocess.run(["xdotool", "getdisplaygeometry"], env={**os.environ, "DISPLAY": display},
+                               capture_output=True)
+            if r.returncode == 0:
+                break
+            time.sleep(0.05)
+    os.environ["DISPLAY"] = display
+    try:
+        yield display
+    finally:
+        os.environ.pop("DISPLAY", None)
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
