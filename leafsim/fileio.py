@@ -15,6 +15,13 @@ import numpy as np
 from .errors import LeafsimError
 
 
+def _public_mode() -> int:
+    """The mode a plain open() would give (0o666 minus the umask); mkstemp makes 0o600."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes, what: str = "file") -> Path:
     """Write ``data`` to ``path`` atomically; returns the path."""
     path = Path(path)
@@ -30,7 +37,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, what: str = "file")
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)
+        os.chmod(tmp, _public_mode())
         os.replace(tmp, path)
     except BaseException as e:
         try:

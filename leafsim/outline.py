@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
@@ -27,6 +26,7 @@ import cv2
 import numpy as np
 
 from .errors import LeafsimError
+from .fileio import write_png_atomic
 from .geometry import LeafShape, polygon_area, resample_closed
 from .params import ParamSet
 
@@ -768,24 +768,5 @@ def draw_outline(traced: TracedOutline, img: np.ndarray, out_png: str | os.PathL
     cv2.line(canvas, fp(traced.base_px), fp(traced.apex_px), (255, 255, 255), max(1, th // 2), cv2.LINE_AA, shift=4)
     cv2.circle(canvas, fp(traced.apex_px), (r + 2) * S, (0, 255, 0), -1, cv2.LINE_AA, shift=4)
     cv2.circle(canvas, fp(traced.base_px), (r + 2) * S, (0, 0, 255), -1, cv2.LINE_AA, shift=4)
-    ok, buf = cv2.imencode(".png", canvas)
-    if not ok:
-        raise LeafsimError(f"{out}: cannot write image (PNG encoding failed)")
-    folder = out.parent if str(out.parent) else Path(".")
-    if not folder.is_dir():
-        raise LeafsimError(f"{out}: cannot write image (folder {folder} does not exist)")
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=str(folder))
-        with os.fdopen(fd, "wb") as f:
-            f.write(buf.tobytes())
-        os.replace(tmp, out)
-        tmp = None
-    except OSError as exc:
-        raise LeafsimError(f"{out}: cannot write image ({exc.strerror or exc})") from None
-    finally:
-        if tmp is not None and os.path.exists(tmp):
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    write_png_atomic(out, canvas)
+

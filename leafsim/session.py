@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import threading
 import time
 from collections import deque
@@ -32,6 +31,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .errors import LeafsimError
+from .fileio import _public_mode, atomic_write_bytes
 from .params import PARAMS, ParamSet, flatten, unknown_key_message
 
 #: stats history length (frames kept for the live plots)
@@ -56,39 +56,7 @@ class BuildResult:
     seconds: float
 
 
-def public_mode() -> int:
-    """File mode an ordinary ``open()`` would give (0o666 minus the umask); temp files from
-    ``mkstemp`` are 0o600."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def _atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` via a temp file in the same folder + ``os.replace`` (no partial file)."""
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise LeafsimError(f"cannot write {path}: folder {folder} does not exist")
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, public_mode())
-        os.replace(tmp, path)
-        tmp = None
-    except OSError as exc:
-        raise LeafsimError(f"cannot write {path}: {exc.strerror or exc}") from None
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-    return path
+public_mode = _public_mode  # file mode a plain open() would give (used for screenshots)
 
 
 def load_photo_rgba(path) -> np.ndarray:
@@ -359,7 +327,7 @@ class Session:
         """Write species, seed and every parameter value as JSON (atomically)."""
         doc = {"format": PRESET_FORMAT, "species": self.species_key, "seed": self.seed,
                "params": self.params.to_dict()}
-        return _atomic_write_bytes(path, (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())
+        return atomic_write_bytes(path, (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())
 
     def read_params(self, path) -> tuple[str, int, ParamSet]:
         """Parse and validate a parameter-set JSON without touching the session.

@@ -132,3 +132,44 @@ def test_unwritable_output(capsys, tmp_path):
 def test_console_script_prints_no_traceback():
     r = subprocess.run([sys.executable, "-m", "leafsim", "veins", "--species", "nope"], capture_output=True, text=True)
     assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+
+
+def test_run_writes_stats_npz_and_frames(capsys, tmp_path):
+    out = tmp_path / "run"
+    stats = tmp_path / "stats.jsonl"
+    code, o, err = run(capsys, "run", "--species", "oak", "--frames", "6", "--every", "3", "--out", str(out),
+                       "--stats", str(stats), "--set", "mesh.spacing=0.05", "--json")
+    assert code == 0, err
+    rep = json.loads(o)
+    assert rep["frames"] == 6 and rep["nan"] is False and 0 < rep["water_fraction"] < 1
+    lines = [json.loads(x) for x in stats.read_text().splitlines()]
+    assert len(lines) == 6 and all({"water_T", "water_V", "residual", "kinetic", "nan", "ms"} <= set(x) for x in lines)
+    assert lines[-1]["water_T"] + lines[-1]["water_V"] <= lines[0]["water_T"] + lines[0]["water_V"]
+    assert sorted(p.name for p in out.glob("frame_*.png")) == ["frame_00000.png", "frame_00003.png", "frame_00006.png"]
+    d = np.load(out / "final.npz", allow_pickle=True)
+    assert d["particle_q"].shape[1] == 3 and np.isfinite(d["particle_q"]).all()
+    assert not list(out.glob(".*tmp"))
+
+
+def test_run_only_requested_effects(capsys):
+    code, o, err = run(capsys, "run", "--species", "oak", "--frames", "3", "--effects", "osmosis",
+                       "--set", "mesh.spacing=0.05", "--json")
+    rep = json.loads(o)
+    assert code == 0 and rep["water_fraction"] < 1 and rep["shape_max_displacement"] == 0
+
+
+def test_run_bad_effect(capsys):
+    _bad(capsys, ["run", "--frames", "3", "--effects", "osmosis,teleport"], "unknown effect 'teleport'")
+
+
+def test_run_every_needs_out(capsys):
+    _bad(capsys, ["run", "--frames", "3", "--every", "2"], "--every needs --out")
+
+
+def test_run_negative_frames(capsys):
+    _bad(capsys, ["run", "--frames", "-1"], "--frames -1")
+
+
+@pytest.mark.parametrize("setting", ["mesh.spacing=-1", "dynamics.tolerance=0", "osmosis.diffusion=nan"])
+def test_run_bad_parameter_before_any_work(capsys, setting):
+    _bad(capsys, ["run", "--frames", "3", "--set", setting], setting.split("=")[0])

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from leafsim import ROOT
 from leafsim.errors import LeafsimError
+from leafsim.fileio import write_png_atomic as _write_png
 from leafsim.render.camera import OrbitCamera
 
 
@@ -22,28 +22,7 @@ def write_png_atomic(rgb: np.ndarray, path) -> Path:
     import cv2
 
     path = Path(path)
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(rgb[:, :, ::-1]))
-    if not ok:  # pragma: no cover
-        raise LeafsimError(f"cannot encode PNG for {path}")
-    folder = path.parent if str(path.parent) else Path(".")
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data.tobytes())
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-        tmp = None
-    except OSError as exc:
-        raise LeafsimError(f"cannot write PNG {path}: {exc.strerror or exc}") from None
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-    return path
+    return _write_png(path, np.asarray(rgb), rgb=True)
 
 
 def default_camera(points, pitch: float = 55.0, yaw: float = -90.0) -> OrbitCamera:

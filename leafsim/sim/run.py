@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import time
 
 import numpy as np
 
 from ..errors import LeafsimError
+from ..fileio import atomic_write_bytes
 from ..params import ParamSet
 from .kernels.pbd import residual
 from .model import LAYER_T, LAYER_V, MASS_UNIT, Model, State
@@ -59,50 +59,24 @@ def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stat
         if st["nan"]:
             break
     if stats_path:
-        _atomic_write(stats_path, "".join(json.dumps(s) + "\n" for s in stats).encode())
+        atomic_write_bytes(stats_path, "".join(json.dumps(s) + "\n" for s in stats).encode())
     return state, stats
-
-
-def _atomic_write(path, data: bytes):
-    path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    try:
-        fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp-", suffix=os.path.splitext(path)[1])
-    except OSError as e:
-        raise LeafsimError(f"cannot write {path}: {e.strerror}") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def save_npz(path, model: Model, state: State) -> None:
     """Write model topology and state arrays to ``path`` (.npz) atomically (temp + os.replace)."""
-    path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    try:
-        fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp-", suffix=".npz")
-    except OSError as e:
-        raise LeafsimError(f"cannot write {path}: {e.strerror}") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(
-                f, particle_rest=model.particle_rest, particle_layer=model.particle_layer, tri_T=model.tri_T,
-                tri_V=model.tri_V, spring_ij=model.spring_ij, vein_particles=model.vein_particles,
-                vein_start=model.vein_start, vein_order=model.vein_order, vein_width=model.vein_width,
-                particle_texcoord=model.particle_texcoord, particle_q=state.particle_q,
-                particle_qd=state.particle_qd, particle_water=state.particle_water,
-                particle_water0=model.particle_water0, spring_rest=state.spring_rest,
-                scalars=state.scalars)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    import io
+
+    buf = io.BytesIO()
+    np.savez_compressed(
+        buf, particle_rest=model.particle_rest, particle_layer=model.particle_layer, tri_T=model.tri_T,
+        tri_V=model.tri_V, spring_ij=model.spring_ij, vein_particles=model.vein_particles,
+        vein_start=model.vein_start, vein_order=model.vein_order, vein_width=model.vein_width,
+        particle_texcoord=model.particle_texcoord, particle_q=state.particle_q,
+        particle_qd=state.particle_qd, particle_water=state.particle_water,
+        particle_water0=model.particle_water0, spring_rest=state.spring_rest,
+        scalars=state.scalars)
+    atomic_write_bytes(path, buf.getvalue(), "positions")
 
 
 def _area3(q, tri):
