@@ -1,11 +1,15 @@
-"""Performance benchmark (``leafsim bench``): median ms per stage and per full step.
+"""Performance benchmark (``leafsim bench`` / ``python -m leafsim.bench [--quick] [--json]``):
+median ms per stage and per full step.
 
 A *full step* is what the thesis ran per frame: osmosis + shrink + 10 PBD iterations over all
-distance constraints (both layers and links).  It is timed for every PBD variant (serial
-Gauss–Seidel, graph-coloured parallel Gauss–Seidel, atomics-free parallel Jacobi), next to a
-vectorised-numpy implementation of the same step in the same run, and next to the default
-production dynamics step (5 substeps × 2 iterations with bending hinges, thickness
-constraints, ground and self-collision).  numba caches are warmed before timing; medians.
+distance constraints (both layers and links).  Every PBD variant is timed (fused serial
+Gauss–Seidel: all 10 passes in one numba call; graph-coloured parallel Gauss–Seidel: same,
+prange per colour; atomics-free parallel Jacobi), the full step is timed as one sequence with
+the faster variant, next to a vectorised-numpy implementation of the same step (per stage and
+whole) in the same run, next to the default production dynamics step (5 substeps × 2
+iterations with bending hinges, thickness constraints, ground and self-collision; one numba
+call per frame), and next to the colour-only step (pigments + RGB).  numba caches are warmed
+before timing; medians of many repetitions (the machine is shared and noisy).
 
 Example
 -------
@@ -88,32 +92,62 @@ class NumpyStep:
         n = model.particle_count
         self.deg = np.bincount(model.spring_ij.ravel(), minlength=n).astype(float)
 
-    def step(self, q, w, rest):
+    def osmosis(self, w):
         m = self.m
         M = m.particle_cytosol
         c = w / M
         loss = np.minimum(self.rate * self.dt * m.particle_water0, w)
         cn = self.lu.solve(M * c - loss)
         w[:] = np.maximum(cn, 0) * M
+
+    def shrink(self, w, rest):
+        m = self.m
+        M = m.particle_cytosol
         i, j = m.spring_ij[:, 0], m.spring_ij[:, 1]
         mass = M + w
         v = (mass[i] + mass[j]) / (m.particle_mass0[i] + m.particle_mass0[j])
         rest[:] = m.spring_rest0 * np.clip(1 - self.sigma * np.clip(1 - v, 0, None), self.l_min, 1)
-        invm = 1.0 / mass
+
+    def pbd(self, q, w, rest, iterations=10):
+        m = self.m
+        i, j = m.spring_ij[:, 0], m.spring_ij[:, 1]
+        invm = 1.0 / (m.particle_cytosol + w)
         wi, wj = invm[i], invm[j]
         n = len(q)
-        for _ in range(10):
+        for _ in range(iterations):
             d = q[i] - q[j]
             ln = np.sqrt((d * d).sum(1))
             f = ((rest - ln) / np.maximum(ln, 1e-12) / (wi + wj))[:, None] * d
             for k in range(3):
                 q[:, k] += 1.5 * (np.bincount(i, f[:, k] * wi, n) - np.bincount(j, f[:, k] * wj, n)) / np.maximum(self.deg, 1)
 
+    def step(self, q, w, rest):
+        self.osmosis(w)
+        self.shrink(w, rest)
+        self.pbd(q, w, rest)
 
-def bench_model(model: Model, reps: int = 30, params: ParamSet | None = None) -> dict:
+
+def _colour_step_fn(model: Model, params: ParamSet):
+    """One colour-only frame (``effects.colour`` alone): pigments aged by one Δt and converted
+    to linear RGB for every particle."""
+    from .sim import colour as kc
+
+    pig = kc.init_pigments(model.particle_count, params, seed=0, rest_relative_mass=model.particle_mass0)
+    w = np.linspace(0.3, 1.0, model.particle_count).astype(np.float32)
+    dt = params["dynamics.dt"]
+    clock = [0.3]
+
+    def step():
+        clock[0] += params["colour.age_rate"] * dt
+        kc.step_pigments(pig, w, clock[0], dt, params)
+        kc.pigments_to_rgb(pig, params)
+
+    return step
+
+
+def bench_model(model: Model, reps: int = 30, params: ParamSet | None = None, jacobi: bool = True) -> dict:
     """Time every stage on one model; returns a dict of medians (ms) and counts."""
-    from .sim.effects import Dynamics, Osmosis, Shrink
-    from .sim.kernels import osmosis as ko
+    from .sim.effects import PARALLEL_MIN_PARTICLES, Dynamics, Osmosis, Shrink
     from .sim.kernels import pbd as kp
 
     params = params or ParamSet()
@@ -121,7 +155,7 @@ def bench_model(model: Model, reps: int = 30, params: ParamSet | None = None) ->
     ms = out["ms"]
     st = model.state()
     st.particle_water[:] *= np.linspace(0.6, 1.0, model.particle_count)
-    # --- osmosis: direct (factor once) vs warm-started PCG
+    # --- osmosis: direct (factor once, fused numba triangular solves) vs warm-started PCG
     osm = Osmosis(model)
     t0 = time.perf_counter()
     osm.configure(params.with_overrides({"osmosis.solver": "direct"}))
@@ -129,87 +163,155 @@ def bench_model(model: Model, reps: int = 30, params: ParamSet | None = None) ->
     ms["osmosis_direct"] = _median_ms(lambda: osm.apply(st), reps)
     osm_cg = Osmosis(model)
     osm_cg.configure(params.with_overrides({"osmosis.solver": "cg", "osmosis.tolerance": 1e-8}))
-    ms["osmosis_cg"] = _median_ms(lambda: osm_cg.apply(st), reps)
+    ms["osmosis_cg"] = _median_ms(lambda: osm_cg.apply(st), max(5, reps // 3))
     out["cg_iterations"] = osm_cg.last_iterations
-    try:
-        import pyamg
-
-        ml = pyamg.smoothed_aggregation_solver(osm.A, symmetry="hermitian")
-        rhs = osm.rhs.copy()
-        x0 = st.particle_water / osm.M
-        ms["osmosis_amg"] = _median_ms(lambda: ml.solve(rhs, x0=x0, tol=1e-8, accel="cg"), max(5, reps // 3))
-    except Exception:  # pragma: no cover - pyamg optional
-        pass
-    best_osm = min(ms["osmosis_direct"], ms["osmosis_cg"])
+    best_osm = osm if ms["osmosis_direct"] <= ms["osmosis_cg"] else osm_cg
     # --- shrink
     sh = Shrink(model)
     sh.configure(params)
     ms["shrink"] = _median_ms(lambda: sh.apply(st), reps)
-    # --- 10 PBD iterations over distance constraints: three variants
+    # --- 10 PBD iterations over distance constraints: fused serial / coloured parallel / Jacobi
     dyn = Dynamics(model)
     dyn.configure(params, {e: True for e in ("gravity", "pbd", "bending", "ground", "self_collision", "shrink")})
     np.divide(1e6, model.particle_cytosol + st.particle_water, out=dyn.invm)
     q = st.particle_q
     rng = np.random.default_rng(0)
     q += rng.normal(0, 0.02 * model.spacing, q.shape)
-    args = (dyn.invm, model.spring_ij, st.spring_rest, dyn.salpha, dyn.slam, model.spring_colour_start, dyn.change)
-    ms["pbd10_gs_serial"] = _median_ms(lambda: [kp.springs_ser(q, *args) for _ in range(10)], reps)
-    ms["pbd10_gs_coloured_parallel"] = _median_ms(lambda: [kp.springs_par(q, *args) for _ in range(10)], reps)
-    # Jacobi adjacency (CSR of springs per particle)
-    n = model.particle_count
-    ij = model.spring_ij
-    inc = np.concatenate([ij[:, 0], ij[:, 1]])
-    sidx = np.concatenate([np.arange(len(ij)), np.arange(len(ij))])
-    sign = np.concatenate([np.ones(len(ij)), -np.ones(len(ij))])
-    order = np.argsort(inc, kind="stable")
-    ptr = np.concatenate([[0], np.cumsum(np.bincount(inc, minlength=n))]).astype(np.int64)
-    dq = np.zeros((len(ij), 3))
-    jargs = (dyn.invm, ij, st.spring_rest, dyn.salpha, dyn.slam, ptr, sidx[order].astype(np.int64), sign[order], dq)
-    ms["pbd10_jacobi_parallel"] = _median_ms(lambda: [kp.jacobi_springs(q, *jargs) for _ in range(10)], reps)
-    pbd_best = min(ms["pbd10_gs_serial"], ms["pbd10_gs_coloured_parallel"])
-    out["pbd_choice"] = "gs_serial" if ms["pbd10_gs_serial"] <= ms["pbd10_gs_coloured_parallel"] else "gs_coloured_parallel"
-    ms["full_step"] = best_osm + ms["shrink"] + pbd_best
+    base = (dyn.invm, model.spring_ij, st.spring_rest, dyn.salpha, dyn.slam, model.spring_colour_start)
+    ser = lambda: kp.springs_multi_ser(q, *base, 10, 0.0)  # noqa: E731
+    par = lambda: kp.springs_multi_par(q, *base, dyn.change, 10, 0.0)  # noqa: E731
+    ms["pbd10_gs_serial"] = _median_ms(ser, reps)
+    ms["pbd10_gs_coloured_parallel"] = _median_ms(par, reps)
+    if jacobi:
+        n = model.particle_count
+        ij = model.spring_ij
+        inc = np.concatenate([ij[:, 0], ij[:, 1]])
+        sidx = np.concatenate([np.arange(len(ij)), np.arange(len(ij))])
+        sign = np.concatenate([np.ones(len(ij)), -np.ones(len(ij))])
+        order = np.argsort(inc, kind="stable")
+        ptr = np.concatenate([[0], np.cumsum(np.bincount(inc, minlength=n))]).astype(np.int64)
+        dq = np.zeros((len(ij), 3))
+        jargs = (dyn.invm, ij, st.spring_rest, dyn.salpha, dyn.slam, ptr, sidx[order].astype(np.int64), sign[order], dq)
+        ms["pbd10_jacobi_parallel"] = _median_ms(lambda: [kp.jacobi_springs(q, *jargs) for _ in range(10)], max(5, reps // 3))
+    use_par = ms["pbd10_gs_coloured_parallel"] < ms["pbd10_gs_serial"]
+    out["pbd_choice"] = "gs_coloured_parallel" if use_par else "gs_serial"
+    out["production_pbd"] = "timed ser|par" if model.particle_count >= PARALLEL_MIN_PARTICLES else "gs_serial"
+    pbd = par if use_par else ser
+    ms["pbd10"] = ms["pbd10_gs_coloured_parallel"] if use_par else ms["pbd10_gs_serial"]
+
+    def full():
+        best_osm.apply(st)
+        sh.apply(st)
+        np.divide(1e6, model.particle_cytosol + st.particle_water, out=dyn.invm)
+        pbd()
+
+    ms["full_step"] = _median_ms(full, reps)
     # --- production dynamics step (defaults: substeps × iterations, hinges, volumes, ground, self-collision)
     st2 = model.state()
     ms["dynamics_default"] = _median_ms(lambda: dyn.apply(st2), reps)
-    # --- numpy reference of the same full step
+    out["dynamics_iterations"] = dyn.last_iterations
+    # --- colour-only step (pigment aging + RGB)
+    ms["colour_step"] = _median_ms(_colour_step_fn(model, params), max(reps, 50))
+    # --- numpy reference of the same full step, per stage and whole
     ref = NumpyStep(model, params, osm.A)
     q2, w2, r2 = model.particle_rest.copy(), st.particle_water.copy(), st.spring_rest.copy()
-    ms["numpy_full_step"] = _median_ms(lambda: ref.step(q2, w2, r2), max(5, reps // 3), warm=1)
+    nr = max(5, reps // 3)
+    np_ms = out["numpy_ms"] = {}
+    np_ms["osmosis_direct"] = _median_ms(lambda: ref.osmosis(w2), nr, warm=1)
+    np_ms["shrink"] = _median_ms(lambda: ref.shrink(w2, r2), nr, warm=1)
+    np_ms["pbd10"] = _median_ms(lambda: ref.pbd(q2, w2, r2), nr, warm=1)
+    np_ms["full_step"] = ms["numpy_full_step"] = _median_ms(lambda: ref.step(q2, w2, r2), nr, warm=1)
     out["speedup_vs_numpy"] = ms["numpy_full_step"] / ms["full_step"]
+    out["colour_vs_full"] = ms["full_step"] / ms["colour_step"]
     return out
 
 
-def run_bench(sizes=("maple", "100k"), reps: int = 30) -> dict:
+def run_bench(sizes=("maple", "100k"), reps: int = 30, jacobi: bool = True) -> dict:
     """Benchmark each named size (see :data:`SIZES`) or explicit mesh.spacing; returns a dict."""
     res = {}
     for s in sizes:
         t0 = time.perf_counter()
         model = build_bench_model(s)
         build_s = time.perf_counter() - t0
-        r = bench_model(model, reps=reps if model.particle_count < 50000 else max(7, reps // 4))
+        r = bench_model(model, reps=reps if model.particle_count < 50000 else max(7, reps // 4), jacobi=jacobi)
         r["build_s"] = build_s
         res[str(s)] = r
     return res
 
 
+#: (key, label) rows of the table; rows with a numpy reference get baseline and ratio columns
+ROWS = [
+    ("osmosis_factor", "osmosis factor (once)"),
+    ("osmosis_direct", "osmosis direct solve"),
+    ("osmosis_cg", "osmosis PCG"),
+    ("shrink", "shrink"),
+    ("pbd10_gs_serial", "PBD 10 passes GS serial"),
+    ("pbd10_gs_coloured_parallel", "PBD 10 passes GS coloured par"),
+    ("pbd10_jacobi_parallel", "PBD 10 passes Jacobi par"),
+    ("pbd10", "PBD 10 passes (best)"),
+    ("full_step", "full step (osm+shrink+10 PBD)"),
+    ("dynamics_default", "dynamics default (GUI frame)"),
+    ("colour_step", "colour-only step"),
+]
+
+
 def format_bench(res: dict) -> str:
-    """A plain-text table of :func:`run_bench` results."""
-    keys = ["osmosis_factor", "osmosis_direct", "osmosis_cg", "osmosis_amg", "shrink", "pbd10_gs_serial",
-            "pbd10_gs_coloured_parallel", "pbd10_jacobi_parallel", "full_step", "numpy_full_step", "dynamics_default"]
+    """A plain-text table of :func:`run_bench` results: stage, ms per size, numpy baseline
+    per size and the speed-up ratio numpy / leafsim per size."""
     names = list(res)
-    lines = ["stage (median ms)".ljust(30) + "".join(n.rjust(14) for n in names)]
-    lines.append("particles / springs".ljust(30) + "".join(f"{res[n]['particles']}/{res[n]['springs']}".rjust(14) for n in names))
-    for k in keys:
-        lines.append(k.ljust(30) + "".join((f"{res[n]['ms'][k]:.3f}" if k in res[n]["ms"] else "-").rjust(14) for n in names))
-    lines.append("speed-up vs numpy".ljust(30) + "".join(f"{res[n]['speedup_vs_numpy']:.1f}x".rjust(14) for n in names))
-    lines.append("cg iterations".ljust(30) + "".join(str(res[n]["cg_iterations"]).rjust(14) for n in names))
-    lines.append("PBD choice".ljust(30) + "".join(res[n]["pbd_choice"].rjust(14) for n in names))
+    w0, w = 32, 11
+    hdr = "stage".ljust(w0) + "".join(f"{n} ms".rjust(w) for n in names)
+    hdr += "".join(f"numpy {n}".rjust(w + 2) for n in names) + "".join(f"ratio {n}".rjust(w + 1) for n in names)
+    lines = [hdr, "-" * len(hdr)]
+    lines.append("particles / springs".ljust(w0) + "  ".join(f"{res[n]['particles']}/{res[n]['springs']}" for n in names))
+    for k, label in ROWS:
+        if not any(k in res[n]["ms"] for n in names):
+            continue
+        row = label.ljust(w0)
+        row += "".join((f"{res[n]['ms'][k]:.3f}" if k in res[n]["ms"] else "-").rjust(w) for n in names)
+        row += "".join((f"{res[n]['numpy_ms'][k]:.3f}" if k in res[n].get("numpy_ms", {}) else "").rjust(w + 2) for n in names)
+        row += "".join((f"{res[n]['numpy_ms'][k] / res[n]['ms'][k]:.1f}x" if k in res[n].get("numpy_ms", {}) else "").rjust(w + 1)
+                       for n in names)
+        lines.append(row.rstrip())
+    lines.append("")
+    for n in names:
+        r = res[n]
+        lines.append(f"[{n}] full step {r['ms']['full_step']:.3f} ms = {r['speedup_vs_numpy']:.1f}x numpy; colour-only step "
+                     f"{r['ms']['colour_step']:.3f} ms, {r['colour_vs_full']:.1f}x cheaper than the full step; "
+                     f"PBD choice {r['pbd_choice']} (production {r['production_pbd']}); cg iterations {r['cg_iterations']}")
     return "\n".join(lines)
+
+
+def main(json_out: bool = False, quick: bool = False) -> int:
+    """CLI entry (``leafsim bench``): ``quick`` = maple size only with few repetitions (well
+    under a minute); otherwise maple and 100k (a few minutes).  Prints the table, or the raw
+    result dict as JSON with ``json_out``.  Returns the exit status."""
+    import json
+
+    if quick:
+        res = run_bench(("maple",), reps=15, jacobi=False)
+    else:
+        res = run_bench(("maple", "100k"), reps=40)
+    if json_out:
+        print(json.dumps(res, indent=1, sort_keys=True))
+    else:
+        print(format_bench(res))
+    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
     import sys
 
-    sizes = tuple(sys.argv[1:]) or ("maple", "100k")
-    print(format_bench(run_bench(sizes)))
+    argv = sys.argv[1:]
+    flags = {a for a in argv if a.startswith("--")}
+    sizes = tuple(a for a in argv if not a.startswith("--"))
+    if sizes:
+        res = run_bench(sizes)
+        if "--json" in flags:
+            import json
+
+            print(json.dumps(res, indent=1, sort_keys=True))
+        else:
+            print(format_bench(res))
+    else:
+        sys.exit(main(json_out="--json" in flags, quick="--quick" in flags))

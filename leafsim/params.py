@@ -177,9 +177,9 @@ _f("mass.water_fraction", 0.7, 0.05, 0.95, "", "Fraction of the initial mass tha
 
 # ---------------------------------------------------------------- osmosis (live)
 G = "Osmosis"
-_f("osmosis.diffusion", 1e-3, 0.0, 1e5, "m²/s", "Osmotic diffusivity λ in physical units (≈1e-3 gives margin-first drying).", G, False, log=True)
-_f("osmosis.loss_top", 0.2, 0.0, 1e3, "1/s", "Evaporation rate of the top layer V (fraction of initial water per second).", G, False, log=True)
-_f("osmosis.loss_bottom", 0.15, 0.0, 1e3, "1/s", "Evaporation rate of the bottom layer T.", G, False, log=True)
+_f("osmosis.diffusion", 1e-4, 0.0, 1e5, "m²/s", "Osmotic diffusivity D in physical units (effective D·τ̄); D·T_dry/L² ≲ 0.1 keeps margin-first drying visible, ≫ 1 dries every layer uniformly.", G, False, log=True)
+_f("osmosis.loss_top", 0.2, 0.0, 1e3, "1/s", "Evaporation rate of the top layer V: every particle loses this fraction of the layer's mean initial water per second (per-area loss, so light margins dry first).", G, False, log=True)
+_f("osmosis.loss_bottom", 0.15, 0.0, 1e3, "1/s", "Evaporation rate of the bottom layer T (same per-area law as the top layer).", G, False, log=True)
 _c("osmosis.solver", "auto", ("auto", "direct", "cg", "jacobi"), "Linear solver of the implicit osmosis step.", G, False)
 _f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True)
 

@@ -17,7 +17,7 @@ def _rgb(s):
 
 @pytest.mark.parametrize("species", ["chestnut", "maple"])
 def test_margins_turn_before_veins(species):
-    s = Session(species, overrides={**COLOUR_ONLY, "osmosis.diffusion": 2e-4, "colour.age_rate": 0.2}, build=True)
+    s = Session(species, overrides={**COLOUR_ONLY, "colour.age_rate": 0.1}, build=True)
     m = s.model
     rgb0 = _rgb(s).copy()
     s.step(600)  # ~ a quarter of the water gone, mid-senescence
@@ -27,7 +27,11 @@ def test_margins_turn_before_veins(species):
     vein = T & (m.particle_kind == KIND_VEIN) & (m.particle_vein_order <= 1)
     d = np.linalg.norm(rgb - rgb0, axis=1)
     assert margin.sum() > 10 and vein.sum() > 10
-    assert d[margin].mean() > 1.2 * d[vein].mean()
+    # the cause: light margin tissue loses relatively more water (per-area evaporation) ...
+    wrel = s.state.particle_water / m.particle_water0
+    assert wrel[margin].mean() < wrel[vein].mean() - 0.02
+    # ... so the margin's colour has moved farther from the young green than the veins'
+    assert d[margin].mean() > 1.1 * d[vein].mean()
     # and the positions did not move: dynamics is off in a colour-only scene
     assert np.array_equal(s.state.particle_q, m.particle_rest)
 

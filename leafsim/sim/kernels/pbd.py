@@ -179,7 +179,153 @@ def _iteration(q, invm, ij, rest, salpha, slam, scs,
 
 
 iteration_par = njit(cache=True, parallel=True, fastmath=True)(_iteration)
-iteration_ser = njit(cache=True, parallel=False, fastmath=True)(_iteration)
+
+
+@njit(cache=True, fastmath=True)
+def iteration_ser(q, invm, ij, rest, salpha, slam, scs,
+                  hidx, hrest, halpha, hlam, hcs,
+                  vidx, vrest, vlam, vcs, ground, pen, change):
+    """Serial twin of :func:`_iteration` (same projection, same order; ``prange`` → ``range``
+    and the largest change tracked inline, so ``change`` is not written and not scanned —
+    keep the two in sync).  Returns the largest |Δx| of the pass.  Write-up of the
+    arguments: :func:`_iteration`."""
+    big = 0.0
+    # ---------------- ground plane z >= 0 first (so constraints restore the thickness after)
+    if ground:
+        for i in range(q.shape[0]):
+            if q[i, 2] < 0.0 and invm[i] > 0.0:
+                if -q[i, 2] > pen[i]:
+                    pen[i] = -q[i, 2]
+                q[i, 2] = 0.0
+    # ---------------- distance constraints
+    for c in range(scs.shape[0] - 1):
+        for s in range(scs[c], scs[c + 1]):
+            a = ij[s, 0]
+            b = ij[s, 1]
+            wa = invm[a]
+            wb = invm[b]
+            dx = q[a, 0] - q[b, 0]
+            dy = q[a, 1] - q[b, 1]
+            dz = q[a, 2] - q[b, 2]
+            d = math.sqrt(dx * dx + dy * dy + dz * dz)
+            W = wa + wb + salpha[s]
+            if d < 1e-12 or W <= 0.0:
+                continue
+            C = d - rest[s]
+            dl = (-C - salpha[s] * slam[s]) / W
+            slam[s] += dl
+            f = dl / d
+            q[a, 0] += wa * f * dx
+            q[a, 1] += wa * f * dy
+            q[a, 2] += wa * f * dz
+            q[b, 0] -= wb * f * dx
+            q[b, 1] -= wb * f * dy
+            q[b, 2] -= wb * f * dz
+            ch = abs(dl) * max(wa, wb)
+            if ch > big:
+                big = ch
+    # ---------------- bending hinges (c, d, a, b): signed dihedral angle, cup (wings up) > 0
+    for c in range(hcs.shape[0] - 1):
+        for e in range(hcs[c], hcs[c + 1]):
+            i1 = hidx[e, 0]
+            i2 = hidx[e, 1]
+            i3 = hidx[e, 2]
+            i4 = hidx[e, 3]
+            ex = q[i4, 0] - q[i3, 0]
+            ey = q[i4, 1] - q[i3, 1]
+            ez = q[i4, 2] - q[i3, 2]
+            el = math.sqrt(ex * ex + ey * ey + ez * ez)
+            # n1 = (x1 - x3) x (x1 - x4), n2 = (x2 - x4) x (x2 - x3)
+            ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
+            bx = q[i1, 0] - q[i4, 0]; by = q[i1, 1] - q[i4, 1]; bz = q[i1, 2] - q[i4, 2]
+            n1x = ay * bz - az * by; n1y = az * bx - ax * bz; n1z = ax * by - ay * bx
+            cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
+            dx = q[i2, 0] - q[i3, 0]; dy = q[i2, 1] - q[i3, 1]; dz = q[i2, 2] - q[i3, 2]
+            n2x = cy * dz - cz * dy; n2y = cz * dx - cx * dz; n2z = cx * dy - cy * dx
+            l1 = n1x * n1x + n1y * n1y + n1z * n1z
+            l2 = n2x * n2x + n2y * n2y + n2z * n2z
+            if el < 1e-12 or l1 < 1e-30 or l2 < 1e-30:
+                continue
+            s1 = math.sqrt(l1)
+            s2 = math.sqrt(l2)
+            cosv = (n1x * n2x + n1y * n2y + n1z * n2z) / (s1 * s2)
+            # sin = (n2 x n1) . e / |e|
+            kx = n2y * n1z - n2z * n1y
+            ky = n2z * n1x - n2x * n1z
+            kz = n2x * n1y - n2y * n1x
+            sinv = (kx * ex + ky * ey + kz * ez) / (s1 * s2 * el)
+            th = math.atan2(sinv, cosv)
+            C = th - hrest[e]
+            if C > math.pi:
+                C -= 2 * math.pi
+            elif C < -math.pi:
+                C += 2 * math.pi
+            # gradients (Bridson et al. 2003)
+            g1 = el / l1
+            g2 = el / l2
+            t31 = (bx * ex + by * ey + bz * ez) / el  # (x1 - x4).e/|e|
+            t32 = (cx * ex + cy * ey + cz * ez) / el  # (x2 - x4).e/|e|
+            t41 = (ax * ex + ay * ey + az * ez) / el  # (x1 - x3).e/|e|
+            t42 = (dx * ex + dy * ey + dz * ez) / el  # (x2 - x3).e/|e|
+            u1x = g1 * n1x; u1y = g1 * n1y; u1z = g1 * n1z
+            u2x = g2 * n2x; u2y = g2 * n2y; u2z = g2 * n2z
+            p1 = t31 / l1; p2 = t32 / l2
+            u3x = p1 * n1x + p2 * n2x; u3y = p1 * n1y + p2 * n2y; u3z = p1 * n1z + p2 * n2z
+            r1 = -t41 / l1; r2 = -t42 / l2
+            u4x = r1 * n1x + r2 * n2x; u4y = r1 * n1y + r2 * n2y; u4z = r1 * n1z + r2 * n2z
+            w1 = invm[i1]; w2 = invm[i2]; w3 = invm[i3]; w4 = invm[i4]
+            W = (w1 * (u1x * u1x + u1y * u1y + u1z * u1z) + w2 * (u2x * u2x + u2y * u2y + u2z * u2z)
+                 + w3 * (u3x * u3x + u3y * u3y + u3z * u3z) + w4 * (u4x * u4x + u4y * u4y + u4z * u4z) + halpha[e])
+            if W <= 0.0:
+                continue
+            dl = (-C - halpha[e] * hlam[e]) / W
+            # degenerate hinges: never move a vertex by more than half the edge length
+            gm = max(w1 * math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z), w2 * math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z),
+                     w3 * math.sqrt(u3x * u3x + u3y * u3y + u3z * u3z), w4 * math.sqrt(u4x * u4x + u4y * u4y + u4z * u4z))
+            if abs(dl) * gm > 0.5 * el:
+                dl = math.copysign(0.5 * el / gm, dl)
+            hlam[e] += dl
+            q[i1, 0] += w1 * dl * u1x; q[i1, 1] += w1 * dl * u1y; q[i1, 2] += w1 * dl * u1z
+            q[i2, 0] += w2 * dl * u2x; q[i2, 1] += w2 * dl * u2y; q[i2, 2] += w2 * dl * u2z
+            q[i3, 0] += w3 * dl * u3x; q[i3, 1] += w3 * dl * u3y; q[i3, 2] += w3 * dl * u3z
+            q[i4, 0] += w4 * dl * u4x; q[i4, 1] += w4 * dl * u4y; q[i4, 2] += w4 * dl * u4z
+            ch = abs(dl) * max(w1 * g1 * s1, w2 * g2 * s2)
+            if ch > big:
+                big = ch
+    # ---------------- thickness: 6 × volume of (v, a, b, c) = det, keeps V on the top side
+    for c in range(vcs.shape[0] - 1):
+        for t in range(vcs[c], vcs[c + 1]):
+            iv = vidx[t, 0]
+            ia = vidx[t, 1]
+            ib = vidx[t, 2]
+            ic = vidx[t, 3]
+            bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
+            cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
+            vx = q[iv, 0] - q[ia, 0]; vy = q[iv, 1] - q[ia, 1]; vz = q[iv, 2] - q[ia, 2]
+            gvx = by * cz - bz * cy; gvy = bz * cx - bx * cz; gvz = bx * cy - by * cx
+            gbx = cy * vz - cz * vy; gby = cz * vx - cx * vz; gbz = cx * vy - cy * vx
+            gcx = vy * bz - vz * by; gcy = vz * bx - vx * bz; gcz = vx * by - vy * bx
+            gax = -(gvx + gbx + gcx); gay = -(gvy + gby + gcy); gaz = -(gvz + gbz + gcz)
+            C = vx * gvx + vy * gvy + vz * gvz - vrest[t]
+            wv = invm[iv]; wa = invm[ia]; wb = invm[ib]; wc = invm[ic]
+            W = (wv * (gvx * gvx + gvy * gvy + gvz * gvz) + wa * (gax * gax + gay * gay + gaz * gaz)
+                 + wb * (gbx * gbx + gby * gby + gbz * gbz) + wc * (gcx * gcx + gcy * gcy + gcz * gcz))
+            if W <= 1e-300:
+                continue
+            dl = -C / W
+            gm = max(wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz), wa * math.sqrt(gax * gax + gay * gay + gaz * gaz),
+                     wb * math.sqrt(gbx * gbx + gby * gby + gbz * gbz), wc * math.sqrt(gcx * gcx + gcy * gcy + gcz * gcz))
+            lim = 0.5 * math.sqrt(math.sqrt(bx * bx + by * by + bz * bz) * math.sqrt(cx * cx + cy * cy + cz * cz))
+            if abs(dl) * gm > lim:
+                dl = math.copysign(lim / gm, dl)
+            q[iv, 0] += wv * dl * gvx; q[iv, 1] += wv * dl * gvy; q[iv, 2] += wv * dl * gvz
+            q[ia, 0] += wa * dl * gax; q[ia, 1] += wa * dl * gay; q[ia, 2] += wa * dl * gaz
+            q[ib, 0] += wb * dl * gbx; q[ib, 1] += wb * dl * gby; q[ib, 2] += wb * dl * gbz
+            q[ic, 0] += wc * dl * gcx; q[ic, 1] += wc * dl * gcy; q[ic, 2] += wc * dl * gcz
+            ch = abs(dl) * wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz)
+            if ch > big:
+                big = ch
+    return big
 
 
 def _springs_only(q, invm, ij, rest, salpha, slam, scs, change):
@@ -375,14 +521,16 @@ def uninvert(q, invm, vidx, hmin, vonly, ground):
 
 @njit(cache=True, fastmath=True)
 def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
-    """Candidate self-contact pairs (found once per substep with a spatial hash of cell
-    ``search``): layer-T particles closer than ``search`` whose rest distance² > ``skip2``.
-    Writes up to len(pairs) pairs; returns the count."""
+    """Candidate self-contact pairs (found once per substep with a spatial hash): layer-T
+    particles closer than ``search`` whose rest distance² > ``skip2``.  Cells are 2 × search
+    wide, so each particle visits only the 2 × 2 × 2 cells on its side of its own cell (a
+    neighbour closer than ``search`` cannot lie farther away) instead of 27.  Writes up to
+    len(pairs) pairs; returns the count."""
     nt = table.shape[0]
     mask = nt - 1
     pow2 = (nt & mask) == 0  # power-of-two table: bit mask instead of a signed 64-bit modulo
     table[:] = -1
-    inv = 1.0 / search
+    inv = 0.5 / search
     for k in range(idx.shape[0]):
         i = idx[k]
         h = (int(math.floor(q[i, 0] * inv)) * 73856093 ^ int(math.floor(q[i, 1] * inv)) * 19349663
@@ -395,13 +543,19 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     cap = pairs.shape[0]
     for k in range(idx.shape[0]):
         i = idx[k]
-        cx = int(math.floor(q[i, 0] * inv))
-        cy = int(math.floor(q[i, 1] * inv))
-        cz = int(math.floor(q[i, 2] * inv))
-        for ox in range(-1, 2):
-            for oy in range(-1, 2):
-                for oz in range(-1, 2):
-                    h = ((cx + ox) * 73856093 ^ (cy + oy) * 19349663 ^ (cz + oz) * 83492791)
+        gx = q[i, 0] * inv
+        gy = q[i, 1] * inv
+        gz = q[i, 2] * inv
+        cx = math.floor(gx)
+        cy = math.floor(gy)
+        cz = math.floor(gz)
+        lx = int(cx) - (1 if gx - cx < 0.5 else 0)
+        ly = int(cy) - (1 if gy - cy < 0.5 else 0)
+        lz = int(cz) - (1 if gz - cz < 0.5 else 0)
+        for ox in range(lx, lx + 2):
+            for oy in range(ly, ly + 2):
+                for oz in range(lz, lz + 2):
+                    h = (ox * 73856093 ^ oy * 19349663 ^ oz * 83492791)
                     h = (h & mask) if pow2 else h % nt
                     m = table[h]
                     while m >= 0:
@@ -415,7 +569,7 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
                                 ey = rest[i, 1] - rest[j, 1]
                                 if ex * ex + ey * ey > skip2:
                                     dup = False
-                                    # the 27-cell walk can meet a pair twice through hash collisions
+                                    # the cell walk can meet a pair twice through hash collisions
                                     for t in range(max(0, n - 8), n):
                                         if pairs[t, 0] == i and pairs[t, 1] == j:
                                             dup = True
