@@ -247,13 +247,18 @@ def cmd_run(args):
         nonlocal renderer, camera, frames_written
         from .render.offscreen import OffscreenRenderer, default_camera
 
+        from .render.options import RenderOptions
+
+        # photo species: the pigment colour carrying the photo's detail (as the GUI shows it)
+        opts = RenderOptions(albedo="detail" if sess.use_texture() else "colours")
         if renderer is None:
+            sess.photo_tint = False
             renderer = OffscreenRenderer(960, 720)
             mesh = sess.render_mesh()
             camera = default_camera(mesh.positions)
-            renderer.render_png(mesh, out / f"frame_{k:05d}.png", camera=camera)
+            renderer.render_png(mesh, out / f"frame_{k:05d}.png", camera=camera, options=opts)
         else:
-            renderer.render_png(sess.render_update(), out / f"frame_{k:05d}.png", camera=camera)
+            renderer.render_png(sess.render_update(), out / f"frame_{k:05d}.png", camera=camera, options=opts)
         frames_written += 1
 
     stats = []
