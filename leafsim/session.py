@@ -59,6 +59,10 @@ class BuildResult:
 public_mode = _public_mode  # file mode a plain open() would give (used for screenshots)
 
 
+#: pigment fields offered as heat-map debug views
+PIGMENT_VIEWS = ("chlorophyll", "carotenoid", "anthocyanin", "browning")
+
+
 def load_photo_rgba(path) -> np.ndarray:
     """The species photo as (H, W, 4) uint8 RGB with alpha = leaf mask (for textures and the
     GUI's photo panel).  Raises LeafsimError naming the file when it cannot be read."""
@@ -506,8 +510,12 @@ class Session:
         """Per layer-T vertex heat-map fields: ``mass`` [mg] now and ``water`` (now / initial)."""
         m, s, T = self.model, self.state, self._T
         w = s.particle_water[T]
-        return {"mass": (m.particle_cytosol[T] + w).astype(np.float32),
-                "water": (w / np.maximum(m.particle_water0[T], 1e-300)).astype(np.float32)}
+        out = {"mass": (m.particle_cytosol[T] + w).astype(np.float32),
+               "water": (w / np.maximum(m.particle_water0[T], 1e-300)).astype(np.float32)}
+        if self.pigments is not None:  # pigment heat maps (relative to the summer content)
+            for name in PIGMENT_VIEWS:
+                out[name] = np.asarray(getattr(self.pigments, name), np.float32)[T]
+        return out
 
     def render_mesh(self):
         """A :class:`leafsim.render.RenderMesh` of the current model and state (populate once

@@ -53,3 +53,15 @@ def test_water_in_the_pipeline_is_monotone_and_non_negative():
         assert (w >= 0).all() and np.isfinite(w).all()
         assert s.total_water() <= prev + 1e-12
         prev = s.total_water()
+
+
+def test_pigment_heat_maps_available_and_evolve():
+    s = Session("maple", overrides={**COLOUR_ONLY, "colour.age_rate": 0.5}, build=True)
+    s.render_mesh()  # sets the render index
+    f0 = s.scalar_fields()
+    assert {"chlorophyll", "carotenoid", "anthocyanin", "browning", "mass", "water"} <= set(f0)
+    chl0 = f0["chlorophyll"].copy()
+    s.step(300)
+    f1 = s.scalar_fields()
+    assert (f1["chlorophyll"] <= chl0 + 1e-6).all() and f1["chlorophyll"].mean() < chl0.mean()
+    assert f1["anthocyanin"].mean() > f0["anthocyanin"].mean()  # maple reddens

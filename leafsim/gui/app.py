@@ -22,7 +22,8 @@ import numpy as np
 
 from ..errors import LeafsimError
 
-VIEWS = ("shaded", "wireframe", "particles", "springs", "mass", "water")
+VIEWS = ("shaded", "wireframe", "particles", "springs", "mass", "water",
+         "chlorophyll", "carotenoid", "anthocyanin", "browning")
 LEFT_W, RIGHT_W = 380, 330
 #: resolution factors of the 3-D view (llvmpipe's cost is per pixel)
 SCALES = (0.35, 0.5, 0.75, 1.0)
@@ -201,7 +202,7 @@ class LeafApp:
                              specular=float(p["render.specular"]), veins=p["render.vein_alpha"] > 0.02,
                              background=BACKGROUND, shadow_size=1024, ground=self.show_ground,
                              shadows=self.shadows)
-        if view == "water":
+        if view == "water" or view in ("chlorophyll", "carotenoid", "anthocyanin", "browning"):
             opts.scalar_range = (0.0, 1.0)
         if self.session.use_texture():
             opts.albedo = {"detail": "detail", "photo": "texture", "colours": "colours"}[self.albedo]

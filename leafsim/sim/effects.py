@@ -15,7 +15,7 @@ from .kernels import osmosis as ko
 from .kernels import pbd as kp
 from .kernels import shrink as ks
 from .model import (
-    LAYER_T, LAYER_V, MASS_UNIT, SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN, Model, State,
+    KIND_VEIN, LAYER_T, LAYER_V, MASS_UNIT, SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN, Model, State,
 )
 
 #: below this many particles the serial Gauss–Seidel kernel beats the coloured parallel one
@@ -168,6 +168,16 @@ class Dynamics:
         # hinge stiffness geometry factor 3|e|²/(A1+A2) (discrete shells)
         self.hgeom = 3.0 * model.hinge_edge_len ** 2 / np.maximum(model.hinge_area, 1e-30)
         self.halpha = np.zeros(model.hinge_count)
+        # Veins stay straight along their length: a hinge whose two wing vertices are both on a
+        # main or lateral vein bends that vein lengthwise, so it gets no bilayer curl target
+        # (the blade still rolls across the veins). Without this a long narrow leaf (chestnut)
+        # scrolls up from the tip into a lump.
+        if model.hinge_count:
+            on_vein = (model.particle_kind == KIND_VEIN) & (model.particle_vein_order <= 1)
+            wings = model.hinge_idx[:, :2]
+            self.hinge_curl = np.where(on_vein[wings[:, 0]] & on_vein[wings[:, 1]], 0.0, 1.0)
+        else:
+            self.hinge_curl = np.ones(0)
         T = np.flatnonzero(model.particle_layer == LAYER_T)
         self.T_idx = T.astype(np.int64)
         # power of two ≥ 2 × |T| buckets: the contact hash uses a bit mask, not a 64-bit modulo
@@ -229,6 +239,7 @@ class Dynamics:
                              m.particle_mass0, m.thickness, BILAYER_GAIN, min(self.plastic_rate * self.dt, 1.0),
                              state.hinge_plastic, state.hinge_rest)
             np.clip(state.hinge_rest, -HINGE_MAX_ANGLE, HINGE_MAX_ANGLE, out=state.hinge_rest)
+            np.multiply(state.hinge_rest, self.hinge_curl, out=state.hinge_rest)
 
     def apply(self, state: State):
         m = self.model
