@@ -40,12 +40,16 @@ def dry(key: str, scene: str, max_frames: int, snap_dir: Path | None):
         from leafsim.render.camera import OrbitCamera
         from leafsim.render.offscreen import OffscreenRenderer, default_camera
 
+        from leafsim.render.options import RenderOptions
+
+        s.photo_tint = False  # photo species: pigment colour with the photo's detail, as in the GUI
+        opts = RenderOptions(albedo="detail" if s.use_texture() else "colours")
         r = OffscreenRenderer(480, 400)
         mesh = s.render_mesh()
         imgs = []
         for pitch, yaw in ((89.0, -90.0), (8.0, -90.0), (8.0, 0.0)):
             cam = default_camera(mesh.positions, pitch=pitch, yaw=yaw)
-            imgs.append(r.render_array(mesh, camera=cam))
+            imgs.append(r.render_array(mesh, camera=cam, options=opts))
         r.release()
         write_png_atomic(snap_dir / f"{key}_{scene}.png", np.hstack(imgs), rgb=True)
     return out
@@ -71,7 +75,11 @@ def main():
             rows.append(r)
             print(f"{k:16s} {sc:7s} {r['frames']:6d} {r['water_left']:6.3f} {r['margin_lift']:7.3f} {r['area_ratio']:6.3f} {r['inverted']:4d} {r['seconds']:6.1f}", flush=True)
     if a.json:
-        Path(a.json).write_text(json.dumps(rows, indent=1))
+        old = {}
+        if Path(a.json).is_file():  # keep the rows of species not rerun
+            old = {(r["species"], r["scene"]): r for r in json.loads(Path(a.json).read_text())}
+        old.update({(r["species"], r["scene"]): r for r in rows})
+        Path(a.json).write_text(json.dumps(list(old.values()), indent=1))
 
 
 if __name__ == "__main__":
