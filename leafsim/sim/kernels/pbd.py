@@ -26,6 +26,135 @@ def predict(q, qd, q_old, invm, gz, dt):
                 q[i, k] += qd[i, k] * dt
 
 
+# ---------------------------------------------------------------- one constraint each
+# Inlined into every loop variant below (parallel colour loops write the change into an
+# array, serial loops track the largest inline); each returns |Δx| of its projection.
+
+@njit(inline="always", fastmath=True)
+def _spring(q, invm, ij, rest, salpha, slam, s):
+    a = ij[s, 0]
+    b = ij[s, 1]
+    wa = invm[a]
+    wb = invm[b]
+    dx = q[a, 0] - q[b, 0]
+    dy = q[a, 1] - q[b, 1]
+    dz = q[a, 2] - q[b, 2]
+    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+    W = wa + wb + salpha[s]
+    if d < 1e-12 or W <= 0.0:
+        return 0.0
+    C = d - rest[s]
+    dl = (-C - salpha[s] * slam[s]) / W
+    slam[s] += dl
+    f = dl / d
+    q[a, 0] += wa * f * dx
+    q[a, 1] += wa * f * dy
+    q[a, 2] += wa * f * dz
+    q[b, 0] -= wb * f * dx
+    q[b, 1] -= wb * f * dy
+    q[b, 2] -= wb * f * dz
+    return abs(dl) * max(wa, wb)
+
+
+@njit(inline="always", fastmath=True)
+def _hinge(q, invm, hidx, hrest, halpha, hlam, e):
+    i1 = hidx[e, 0]
+    i2 = hidx[e, 1]
+    i3 = hidx[e, 2]
+    i4 = hidx[e, 3]
+    ex = q[i4, 0] - q[i3, 0]
+    ey = q[i4, 1] - q[i3, 1]
+    ez = q[i4, 2] - q[i3, 2]
+    el = math.sqrt(ex * ex + ey * ey + ez * ez)
+    # n1 = (x1 - x3) x (x1 - x4), n2 = (x2 - x4) x (x2 - x3)
+    ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
+    bx = q[i1, 0] - q[i4, 0]; by = q[i1, 1] - q[i4, 1]; bz = q[i1, 2] - q[i4, 2]
+    n1x = ay * bz - az * by; n1y = az * bx - ax * bz; n1z = ax * by - ay * bx
+    cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
+    dx = q[i2, 0] - q[i3, 0]; dy = q[i2, 1] - q[i3, 1]; dz = q[i2, 2] - q[i3, 2]
+    n2x = cy * dz - cz * dy; n2y = cz * dx - cx * dz; n2z = cx * dy - cy * dx
+    l1 = n1x * n1x + n1y * n1y + n1z * n1z
+    l2 = n2x * n2x + n2y * n2y + n2z * n2z
+    if el < 1e-12 or l1 < 1e-30 or l2 < 1e-30:
+        return 0.0
+    s1 = math.sqrt(l1)
+    s2 = math.sqrt(l2)
+    cosv = (n1x * n2x + n1y * n2y + n1z * n2z) / (s1 * s2)
+    # sin = (n2 x n1) . e / |e|
+    kx = n2y * n1z - n2z * n1y
+    ky = n2z * n1x - n2x * n1z
+    kz = n2x * n1y - n2y * n1x
+    sinv = (kx * ex + ky * ey + kz * ez) / (s1 * s2 * el)
+    th = math.atan2(sinv, cosv)
+    C = th - hrest[e]
+    if C > math.pi:
+        C -= 2 * math.pi
+    elif C < -math.pi:
+        C += 2 * math.pi
+    # gradients (Bridson et al. 2003)
+    g1 = el / l1
+    g2 = el / l2
+    t31 = (bx * ex + by * ey + bz * ez) / el  # (x1 - x4).e/|e|
+    t32 = (cx * ex + cy * ey + cz * ez) / el  # (x2 - x4).e/|e|
+    t41 = (ax * ex + ay * ey + az * ez) / el  # (x1 - x3).e/|e|
+    t42 = (dx * ex + dy * ey + dz * ez) / el  # (x2 - x3).e/|e|
+    u1x = g1 * n1x; u1y = g1 * n1y; u1z = g1 * n1z
+    u2x = g2 * n2x; u2y = g2 * n2y; u2z = g2 * n2z
+    p1 = t31 / l1; p2 = t32 / l2
+    u3x = p1 * n1x + p2 * n2x; u3y = p1 * n1y + p2 * n2y; u3z = p1 * n1z + p2 * n2z
+    r1 = -t41 / l1; r2 = -t42 / l2
+    u4x = r1 * n1x + r2 * n2x; u4y = r1 * n1y + r2 * n2y; u4z = r1 * n1z + r2 * n2z
+    w1 = invm[i1]; w2 = invm[i2]; w3 = invm[i3]; w4 = invm[i4]
+    W = (w1 * (u1x * u1x + u1y * u1y + u1z * u1z) + w2 * (u2x * u2x + u2y * u2y + u2z * u2z)
+         + w3 * (u3x * u3x + u3y * u3y + u3z * u3z) + w4 * (u4x * u4x + u4y * u4y + u4z * u4z) + halpha[e])
+    if W <= 0.0:
+        return 0.0
+    dl = (-C - halpha[e] * hlam[e]) / W
+    # degenerate hinges: never move a vertex by more than half the edge length
+    gm = max(w1 * math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z), w2 * math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z),
+             w3 * math.sqrt(u3x * u3x + u3y * u3y + u3z * u3z), w4 * math.sqrt(u4x * u4x + u4y * u4y + u4z * u4z))
+    if abs(dl) * gm > 0.5 * el:
+        dl = math.copysign(0.5 * el / gm, dl)
+    hlam[e] += dl
+    q[i1, 0] += w1 * dl * u1x; q[i1, 1] += w1 * dl * u1y; q[i1, 2] += w1 * dl * u1z
+    q[i2, 0] += w2 * dl * u2x; q[i2, 1] += w2 * dl * u2y; q[i2, 2] += w2 * dl * u2z
+    q[i3, 0] += w3 * dl * u3x; q[i3, 1] += w3 * dl * u3y; q[i3, 2] += w3 * dl * u3z
+    q[i4, 0] += w4 * dl * u4x; q[i4, 1] += w4 * dl * u4y; q[i4, 2] += w4 * dl * u4z
+    return abs(dl) * max(w1 * g1 * s1, w2 * g2 * s2)
+
+
+@njit(inline="always", fastmath=True)
+def _volume(q, invm, vidx, vrest, t):
+    iv = vidx[t, 0]
+    ia = vidx[t, 1]
+    ib = vidx[t, 2]
+    ic = vidx[t, 3]
+    bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
+    cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
+    vx = q[iv, 0] - q[ia, 0]; vy = q[iv, 1] - q[ia, 1]; vz = q[iv, 2] - q[ia, 2]
+    gvx = by * cz - bz * cy; gvy = bz * cx - bx * cz; gvz = bx * cy - by * cx
+    gbx = cy * vz - cz * vy; gby = cz * vx - cx * vz; gbz = cx * vy - cy * vx
+    gcx = vy * bz - vz * by; gcy = vz * bx - vx * bz; gcz = vx * by - vy * bx
+    gax = -(gvx + gbx + gcx); gay = -(gvy + gby + gcy); gaz = -(gvz + gbz + gcz)
+    C = vx * gvx + vy * gvy + vz * gvz - vrest[t]
+    wv = invm[iv]; wa = invm[ia]; wb = invm[ib]; wc = invm[ic]
+    W = (wv * (gvx * gvx + gvy * gvy + gvz * gvz) + wa * (gax * gax + gay * gay + gaz * gaz)
+         + wb * (gbx * gbx + gby * gby + gbz * gbz) + wc * (gcx * gcx + gcy * gcy + gcz * gcz))
+    if W <= 1e-300:
+        return 0.0
+    dl = -C / W
+    gm = max(wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz), wa * math.sqrt(gax * gax + gay * gay + gaz * gaz),
+             wb * math.sqrt(gbx * gbx + gby * gby + gbz * gbz), wc * math.sqrt(gcx * gcx + gcy * gcy + gcz * gcz))
+    lim = 0.5 * math.sqrt(math.sqrt(bx * bx + by * by + bz * bz) * math.sqrt(cx * cx + cy * cy + cz * cz))
+    if abs(dl) * gm > lim:
+        dl = math.copysign(lim / gm, dl)
+    q[iv, 0] += wv * dl * gvx; q[iv, 1] += wv * dl * gvy; q[iv, 2] += wv * dl * gvz
+    q[ia, 0] += wa * dl * gax; q[ia, 1] += wa * dl * gay; q[ia, 2] += wa * dl * gaz
+    q[ib, 0] += wb * dl * gbx; q[ib, 1] += wb * dl * gby; q[ib, 2] += wb * dl * gbz
+    q[ic, 0] += wc * dl * gcx; q[ic, 1] += wc * dl * gcy; q[ic, 2] += wc * dl * gcz
+    return abs(dl) * wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz)
+
+
 def _iteration(q, invm, ij, rest, salpha, slam, scs,
                hidx, hrest, halpha, hlam, hcs,
                vidx, vrest, vlam, vcs, ground, pen, change):
@@ -43,135 +172,21 @@ def _iteration(q, invm, ij, rest, salpha, slam, scs,
     # ---------------- distance constraints
     for c in range(scs.shape[0] - 1):
         for s in prange(scs[c], scs[c + 1]):
-            a = ij[s, 0]
-            b = ij[s, 1]
-            wa = invm[a]
-            wb = invm[b]
-            dx = q[a, 0] - q[b, 0]
-            dy = q[a, 1] - q[b, 1]
-            dz = q[a, 2] - q[b, 2]
-            d = math.sqrt(dx * dx + dy * dy + dz * dz)
-            W = wa + wb + salpha[s]
-            if d < 1e-12 or W <= 0.0:
-                change[s] = 0.0
-                continue
-            C = d - rest[s]
-            dl = (-C - salpha[s] * slam[s]) / W
-            slam[s] += dl
-            f = dl / d
-            q[a, 0] += wa * f * dx
-            q[a, 1] += wa * f * dy
-            q[a, 2] += wa * f * dz
-            q[b, 0] -= wb * f * dx
-            q[b, 1] -= wb * f * dy
-            q[b, 2] -= wb * f * dz
-            change[s] = abs(dl) * max(wa, wb)
+            change[s] = _spring(q, invm, ij, rest, salpha, slam, s)
     for s in range(scs[-1]):
         if change[s] > big:
             big = change[s]
     # ---------------- bending hinges (c, d, a, b): signed dihedral angle, cup (wings up) > 0
     for c in range(hcs.shape[0] - 1):
         for e in prange(hcs[c], hcs[c + 1]):
-            i1 = hidx[e, 0]
-            i2 = hidx[e, 1]
-            i3 = hidx[e, 2]
-            i4 = hidx[e, 3]
-            ex = q[i4, 0] - q[i3, 0]
-            ey = q[i4, 1] - q[i3, 1]
-            ez = q[i4, 2] - q[i3, 2]
-            el = math.sqrt(ex * ex + ey * ey + ez * ez)
-            # n1 = (x1 - x3) x (x1 - x4), n2 = (x2 - x4) x (x2 - x3)
-            ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
-            bx = q[i1, 0] - q[i4, 0]; by = q[i1, 1] - q[i4, 1]; bz = q[i1, 2] - q[i4, 2]
-            n1x = ay * bz - az * by; n1y = az * bx - ax * bz; n1z = ax * by - ay * bx
-            cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
-            dx = q[i2, 0] - q[i3, 0]; dy = q[i2, 1] - q[i3, 1]; dz = q[i2, 2] - q[i3, 2]
-            n2x = cy * dz - cz * dy; n2y = cz * dx - cx * dz; n2z = cx * dy - cy * dx
-            l1 = n1x * n1x + n1y * n1y + n1z * n1z
-            l2 = n2x * n2x + n2y * n2y + n2z * n2z
-            if el < 1e-12 or l1 < 1e-30 or l2 < 1e-30:
-                change[e] = 0.0
-                continue
-            s1 = math.sqrt(l1)
-            s2 = math.sqrt(l2)
-            cosv = (n1x * n2x + n1y * n2y + n1z * n2z) / (s1 * s2)
-            # sin = (n2 x n1) . e / |e|
-            kx = n2y * n1z - n2z * n1y
-            ky = n2z * n1x - n2x * n1z
-            kz = n2x * n1y - n2y * n1x
-            sinv = (kx * ex + ky * ey + kz * ez) / (s1 * s2 * el)
-            th = math.atan2(sinv, cosv)
-            C = th - hrest[e]
-            if C > math.pi:
-                C -= 2 * math.pi
-            elif C < -math.pi:
-                C += 2 * math.pi
-            # gradients (Bridson et al. 2003)
-            g1 = el / l1
-            g2 = el / l2
-            t31 = (bx * ex + by * ey + bz * ez) / el  # (x1 - x4).e/|e|
-            t32 = (cx * ex + cy * ey + cz * ez) / el  # (x2 - x4).e/|e|
-            t41 = (ax * ex + ay * ey + az * ez) / el  # (x1 - x3).e/|e|
-            t42 = (dx * ex + dy * ey + dz * ez) / el  # (x2 - x3).e/|e|
-            u1x = g1 * n1x; u1y = g1 * n1y; u1z = g1 * n1z
-            u2x = g2 * n2x; u2y = g2 * n2y; u2z = g2 * n2z
-            p1 = t31 / l1; p2 = t32 / l2
-            u3x = p1 * n1x + p2 * n2x; u3y = p1 * n1y + p2 * n2y; u3z = p1 * n1z + p2 * n2z
-            r1 = -t41 / l1; r2 = -t42 / l2
-            u4x = r1 * n1x + r2 * n2x; u4y = r1 * n1y + r2 * n2y; u4z = r1 * n1z + r2 * n2z
-            w1 = invm[i1]; w2 = invm[i2]; w3 = invm[i3]; w4 = invm[i4]
-            W = (w1 * (u1x * u1x + u1y * u1y + u1z * u1z) + w2 * (u2x * u2x + u2y * u2y + u2z * u2z)
-                 + w3 * (u3x * u3x + u3y * u3y + u3z * u3z) + w4 * (u4x * u4x + u4y * u4y + u4z * u4z) + halpha[e])
-            if W <= 0.0:
-                change[e] = 0.0
-                continue
-            dl = (-C - halpha[e] * hlam[e]) / W
-            # degenerate hinges: never move a vertex by more than half the edge length
-            gm = max(w1 * math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z), w2 * math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z),
-                     w3 * math.sqrt(u3x * u3x + u3y * u3y + u3z * u3z), w4 * math.sqrt(u4x * u4x + u4y * u4y + u4z * u4z))
-            if abs(dl) * gm > 0.5 * el:
-                dl = math.copysign(0.5 * el / gm, dl)
-            hlam[e] += dl
-            q[i1, 0] += w1 * dl * u1x; q[i1, 1] += w1 * dl * u1y; q[i1, 2] += w1 * dl * u1z
-            q[i2, 0] += w2 * dl * u2x; q[i2, 1] += w2 * dl * u2y; q[i2, 2] += w2 * dl * u2z
-            q[i3, 0] += w3 * dl * u3x; q[i3, 1] += w3 * dl * u3y; q[i3, 2] += w3 * dl * u3z
-            q[i4, 0] += w4 * dl * u4x; q[i4, 1] += w4 * dl * u4y; q[i4, 2] += w4 * dl * u4z
-            change[e] = abs(dl) * max(w1 * g1 * s1, w2 * g2 * s2)
+            change[e] = _hinge(q, invm, hidx, hrest, halpha, hlam, e)
     for e in range(hcs[-1]):
         if change[e] > big:
             big = change[e]
     # ---------------- thickness: 6 × volume of (v, a, b, c) = det, keeps V on the top side
     for c in range(vcs.shape[0] - 1):
         for t in prange(vcs[c], vcs[c + 1]):
-            iv = vidx[t, 0]
-            ia = vidx[t, 1]
-            ib = vidx[t, 2]
-            ic = vidx[t, 3]
-            bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
-            cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
-            vx = q[iv, 0] - q[ia, 0]; vy = q[iv, 1] - q[ia, 1]; vz = q[iv, 2] - q[ia, 2]
-            gvx = by * cz - bz * cy; gvy = bz * cx - bx * cz; gvz = bx * cy - by * cx
-            gbx = cy * vz - cz * vy; gby = cz * vx - cx * vz; gbz = cx * vy - cy * vx
-            gcx = vy * bz - vz * by; gcy = vz * bx - vx * bz; gcz = vx * by - vy * bx
-            gax = -(gvx + gbx + gcx); gay = -(gvy + gby + gcy); gaz = -(gvz + gbz + gcz)
-            C = vx * gvx + vy * gvy + vz * gvz - vrest[t]
-            wv = invm[iv]; wa = invm[ia]; wb = invm[ib]; wc = invm[ic]
-            W = (wv * (gvx * gvx + gvy * gvy + gvz * gvz) + wa * (gax * gax + gay * gay + gaz * gaz)
-                 + wb * (gbx * gbx + gby * gby + gbz * gbz) + wc * (gcx * gcx + gcy * gcy + gcz * gcz))
-            if W <= 1e-300:
-                change[t] = 0.0
-                continue
-            dl = -C / W
-            gm = max(wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz), wa * math.sqrt(gax * gax + gay * gay + gaz * gaz),
-                     wb * math.sqrt(gbx * gbx + gby * gby + gbz * gbz), wc * math.sqrt(gcx * gcx + gcy * gcy + gcz * gcz))
-            lim = 0.5 * math.sqrt(math.sqrt(bx * bx + by * by + bz * bz) * math.sqrt(cx * cx + cy * cy + cz * cz))
-            if abs(dl) * gm > lim:
-                dl = math.copysign(lim / gm, dl)
-            q[iv, 0] += wv * dl * gvx; q[iv, 1] += wv * dl * gvy; q[iv, 2] += wv * dl * gvz
-            q[ia, 0] += wa * dl * gax; q[ia, 1] += wa * dl * gay; q[ia, 2] += wa * dl * gaz
-            q[ib, 0] += wb * dl * gbx; q[ib, 1] += wb * dl * gby; q[ib, 2] += wb * dl * gbz
-            q[ic, 0] += wc * dl * gcx; q[ic, 1] += wc * dl * gcy; q[ic, 2] += wc * dl * gcz
-            change[t] = abs(dl) * wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz)
+            change[t] = _volume(q, invm, vidx, vrest, t)
     for t in range(vcs[-1]):
         if change[t] > big:
             big = change[t]
@@ -200,129 +215,19 @@ def iteration_ser(q, invm, ij, rest, salpha, slam, scs,
     # ---------------- distance constraints
     for c in range(scs.shape[0] - 1):
         for s in range(scs[c], scs[c + 1]):
-            a = ij[s, 0]
-            b = ij[s, 1]
-            wa = invm[a]
-            wb = invm[b]
-            dx = q[a, 0] - q[b, 0]
-            dy = q[a, 1] - q[b, 1]
-            dz = q[a, 2] - q[b, 2]
-            d = math.sqrt(dx * dx + dy * dy + dz * dz)
-            W = wa + wb + salpha[s]
-            if d < 1e-12 or W <= 0.0:
-                continue
-            C = d - rest[s]
-            dl = (-C - salpha[s] * slam[s]) / W
-            slam[s] += dl
-            f = dl / d
-            q[a, 0] += wa * f * dx
-            q[a, 1] += wa * f * dy
-            q[a, 2] += wa * f * dz
-            q[b, 0] -= wb * f * dx
-            q[b, 1] -= wb * f * dy
-            q[b, 2] -= wb * f * dz
-            ch = abs(dl) * max(wa, wb)
+            ch = _spring(q, invm, ij, rest, salpha, slam, s)
             if ch > big:
                 big = ch
     # ---------------- bending hinges (c, d, a, b): signed dihedral angle, cup (wings up) > 0
     for c in range(hcs.shape[0] - 1):
         for e in range(hcs[c], hcs[c + 1]):
-            i1 = hidx[e, 0]
-            i2 = hidx[e, 1]
-            i3 = hidx[e, 2]
-            i4 = hidx[e, 3]
-            ex = q[i4, 0] - q[i3, 0]
-            ey = q[i4, 1] - q[i3, 1]
-            ez = q[i4, 2] - q[i3, 2]
-            el = math.sqrt(ex * ex + ey * ey + ez * ez)
-            # n1 = (x1 - x3) x (x1 - x4), n2 = (x2 - x4) x (x2 - x3)
-            ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
-            bx = q[i1, 0] - q[i4, 0]; by = q[i1, 1] - q[i4, 1]; bz = q[i1, 2] - q[i4, 2]
-            n1x = ay * bz - az * by; n1y = az * bx - ax * bz; n1z = ax * by - ay * bx
-            cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
-            dx = q[i2, 0] - q[i3, 0]; dy = q[i2, 1] - q[i3, 1]; dz = q[i2, 2] - q[i3, 2]
-            n2x = cy * dz - cz * dy; n2y = cz * dx - cx * dz; n2z = cx * dy - cy * dx
-            l1 = n1x * n1x + n1y * n1y + n1z * n1z
-            l2 = n2x * n2x + n2y * n2y + n2z * n2z
-            if el < 1e-12 or l1 < 1e-30 or l2 < 1e-30:
-                continue
-            s1 = math.sqrt(l1)
-            s2 = math.sqrt(l2)
-            cosv = (n1x * n2x + n1y * n2y + n1z * n2z) / (s1 * s2)
-            # sin = (n2 x n1) . e / |e|
-            kx = n2y * n1z - n2z * n1y
-            ky = n2z * n1x - n2x * n1z
-            kz = n2x * n1y - n2y * n1x
-            sinv = (kx * ex + ky * ey + kz * ez) / (s1 * s2 * el)
-            th = math.atan2(sinv, cosv)
-            C = th - hrest[e]
-            if C > math.pi:
-                C -= 2 * math.pi
-            elif C < -math.pi:
-                C += 2 * math.pi
-            # gradients (Bridson et al. 2003)
-            g1 = el / l1
-            g2 = el / l2
-            t31 = (bx * ex + by * ey + bz * ez) / el  # (x1 - x4).e/|e|
-            t32 = (cx * ex + cy * ey + cz * ez) / el  # (x2 - x4).e/|e|
-            t41 = (ax * ex + ay * ey + az * ez) / el  # (x1 - x3).e/|e|
-            t42 = (dx * ex + dy * ey + dz * ez) / el  # (x2 - x3).e/|e|
-            u1x = g1 * n1x; u1y = g1 * n1y; u1z = g1 * n1z
-            u2x = g2 * n2x; u2y = g2 * n2y; u2z = g2 * n2z
-            p1 = t31 / l1; p2 = t32 / l2
-            u3x = p1 * n1x + p2 * n2x; u3y = p1 * n1y + p2 * n2y; u3z = p1 * n1z + p2 * n2z
-            r1 = -t41 / l1; r2 = -t42 / l2
-            u4x = r1 * n1x + r2 * n2x; u4y = r1 * n1y + r2 * n2y; u4z = r1 * n1z + r2 * n2z
-            w1 = invm[i1]; w2 = invm[i2]; w3 = invm[i3]; w4 = invm[i4]
-            W = (w1 * (u1x * u1x + u1y * u1y + u1z * u1z) + w2 * (u2x * u2x + u2y * u2y + u2z * u2z)
-                 + w3 * (u3x * u3x + u3y * u3y + u3z * u3z) + w4 * (u4x * u4x + u4y * u4y + u4z * u4z) + halpha[e])
-            if W <= 0.0:
-                continue
-            dl = (-C - halpha[e] * hlam[e]) / W
-            # degenerate hinges: never move a vertex by more than half the edge length
-            gm = max(w1 * math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z), w2 * math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z),
-                     w3 * math.sqrt(u3x * u3x + u3y * u3y + u3z * u3z), w4 * math.sqrt(u4x * u4x + u4y * u4y + u4z * u4z))
-            if abs(dl) * gm > 0.5 * el:
-                dl = math.copysign(0.5 * el / gm, dl)
-            hlam[e] += dl
-            q[i1, 0] += w1 * dl * u1x; q[i1, 1] += w1 * dl * u1y; q[i1, 2] += w1 * dl * u1z
-            q[i2, 0] += w2 * dl * u2x; q[i2, 1] += w2 * dl * u2y; q[i2, 2] += w2 * dl * u2z
-            q[i3, 0] += w3 * dl * u3x; q[i3, 1] += w3 * dl * u3y; q[i3, 2] += w3 * dl * u3z
-            q[i4, 0] += w4 * dl * u4x; q[i4, 1] += w4 * dl * u4y; q[i4, 2] += w4 * dl * u4z
-            ch = abs(dl) * max(w1 * g1 * s1, w2 * g2 * s2)
+            ch = _hinge(q, invm, hidx, hrest, halpha, hlam, e)
             if ch > big:
                 big = ch
     # ---------------- thickness: 6 × volume of (v, a, b, c) = det, keeps V on the top side
     for c in range(vcs.shape[0] - 1):
         for t in range(vcs[c], vcs[c + 1]):
-            iv = vidx[t, 0]
-            ia = vidx[t, 1]
-            ib = vidx[t, 2]
-            ic = vidx[t, 3]
-            bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
-            cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
-            vx = q[iv, 0] - q[ia, 0]; vy = q[iv, 1] - q[ia, 1]; vz = q[iv, 2] - q[ia, 2]
-            gvx = by * cz - bz * cy; gvy = bz * cx - bx * cz; gvz = bx * cy - by * cx
-            gbx = cy * vz - cz * vy; gby = cz * vx - cx * vz; gbz = cx * vy - cy * vx
-            gcx = vy * bz - vz * by; gcy = vz * bx - vx * bz; gcz = vx * by - vy * bx
-            gax = -(gvx + gbx + gcx); gay = -(gvy + gby + gcy); gaz = -(gvz + gbz + gcz)
-            C = vx * gvx + vy * gvy + vz * gvz - vrest[t]
-            wv = invm[iv]; wa = invm[ia]; wb = invm[ib]; wc = invm[ic]
-            W = (wv * (gvx * gvx + gvy * gvy + gvz * gvz) + wa * (gax * gax + gay * gay + gaz * gaz)
-                 + wb * (gbx * gbx + gby * gby + gbz * gbz) + wc * (gcx * gcx + gcy * gcy + gcz * gcz))
-            if W <= 1e-300:
-                continue
-            dl = -C / W
-            gm = max(wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz), wa * math.sqrt(gax * gax + gay * gay + gaz * gaz),
-                     wb * math.sqrt(gbx * gbx + gby * gby + gbz * gbz), wc * math.sqrt(gcx * gcx + gcy * gcy + gcz * gcz))
-            lim = 0.5 * math.sqrt(math.sqrt(bx * bx + by * by + bz * bz) * math.sqrt(cx * cx + cy * cy + cz * cz))
-            if abs(dl) * gm > lim:
-                dl = math.copysign(lim / gm, dl)
-            q[iv, 0] += wv * dl * gvx; q[iv, 1] += wv * dl * gvy; q[iv, 2] += wv * dl * gvz
-            q[ia, 0] += wa * dl * gax; q[ia, 1] += wa * dl * gay; q[ia, 2] += wa * dl * gaz
-            q[ib, 0] += wb * dl * gbx; q[ib, 1] += wb * dl * gby; q[ib, 2] += wb * dl * gbz
-            q[ic, 0] += wc * dl * gcx; q[ic, 1] += wc * dl * gcy; q[ic, 2] += wc * dl * gcz
-            ch = abs(dl) * wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz)
+            ch = _volume(q, invm, vidx, vrest, t)
             if ch > big:
                 big = ch
     return big
@@ -332,28 +237,7 @@ def _springs_only(q, invm, ij, rest, salpha, slam, scs, change):
     """Distance constraints only (the benchmark's PBD pass)."""
     for c in range(scs.shape[0] - 1):
         for s in prange(scs[c], scs[c + 1]):
-            a = ij[s, 0]
-            b = ij[s, 1]
-            wa = invm[a]
-            wb = invm[b]
-            dx = q[a, 0] - q[b, 0]
-            dy = q[a, 1] - q[b, 1]
-            dz = q[a, 2] - q[b, 2]
-            d = math.sqrt(dx * dx + dy * dy + dz * dz)
-            W = wa + wb + salpha[s]
-            if d < 1e-12 or W <= 0.0:
-                change[s] = 0.0
-                continue
-            dl = (rest[s] - d - salpha[s] * slam[s]) / W
-            slam[s] += dl
-            f = dl / d
-            q[a, 0] += wa * f * dx
-            q[a, 1] += wa * f * dy
-            q[a, 2] += wa * f * dz
-            q[b, 0] -= wb * f * dx
-            q[b, 1] -= wb * f * dy
-            q[b, 2] -= wb * f * dz
-            change[s] = abs(dl) * max(wa, wb)
+            change[s] = _spring(q, invm, ij, rest, salpha, slam, s)
     big = 0.0
     for s in range(scs[-1]):
         if change[s] > big:
@@ -624,27 +508,7 @@ def springs_multi_ser(q, invm, ij, rest, salpha, slam, scs, niter, tol):
         it += 1
         big = 0.0
         for s in range(scs[-1]):
-            a = ij[s, 0]
-            b = ij[s, 1]
-            wa = invm[a]
-            wb = invm[b]
-            dx = q[a, 0] - q[b, 0]
-            dy = q[a, 1] - q[b, 1]
-            dz = q[a, 2] - q[b, 2]
-            d = math.sqrt(dx * dx + dy * dy + dz * dz)
-            W = wa + wb + salpha[s]
-            if d < 1e-12 or W <= 0.0:
-                continue
-            dl = (rest[s] - d - salpha[s] * slam[s]) / W
-            slam[s] += dl
-            f = dl / d
-            q[a, 0] += wa * f * dx
-            q[a, 1] += wa * f * dy
-            q[a, 2] += wa * f * dz
-            q[b, 0] -= wb * f * dx
-            q[b, 1] -= wb * f * dy
-            q[b, 2] -= wb * f * dz
-            ch = abs(dl) * max(wa, wb)
+            ch = _spring(q, invm, ij, rest, salpha, slam, s)
             if ch > big:
                 big = ch
         if big < tol:
@@ -660,28 +524,7 @@ def springs_multi_par(q, invm, ij, rest, salpha, slam, scs, change, niter, tol):
         it += 1
         for c in range(scs.shape[0] - 1):
             for s in prange(scs[c], scs[c + 1]):
-                a = ij[s, 0]
-                b = ij[s, 1]
-                wa = invm[a]
-                wb = invm[b]
-                dx = q[a, 0] - q[b, 0]
-                dy = q[a, 1] - q[b, 1]
-                dz = q[a, 2] - q[b, 2]
-                d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                W = wa + wb + salpha[s]
-                if d < 1e-12 or W <= 0.0:
-                    change[s] = 0.0
-                    continue
-                dl = (rest[s] - d - salpha[s] * slam[s]) / W
-                slam[s] += dl
-                f = dl / d
-                q[a, 0] += wa * f * dx
-                q[a, 1] += wa * f * dy
-                q[a, 2] += wa * f * dz
-                q[b, 0] -= wb * f * dx
-                q[b, 1] -= wb * f * dy
-                q[b, 2] -= wb * f * dz
-                change[s] = abs(dl) * max(wa, wb)
+                change[s] = _spring(q, invm, ij, rest, salpha, slam, s)
         big = 0.0
         for s in range(scs[-1]):
             if change[s] > big:
