@@ -25,7 +25,7 @@ def xdisplay():
         yield os.environ["DISPLAY"]
         return
     if shutil.which("Xvfb") is None:
-        pytest.skip("no DISPLAY and no Xvfb installed")
+        pytest.fail("GUI tests need an X display: no DISPLAY and no Xvfb (scripts/setup.sh installs xvfb)")
     proc = None
     for _ in range(5):
         n = _free_display()
@@ -42,7 +42,7 @@ def xdisplay():
         proc.wait()
         proc = None
     if proc is None:
-        pytest.skip("could not start Xvfb")
+        pytest.fail("GUI tests need an X display: Xvfb did not start")
     display = f":{n}"
     # wait until the server answers (xdpyinfo-free: a client connection via xdotool if present)
     if shutil.which("xdotool"):
