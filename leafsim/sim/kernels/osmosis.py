@@ -6,18 +6,24 @@ import numpy as np
 from numba import njit, prange
 
 
+@njit(inline="always", fastmath=True)
+def _loss(w, rate, dt, w_ref):
+    """Evaporation of one particle this step: rate Δt w_ref, never more than its water w."""
+    l = rate * dt * w_ref
+    if l > w:
+        l = w
+    if l < 0.0:
+        l = 0.0
+    return l
+
+
 @njit(cache=True, fastmath=True)
 def loss_rhs(M, c, w0, rate, dt, rhs, loss):
     """rhs = M c − loss with loss = min(rate Δt w0, w) so water stays ≥ 0."""
     for i in range(M.shape[0]):
         w = M[i] * c[i]
-        l = rate[i] * dt * w0[i]
-        if l > w:
-            l = w
-        if l < 0.0:
-            l = 0.0
-        loss[i] = l
-        rhs[i] = w - l
+        loss[i] = _loss(w, rate[i], dt, w0[i])
+        rhs[i] = w - loss[i]
 
 
 @njit(cache=True, parallel=True, fastmath=True)
@@ -119,11 +125,7 @@ def direct_step(M, w, w0, rate, dt, Lp, Li, Lx, Up, Ui, Ux, perm_r, perm_c, y, r
     n = M.shape[0]
     for i in range(n):
         wi = w[i]  # = M c
-        l = rate[i] * dt * w0[i]
-        if l > wi:
-            l = wi
-        if l < 0.0:
-            l = 0.0
+        l = _loss(wi, rate[i], dt, w0[i])
         loss[i] = l
         rhs[i] = wi - l
         y[perm_r[i]] = wi - l
