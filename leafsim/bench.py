@@ -87,7 +87,7 @@ class NumpyStep:
         self.sigma = np.where(t == SPRING_VEIN, params["shrink.sigma_vein"], params["shrink.sigma_surface_bottom"])
         self.sigma[t == 2] = params["shrink.sigma_surface_top"]
         self.l_min = params["shrink.l_min"]
-        self.rate = np.where(model.particle_layer == LAYER_V, params["osmosis.loss_top"], params["osmosis.loss_bottom"])
+        self.rate = np.where(model.particle_layer == LAYER_V, params["osmosis.evaporation_top"], params["osmosis.evaporation_bottom"])
         self.dt = params["dynamics.dt"]
         n = model.particle_count
         self.deg = np.bincount(model.spring_ij.ravel(), minlength=n).astype(float)
@@ -96,7 +96,7 @@ class NumpyStep:
         m = self.m
         M = m.particle_cytosol
         c = w / M
-        loss = np.minimum(self.rate * self.dt * m.particle_water0, w)
+        loss = np.minimum(self.rate * self.dt * m.particle_area, w)
         cn = self.lu.solve(M * c - loss)
         w[:] = np.maximum(cn, 0) * M
 
@@ -132,7 +132,7 @@ def _colour_step_fn(model: Model, params: ParamSet):
     to linear RGB for every particle."""
     from .sim import colour as kc
 
-    pig = kc.init_pigments(model.particle_count, params, seed=0, rest_relative_mass=model.particle_mass0)
+    pig = kc.init_pigments(model.particle_count, params, seed=0, rest_relative_mass=model.areal_mass0)
     w = np.linspace(0.3, 1.0, model.particle_count).astype(np.float32)
     dt = params["dynamics.dt"]
     clock = [0.3]
@@ -173,7 +173,7 @@ def bench_model(model: Model, reps: int = 30, params: ParamSet | None = None, ja
     # --- 10 PBD iterations over distance constraints: fused serial / coloured parallel / Jacobi
     dyn = Dynamics(model)
     dyn.configure(params, {e: True for e in ("gravity", "pbd", "bending", "ground", "self_collision", "shrink")})
-    np.divide(1e6, model.particle_cytosol + st.particle_water, out=dyn.invm)
+    np.divide(1.0, model.particle_cytosol + st.particle_water, out=dyn.invm)
     q = st.particle_q
     rng = np.random.default_rng(0)
     q += rng.normal(0, 0.02 * model.spacing, q.shape)
@@ -202,7 +202,7 @@ def bench_model(model: Model, reps: int = 30, params: ParamSet | None = None, ja
     def full():
         best_osm.apply(st)
         sh.apply(st)
-        np.divide(1e6, model.particle_cytosol + st.particle_water, out=dyn.invm)
+        np.divide(1.0, model.particle_cytosol + st.particle_water, out=dyn.invm)
         pbd()
 
     ms["full_step"] = _median_ms(full, reps)

@@ -16,13 +16,15 @@ True
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import Delaunay, cKDTree
 
 from .errors import LeafsimError
-from .geometry import LeafShape, points_in_polygon, resample_closed, resample_polyline
+from .geometry import LeafShape, points_in_polygon, polygon_area, resample_closed, resample_polyline
 from .params import ParamSet
 from .sim.kernels.build import greedy_colour, poisson_accept
 from .sim.model import (
@@ -45,9 +47,26 @@ def _colour_sort(idx: np.ndarray, n: int):
     return perm, np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
+@dataclass
+class _Points:
+    """Layer-T particles before triangulation: positions (n, 2), kinds (n,), vein orders (n,),
+    vein polylines as particle-index chains with widths [m] and orders, contour count."""
+
+    pts: np.ndarray
+    kinds: np.ndarray
+    vorders: np.ndarray
+    vein_lists: list
+    vein_ord: list
+    vein_wid: list
+    n_contour: int
+
+
 def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
                 extra_points: np.ndarray | None = None) -> Model:
     """Build the two-layer blade.
+
+    Stages (each a function below): sample particles → triangulate → T edges and vein springs →
+    dual layer V and links → hinges → thickness volumes → masses per area → colour sort.
 
     Parameters
     ----------
@@ -69,10 +88,29 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
         raise LeafsimError("build: the outline needs at least 3 points")
     r = params["mesh.spacing"] * L
     h = params["mesh.thickness"]
-    rng = np.random.default_rng(seed)
-    max_order = _ORDER[params["mesh.veins_included"]]
+    P = _sample_particles(contour, veins, params, r, np.random.default_rng(seed), extra_points)
+    tri, P, remap = _triangulate(P, contour, r)
+    nT, m = len(P.pts), len(tri)
+    vp, vw, vo = _vein_chains(P, remap)
+    E = _t_edges(P.pts, tri, vp, vo)
+    rest = np.zeros((nT + m, 3))
+    rest[:nT, :2] = P.pts
+    rest[nT:, :2] = P.pts[tri].mean(1)
+    rest[nT:, 2] = h
+    tri_area = np.abs(_areas(P.pts, tri))
+    S = _springs(E, tri, rest, tri_area, nT, vp, vw)
+    H = _hinges(E, tri, rest, tri_area, S, vp, vw, vo)
+    vol_idx = np.column_stack([np.arange(nT, nT + m), tri]).astype(np.int64)
+    vol_rest0 = 2.0 * tri_area * h  # 6 × tetra volume = det = h × 2A
+    base = int(np.argmin(np.linalg.norm(P.pts - np.asarray(shape.base, float), axis=1)))
+    M = _masses(P, tri, tri_area, S, E.n_T_springs, base, vp, vw, params)
+    return _finalize(shape, P, tri, rest, S, H, vol_idx, vol_rest0, E.tri_edge, M, base, vp, vw, vo, remap, L, h, r, E.share)
 
-    # ---------------------------------------------------------------- contour particles
+
+def _sample_particles(contour, veins: VeinGraph, params: ParamSet, r: float, rng, extra_points) -> _Points:
+    """Contour particles at regular spacing, vein particles along the veins (merged at
+    junctions, snapped to the contour), Poisson-disk surface particles at spacing ``r``."""
+    max_order = _ORDER[params["mesh.veins_included"]]
     per = float(np.linalg.norm(np.diff(np.vstack([contour, contour[:1]]), axis=0), axis=1).sum())
     nc = max(12, int(round(per / (params["mesh.contour_spacing"] * r))))
     cpts = resample_closed(contour, nc)
@@ -81,8 +119,6 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     vorder = [np.full(nc, -1, np.int8)]
     n = nc
     ctree = cKDTree(cpts)
-
-    # ---------------------------------------------------------------- vein particles
     vein_lists, vein_ord, vein_wid = [], [], []
     vtree_pts = np.empty((0, 2))
     vtree = None
@@ -90,13 +126,13 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     for v in sorted(veins.veins, key=lambda v: v.order):
         if v.order > max_order or len(v.points) < 2:
             continue
-        P = resample_polyline(np.asarray(v.points, float), vs)
+        Pv = resample_polyline(np.asarray(v.points, float), vs)
         s_old = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(v.points, axis=0), axis=1))])
-        s_new = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
-        W = np.interp(s_new / max(s_new[-1], 1e-30), s_old / max(s_old[-1], 1e-30), np.asarray(v.widths, float)) if len(v.widths) == len(v.points) else np.full(len(P), 0.001)
-        inside = points_in_polygon(P, contour)
+        s_new = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(Pv, axis=0), axis=1))])
+        W = np.interp(s_new / max(s_new[-1], 1e-30), s_old / max(s_old[-1], 1e-30), np.asarray(v.widths, float)) if len(v.widths) == len(v.points) else np.full(len(Pv), 0.001)
+        inside = points_in_polygon(Pv, contour)
         idx, wid = [], []
-        for p, w, ins in zip(P, W, inside):
+        for p, w, ins in zip(Pv, W, inside):
             dc, jc = ctree.query(p)
             if dc < 0.5 * r:
                 j = int(jc)  # snap to the contour particle
@@ -126,22 +162,8 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
             vein_wid.append(np.array(wid))
         if len(vtree_pts):
             vtree = cKDTree(vtree_pts)
-
     fixed = np.vstack(pts)
-    # ---------------------------------------------------------------- surface particles
-    lo, hi = contour.min(0) - r, contour.max(0) + r
-    area = abs(float(0.5 * np.dot(contour[:, 0], np.roll(contour[:, 1], -1)) - 0.5 * np.dot(contour[:, 1], np.roll(contour[:, 0], -1))))
-    ncand = int(12 * area / (r * r)) + 100
-    cand = lo + rng.random((ncand, 2)) * (hi - lo)
-    cand = cand[points_in_polygon(cand, contour)]
-    # keep surface points off the vein segments (so consecutive vein particles stay Delaunay-connected)
-    segs = [(fixed[a[:-1]], fixed[a[1:]]) for a in vein_lists]
-    if segs and len(cand):
-        dense = np.vstack([resample_polyline(fixed[ch], 0.1 * r) for ch in vein_lists])
-        dd, _ = cKDTree(dense).query(cand, distance_upper_bound=0.75 * r)
-        cand = cand[~np.isfinite(dd)]
-    ok = poisson_accept(np.ascontiguousarray(cand), np.ascontiguousarray(fixed), r, lo - r, hi + r)
-    surf = cand[ok]
+    surf = _poisson_surface(contour, fixed, vein_lists, r, rng)
     if extra_points is not None and len(extra_points):
         surf = np.vstack([surf, np.asarray(extra_points, float)])
     allp = np.vstack([fixed, surf])
@@ -149,11 +171,32 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     vords = np.concatenate(vorder + [np.full(len(surf), -1, np.int8)])
     if len(allp) < 3:
         raise LeafsimError("build: too few particles; decrease mesh.spacing")
+    return _Points(allp, kinds, vords, vein_lists, vein_ord, vein_wid, nc)
 
-    # ---------------------------------------------------------------- Delaunay, drop outside & slivers
+
+def _poisson_surface(contour, fixed, vein_lists, r: float, rng) -> np.ndarray:
+    """(k, 2) Poisson-disk surface points inside the outline, ≥ r from every fixed point and
+    kept off the vein segments (so consecutive vein particles stay Delaunay-connected)."""
+    lo, hi = contour.min(0) - r, contour.max(0) + r
+    area = abs(polygon_area(contour))
+    ncand = int(12 * area / (r * r)) + 100
+    cand = lo + rng.random((ncand, 2)) * (hi - lo)
+    cand = cand[points_in_polygon(cand, contour)]
+    if vein_lists and len(cand):
+        dense = np.vstack([resample_polyline(fixed[ch], 0.1 * r) for ch in vein_lists])
+        dd, _ = cKDTree(dense).query(cand, distance_upper_bound=0.75 * r)
+        cand = cand[~np.isfinite(dd)]
+    ok = poisson_accept(np.ascontiguousarray(cand), np.ascontiguousarray(fixed), r, lo - r, hi + r)
+    return cand[ok]
+
+
+def _triangulate(P: _Points, contour, r: float):
+    """Delaunay triangulation of layer T: outside triangles and boundary slivers dropped,
+    CCW, unused particles removed, particles and triangles in Morton order, missing vein
+    edges flipped in.  Returns (tri (m, 3), reordered points, remap old → new index (−1 gone))."""
+    allp, kinds, vords = P.pts, P.kinds, P.vorders
     tri = Delaunay(allp).simplices.astype(np.int64)
-    cen = allp[tri].mean(1)
-    keep = points_in_polygon(cen, contour)
+    keep = points_in_polygon(allp[tri].mean(1), contour)
     a, b, c = allp[tri[:, 0]], allp[tri[:, 1]], allp[tri[:, 2]]
     ar = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
     e2 = ((b - a) ** 2).sum(1) + ((c - b) ** 2).sum(1) + ((a - c) ** 2).sum(1)
@@ -162,8 +205,7 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     keep &= ~(on_contour & (quality < 0.15))  # hull-fill slivers along the outline
     keep &= np.abs(ar) > 1e-6 * r * r  # degenerate (collinear) triangles
     tri = tri[keep]
-    ar = ar[keep]
-    flip = ar < 0
+    flip = ar[keep] < 0
     tri[flip] = tri[flip][:, [0, 2, 1]]
     # drop particles no triangle uses (e.g. veins poking past a concave margin)
     used = np.zeros(len(allp), bool)
@@ -174,37 +216,59 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     tri = remap[tri]
     # spatial (Morton) order of particles and triangles: constraint loops then walk memory
     # almost sequentially (measured: the random Poisson order made every access a cache miss)
-    mort = _morton(allp)
-    order = np.argsort(mort, kind="stable")
+    order = np.argsort(_morton(allp), kind="stable")
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
     allp, kinds, vords = allp[order], kinds[order], vords[order]
     tri = rank[tri]
     tri = tri[np.argsort(_morton(allp[tri].mean(1)), kind="stable")]
     remap = np.where(remap >= 0, rank[np.maximum(remap, 0)], -1)
-    nT = len(allp)
-    tri = _flip_in_vein_edges(allp, tri, [remap[l][remap[l] >= 0] for l in vein_lists])
-    m = len(tri)
-    vp, vs_, vo, vw = [], [0], [], []
-    for lst, o, w in zip(vein_lists, vein_ord, vein_wid):
+    tri = _flip_in_vein_edges(allp, tri, [remap[l][remap[l] >= 0] for l in P.vein_lists])
+    return tri, _Points(allp, kinds, vords, P.vein_lists, P.vein_ord, P.vein_wid, P.n_contour), remap
+
+
+def _vein_chains(P: _Points, remap):
+    """Vein polylines in the final particle numbering: (chains, widths [m], orders)."""
+    vp, vw, vo = [], [], []
+    for lst, o, w in zip(P.vein_lists, P.vein_ord, P.vein_wid):
         j = remap[lst]
         ok_ = j >= 0
-        j, w = j[ok_], w[ok_]
-        if len(j) >= 2:
-            vp.append(j)
-            vw.append(w)
+        if ok_.sum() >= 2:
+            vp.append(j[ok_])
+            vw.append(w[ok_])
             vo.append(o)
-            vs_.append(vs_[-1] + len(j))
-    vein_particles = np.concatenate(vp) if vp else np.zeros(0, np.int64)
-    vein_width = np.concatenate(vw) if vw else np.zeros(0)
+    return vp, vw, vo
 
-    # ---------------------------------------------------------------- T edges, vein edges
-    E = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    Es = np.sort(E, 1)
+
+@dataclass
+class _Edges:
+    """Layer-T springs: edges of the triangulation first (``n_edges``), then vein links the
+    triangulation lacks; per edge the triangle pairs of interior edges."""
+
+    ij: np.ndarray          # (s_T, 2)
+    order: np.ndarray       # (s_T,) vein order or −1
+    n_edges: int
+    tri_edge: np.ndarray    # (m, 3) edge index of triangle edges (01, 12, 20)
+    e_int: np.ndarray       # interior edge indices
+    t1: np.ndarray          # first / second triangle of each interior edge
+    t2: np.ndarray
+    pos1: np.ndarray        # edge slot (0, 1, 2) of the interior edge in t1 / t2
+    pos2: np.ndarray
+    share: float            # vein_edge_share
+
+    @property
+    def n_T_springs(self) -> int:
+        return len(self.ij)
+
+
+def _t_edges(pts, tri, vp, vo) -> _Edges:
+    """Unique edges of the triangulation, which of them are vein edges (and the vein links
+    no triangle edge carries), and the two triangles of each interior edge."""
+    nT, m = len(pts), len(tri)
+    Es = np.sort(np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), 1)
     key = Es[:, 0] * nT + Es[:, 1]
     ukey, first, inv, cnt = np.unique(key, return_index=True, return_inverse=True, return_counts=True)
     edges = Es[first]
-    tri_edge = inv.reshape(3, m).T  # (m,3) edge index of edges (01,12,20)
     vein_edge_order = {}
     for j, o in zip(vp, vo):
         for p, q in zip(j[:-1], j[1:]):
@@ -215,116 +279,231 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     present = np.isin(vkeys, ukey)
     share = float(present.mean()) if len(vkeys) else 1.0
     missing = vkeys[~present]  # still join them by a spring (not a triangle edge)
-    sp_ij = np.vstack([edges, np.column_stack([missing // nT, missing % nT])]).astype(np.int64)
-    allkeys = np.concatenate([ukey, missing])
-    s_order = np.array([vein_edge_order.get(int(k_), -1) for k_ in allkeys], np.int8)
-    s_type = np.where(s_order >= 0, SPRING_VEIN, SPRING_SURFACE).astype(np.int8)
-    nTs = len(sp_ij)
-
-    # ---------------------------------------------------------------- layer V
-    rest = np.zeros((nT + m, 3))
-    rest[:nT, :2] = allp
-    rest[nT:, :2] = allp[tri].mean(1)
-    rest[nT:, 2] = h
-    tri_V = np.arange(nT, nT + m, dtype=np.int64)
-    # interior edges -> pairs of triangles
+    ij = np.vstack([edges, np.column_stack([missing // nT, missing % nT])]).astype(np.int64)
+    order = np.array([vein_edge_order.get(int(k_), -1) for k_ in np.concatenate([ukey, missing])], np.int8)
     owner = np.arange(3 * m) % m
     order_ = np.argsort(inv, kind="stable")
     inv_s = inv[order_]
     pair_start = np.flatnonzero(np.r_[True, inv_s[1:] != inv_s[:-1]])
     two = cnt[inv_s[pair_start]] == 2
-    e_int = inv_s[pair_start[two]]
-    t1 = owner[order_[pair_start[two]]]
-    t2 = owner[order_[pair_start[two] + 1]]
-    V_ij = np.column_stack([tri_V[t1], tri_V[t2]])
+    return _Edges(ij, order, len(edges), inv.reshape(3, m).T, inv_s[pair_start[two]],
+                  owner[order_[pair_start[two]]], owner[order_[pair_start[two] + 1]],
+                  order_[pair_start[two]] // m, order_[pair_start[two] + 1] // m, share)
+
+
+@dataclass
+class _Springs:
+    """All springs (T, then V, then links) with their physical weights (see Model)."""
+
+    ij: np.ndarray
+    type: np.ndarray
+    order: np.ndarray
+    layer: np.ndarray
+    rest0: np.ndarray
+    weight: np.ndarray
+    rod: np.ndarray
+    face: np.ndarray
+    V_of_edge: np.ndarray   # V spring index across each T edge (−1 on the boundary)
+
+
+def _springs(E: _Edges, tri, rest, tri_area, nT: int, vp, vw) -> _Springs:
+    """T springs (surface or vein), V springs across interior T edges (the Voronoi dual),
+    links V → triangle vertices; rest lengths, membrane weights ΣA/|e|², vein rod weights
+    (cross-section / length) and osmosis faces."""
+    m = len(tri)
+    tri_V = np.arange(nT, nT + m, dtype=np.int64)
+    V_ij = np.column_stack([tri_V[E.t1], tri_V[E.t2]])
     link_ij = np.column_stack([np.repeat(tri_V, 3), tri.ravel()])
-    sp_ij = np.vstack([sp_ij, V_ij, link_ij])
-    s_type = np.concatenate([s_type, np.full(len(V_ij), SPRING_V, np.int8), np.full(len(link_ij), SPRING_LINK, np.int8)])
-    s_order = np.concatenate([s_order, -np.ones(len(V_ij) + len(link_ij), np.int8)])
-    s_layer = np.concatenate([np.zeros(nTs, np.int8), np.ones(len(V_ij), np.int8), np.full(len(link_ij), 2, np.int8)])
-    n_all = nT + m
-    rest0 = np.linalg.norm(rest[sp_ij[:, 0]] - rest[sp_ij[:, 1]], axis=1)
-    V_spring_of_edge = -np.ones(len(edges), np.int64)
-    V_spring_of_edge[e_int] = nTs + np.arange(len(V_ij))
+    nTs, nV = E.n_T_springs, len(V_ij)
+    ij = np.vstack([E.ij, V_ij, link_ij])
+    s_type = np.concatenate([np.where(E.order >= 0, SPRING_VEIN, SPRING_SURFACE).astype(np.int8),
+                             np.full(nV, SPRING_V, np.int8), np.full(len(link_ij), SPRING_LINK, np.int8)])
+    s_order = np.concatenate([E.order, -np.ones(nV + len(link_ij), np.int8)])
+    s_layer = np.concatenate([np.zeros(nTs, np.int8), np.ones(nV, np.int8), np.full(len(link_ij), 2, np.int8)])
+    rest0 = np.linalg.norm(rest[ij[:, 0]] - rest[ij[:, 1]], axis=1)
+    # area each spring stands for: T edge = its triangles' areas; V spring = a third of the two
+    # cells it joins (each cell has three); link = a third of its triangle
+    tri_edge = E.tri_edge
+    edge_area = np.bincount(tri_edge.ravel(), np.repeat(tri_area, 3), E.n_edges)
+    area = np.concatenate([edge_area, np.zeros(nTs - E.n_edges), (tri_area[E.t1] + tri_area[E.t2]) / 3.0,
+                           np.repeat(tri_area, 3) / 3.0])
+    weight = area / np.maximum(rest0, 1e-30) ** 2
+    # vein rods: cross-section π w²/4 of the thinner end, per length
+    rod = np.zeros(len(ij))
+    wmap = {}
+    for chain, w in zip(vp, vw):
+        for p, q, wa, wb in zip(chain[:-1], chain[1:], w[:-1], w[1:]):
+            if p != q:
+                k_ = (min(p, q), max(p, q))
+                wmap[k_] = max(wmap.get(k_, 0.0), min(wa, wb))
+    if wmap:
+        sk = {(int(a), int(b)): s for s, (a, b) in enumerate(np.sort(E.ij, 1))}
+        for k_, w in wmap.items():
+            s = sk.get(k_)
+            if s is not None:
+                rod[s] = 0.25 * np.pi * w * w / max(rest0[s], 1e-30)
+    face = np.concatenate([_dual_faces(E, tri, rest), np.zeros(nTs - E.n_edges),
+                           np.linalg.norm(rest[E.ij[E.e_int, 0], :2] - rest[E.ij[E.e_int, 1], :2], axis=1),
+                           np.zeros(len(link_ij))])
+    V_of_edge = -np.ones(E.n_edges, np.int64)
+    V_of_edge[E.e_int] = nTs + np.arange(nV)
+    return _Springs(ij, s_type, s_order, s_layer, rest0, weight, rod, face, V_of_edge)
 
-    # ---------------------------------------------------------------- hinges (c, d, a, b)
-    hin = []
-    tri_edge_vert = [(0, 1, 2), (1, 2, 0), (2, 0, 1)]  # edge (i,j), opposite k
-    # for each interior edge find (a,b) oriented as in t1 and opposite vertices
-    pos1 = order_[pair_start[two]] // m  # which edge slot of t1
-    pos2 = order_[pair_start[two] + 1] // m
-    sl = np.array(tri_edge_vert)
-    a_ = tri[t1, sl[pos1, 0]]
-    b_ = tri[t1, sl[pos1, 1]]
-    c_ = tri[t1, sl[pos1, 2]]
-    d_ = tri[t2, sl[pos2, 2]]
-    hinge_idx = np.column_stack([c_, d_, a_, b_]).astype(np.int64)
-    hinge_T = e_int.astype(np.int64)
-    hinge_V = V_spring_of_edge[e_int]
-    hinge_len = np.linalg.norm(rest[a_] - rest[b_], axis=1)
-    tri_area = np.abs(_areas(allp, tri))
-    hinge_area = tri_area[t1] + tri_area[t2]
 
-    # ---------------------------------------------------------------- thickness constraints
-    vol_idx = np.column_stack([tri_V, tri]).astype(np.int64)
-    vol_rest0 = 2.0 * tri_area * h  # 6 × tetra volume = det = h × 2A
-    vol_springs = tri_edge.astype(np.int64)
+def _dual_faces(E: _Edges, tri, rest) -> np.ndarray:
+    """Finite-volume face of each T edge: the barycentric dual, i.e. per adjacent triangle the
+    normal distance from the edge midpoint to the triangle centroid (equilateral: |e|/√3 in all)."""
+    p = rest[:, :2]
+    a, b = p[E.ij[:E.n_edges, 0]], p[E.ij[:E.n_edges, 1]]
+    mid = 0.5 * (a + b)
+    t = b - a
+    nrm = np.column_stack([-t[:, 1], t[:, 0]]) / np.maximum(np.linalg.norm(t, axis=1), 1e-30)[:, None]
+    cen = p[tri].mean(1)
+    face = np.zeros(E.n_edges)
+    for k in range(3):
+        e = E.tri_edge[:, k]
+        np.add.at(face, e, np.abs(((cen - mid[e]) * nrm[e]).sum(1)))
+    return face
 
-    # ---------------------------------------------------------------- mass (Dijkstra over T springs)
+
+@dataclass
+class _Hinges:
+    idx: np.ndarray         # (h, 4) = (c, d, a, b)
+    spring_T: np.ndarray
+    spring_V: np.ndarray
+    edge_len: np.ndarray
+    area: np.ndarray
+    rod: np.ndarray         # (h,) vein bending weight I/ℓ [m³]
+    vein: np.ndarray        # (h,) bool: the hinge bends a main/lateral vein along its length
+
+
+def _hinges(E: _Edges, tri, rest, tri_area, S: _Springs, vp, vw, vo) -> _Hinges:
+    """Bending hinges on interior T edges: (c, d, a, b) = wings and shared edge a–b, edge
+    length, the two triangles' area (discrete-shell weight 3|e|²/(A₁+A₂)).  A hinge whose wings
+    lie on the vein through a (the vein runs c–a–d) bends that vein lengthwise: it carries the
+    vein's rod stiffness share, I = π w⁴/64 over the vein length ℓ̄ at a, split among a's hinges."""
+    sl = np.array([(0, 1, 2), (1, 2, 0), (2, 0, 1)])  # edge (i, j), opposite k
+    a_ = tri[E.t1, sl[E.pos1, 0]]
+    b_ = tri[E.t1, sl[E.pos1, 1]]
+    c_ = tri[E.t1, sl[E.pos1, 2]]
+    d_ = tri[E.t2, sl[E.pos2, 2]]
+    idx = np.column_stack([c_, d_, a_, b_]).astype(np.int64)
+    edge_len = np.linalg.norm(rest[a_] - rest[b_], axis=1)
+    area = tri_area[E.t1] + tri_area[E.t2]
+    # vein neighbours along each chain: (prev, next, I/ℓ̄) per vein particle
+    rod_at: dict[int, tuple] = {}
+    for chain, w, o in zip(vp, vw, vo):
+        for k in range(1, len(chain) - 1):
+            i = int(chain[k])
+            lbar = 0.5 * (np.linalg.norm(rest[chain[k - 1]] - rest[i]) + np.linalg.norm(rest[chain[k + 1]] - rest[i]))
+            I = np.pi * float(w[k]) ** 4 / 64.0
+            rod_at[i] = (int(chain[k - 1]), int(chain[k + 1]), I / max(lbar, 1e-30), o)
+    rod = np.zeros(len(idx))
+    vein = np.zeros(len(idx), bool)
+    hits: dict[int, list] = {}
+    for e in range(len(idx)):
+        c, d, a, b = idx[e]
+        for v in (a, b):
+            nb = rod_at.get(int(v))
+            if nb is not None and {int(c), int(d)} == {nb[0], nb[1]}:
+                hits.setdefault(int(v), []).append(e)
+                vein[e] |= nb[3] <= 1
+    for v, es in hits.items():
+        for e in es:
+            rod[e] += rod_at[v][2] / len(es)
+    return _Hinges(idx, E.e_int.astype(np.int64), S.V_of_edge[E.e_int], edge_len, area, rod, vein)
+
+
+@dataclass
+class _Masses:
+    area: np.ndarray        # (n,) area each particle stands for [m²]
+    mass0: np.ndarray       # (n,) fresh mass [kg]
+    water0: np.ndarray
+    cytosol: np.ndarray
+    tau: np.ndarray
+    vein_width: np.ndarray  # (n,) [m], 0 off the veins
+
+
+def _masses(P: _Points, tri, tri_area, S: _Springs, nTs: int, base: int, vp, vw, params: ParamSet) -> _Masses:
+    """Fresh mass lumped by area: each layer carries half the blade's areal mass; a T particle
+    stands for a third of its triangles' area, a V particle for its triangle.  The areal mass
+    follows Jeong's graph-distance profile (τ from Dijkstra over the T springs, weighted per
+    vein order) between ``mass.profile_min`` × and 1 × its peak, normalised so that the
+    blade's mean dry mass per area is ``mass.lma``; vein particles add their rod (π w²/4 ×
+    length share × ``mass.vein_density``, minus the lamina it replaces).  Water = water
+    fraction × fresh mass, the rest is dry mass (cytosol)."""
+    nT, m = len(P.pts), len(tri)
     wt = {0: params["mass.weight_main"], 1: params["mass.weight_lateral"], 2: params["mass.weight_sub"], 3: params["mass.weight_sub"]}
     w_edge = np.full(nTs, params["mass.weight_surface"])
     for o, wv in wt.items():
-        w_edge[s_order[:nTs] == o] = wv
-    lw = rest0[:nTs] * w_edge
-    G = coo_matrix((np.r_[lw, lw], (np.r_[sp_ij[:nTs, 0], sp_ij[:nTs, 1]], np.r_[sp_ij[:nTs, 1], sp_ij[:nTs, 0]])), shape=(nT, nT)).tocsr()
-    base = int(np.argmin(np.linalg.norm(allp - np.asarray(shape.base, float), axis=1)))
+        w_edge[S.order[:nTs] == o] = wv
+    lw = S.rest0[:nTs] * w_edge
+    ij = S.ij[:nTs]
+    G = coo_matrix((np.r_[lw, lw], (np.r_[ij[:, 0], ij[:, 1]], np.r_[ij[:, 1], ij[:, 0]])), shape=(nT, nT)).tocsr()
     dist = dijkstra(G, indices=base)
     finite = np.isfinite(dist)
     dmax = dist[finite].max() if finite.any() else 1.0
     dist[~finite] = dmax
     tau_T = (1.0 - dist / max(dmax, 1e-300)) ** params["mass.D"]
-    mmin, mmax = params["mass.m_min"], params["mass.m_max"]
-    m0_T = mmin * (1 - tau_T) + mmax * tau_T
-    m0 = np.concatenate([m0_T, m0_T[tri].mean(1)])
-    tau = np.concatenate([tau_T, tau_T[tri].mean(1)])
+    prof_T = params["mass.profile_min"] + (1.0 - params["mass.profile_min"]) * tau_T
+    area_T = np.bincount(tri.ravel(), np.repeat(tri_area, 3) / 3.0, nT)
+    prof_V = prof_T[tri].mean(1)
     fw = params["mass.water_fraction"]
+    fresh = params["mass.lma"] / (1.0 - fw)  # fresh blade mass per area [kg/m²]
+    scale = fresh / (np.dot(area_T, prof_T) / area_T.sum())
+    m0 = np.concatenate([0.5 * scale * prof_T * area_T, 0.5 * scale * prof_V * tri_area])
+    vein_width = np.zeros(nT + m)
+    extra = np.zeros(nT + m)
+    pts = P.pts
+    for chain, w in zip(vp, vw):
+        seg = np.linalg.norm(np.diff(pts[chain], axis=0), axis=1)
+        share = 0.5 * (np.r_[seg, 0.0] + np.r_[0.0, seg])
+        rod = params["mass.vein_density"] * 0.25 * np.pi * w * w - scale * prof_T[chain] * w
+        np.add.at(extra, chain, np.maximum(rod, 0.0) * share)
+        np.maximum.at(vein_width, chain, w)
+    m0 += extra
+    tau = np.concatenate([tau_T, tau_T[tri].mean(1)])
+    area = np.concatenate([area_T, tri_area])
+    return _Masses(area, m0, fw * m0, (1.0 - fw) * m0, tau, vein_width)
 
-    # petiole particles (pinned in the hanging scene)
-    pinned = np.zeros(n_all, bool)
-    pinned[:nT] = np.linalg.norm(allp - allp[base], axis=1) < 1.6 * r
 
-    # ---------------------------------------------------------------- colour-sort constraints
-    perm_s, s_cs = _colour_sort(sp_ij, n_all)
+def _finalize(shape, P, tri, rest, S: _Springs, H: _Hinges, vol_idx, vol_rest0, tri_edge, M: _Masses, base,
+              vp, vw, vo, remap, L, h, r, share) -> Model:
+    """Colour-sort every constraint type and assemble the immutable Model."""
+    nT, m = len(P.pts), len(tri)
+    n_all = nT + m
+    perm_s, s_cs = _colour_sort(S.ij, n_all)
     inv_perm = np.empty_like(perm_s)
     inv_perm[perm_s] = np.arange(len(perm_s))
-    sp_ij, rest0, s_type, s_order, s_layer = sp_ij[perm_s], rest0[perm_s], s_type[perm_s], s_order[perm_s], s_layer[perm_s]
-    hinge_T, hinge_V, vol_springs = inv_perm[hinge_T], inv_perm[hinge_V], inv_perm[vol_springs]
-    perm_h, h_cs = _colour_sort(hinge_idx, n_all)
-    hinge_idx, hinge_T, hinge_V, hinge_len, hinge_area = (x[perm_h] for x in (hinge_idx, hinge_T, hinge_V, hinge_len, hinge_area))
+    sp = {k: getattr(S, k)[perm_s] for k in ("ij", "type", "order", "layer", "rest0", "weight", "rod", "face")}
+    hinge_T, hinge_V, vol_springs = inv_perm[H.spring_T], inv_perm[H.spring_V], inv_perm[tri_edge.astype(np.int64)]
+    perm_h, h_cs = _colour_sort(H.idx, n_all)
+    hs = {k: getattr(H, k)[perm_h] for k in ("idx", "edge_len", "area", "rod", "vein")}
+    hinge_T, hinge_V = hinge_T[perm_h], hinge_V[perm_h]
     perm_v, v_cs = _colour_sort(vol_idx, n_all)
-    vol_idx, vol_rest0, vol_springs = vol_idx[perm_v], vol_rest0[perm_v], vol_springs[perm_v]
-
-    kinds_all = np.concatenate([kinds, np.full(m, KIND_VORONOI, np.int8)])
-    cont = np.flatnonzero(remap[:nc] >= 0)
+    pinned = np.zeros(n_all, bool)
+    pinned[:nT] = np.linalg.norm(P.pts - P.pts[base], axis=1) < 1.6 * r  # petiole (hanging scene)
+    cont = np.flatnonzero(remap[:P.n_contour] >= 0)
+    vs_ = np.concatenate([[0], np.cumsum([len(j) for j in vp])]).astype(np.int64)
     return Model(
         particle_rest=rest,
         particle_layer=np.concatenate([np.full(nT, LAYER_T, np.int8), np.full(m, LAYER_V, np.int8)]),
-        particle_kind=kinds_all,
-        particle_vein_order=np.concatenate([vords, -np.ones(m, np.int8)]),
-        particle_cytosol=(1 - fw) * m0,
-        particle_mass0=m0,
-        particle_water0=fw * m0,
-        particle_tau=tau,
+        particle_kind=np.concatenate([P.kinds, np.full(m, KIND_VORONOI, np.int8)]),
+        particle_vein_order=np.concatenate([P.vorders, -np.ones(m, np.int8)]),
+        particle_area=M.area, particle_cytosol=M.cytosol, particle_mass0=M.mass0, particle_water0=M.water0,
+        particle_tau=M.tau, particle_vein_width=M.vein_width,
         particle_texcoord=shape.texcoords(rest[:, :2]),
         particle_pinned=pinned,
-        tri_T=tri, tri_V=tri_V,
-        spring_ij=sp_ij, spring_rest0=rest0, spring_type=s_type, spring_layer=s_layer,
-        spring_order=s_order, spring_colour_start=s_cs,
-        hinge_idx=hinge_idx, hinge_spring_T=hinge_T, hinge_spring_V=hinge_V,
-        hinge_edge_len=hinge_len, hinge_area=hinge_area, hinge_colour_start=h_cs,
-        vol_idx=vol_idx, vol_rest0=vol_rest0, vol_springs=vol_springs, vol_colour_start=v_cs,
-        vein_particles=vein_particles.astype(np.int64), vein_start=np.array(vs_, np.int64),
-        vein_order=np.array(vo, np.int8), vein_width=vein_width,
+        tri_T=tri, tri_V=np.arange(nT, nT + m, dtype=np.int64),
+        spring_ij=sp["ij"], spring_rest0=sp["rest0"], spring_type=sp["type"], spring_layer=sp["layer"],
+        spring_order=sp["order"], spring_weight=sp["weight"], spring_rod=sp["rod"], spring_face=sp["face"],
+        spring_colour_start=s_cs,
+        hinge_idx=hs["idx"], hinge_spring_T=hinge_T, hinge_spring_V=hinge_V,
+        hinge_edge_len=hs["edge_len"], hinge_area=hs["area"], hinge_rod=hs["rod"], hinge_vein=hs["vein"],
+        hinge_colour_start=h_cs,
+        vol_idx=vol_idx[perm_v], vol_rest0=vol_rest0[perm_v], vol_springs=vol_springs[perm_v], vol_colour_start=v_cs,
+        vein_particles=(np.concatenate(vp) if vp else np.zeros(0, np.int64)).astype(np.int64), vein_start=vs_,
+        vein_order=np.array(vo, np.int8), vein_width=np.concatenate(vw) if vw else np.zeros(0),
         contour_particles=remap[cont].astype(np.int64),
         base_particle=base, length=L, thickness=h, spacing=r, vein_edge_share=share,
     )

@@ -171,15 +171,16 @@ _f("mass.weight_lateral", 50.0, 0.01, 1e4, "", "Dijkstra edge weight factor of l
 _f("mass.weight_sub", 200.0, 0.01, 1e4, "", "Dijkstra edge weight factor of sublateral/net springs.", G, True, log=True)
 _f("mass.weight_surface", 1000.0, 0.01, 1e5, "", "Dijkstra edge weight factor of surface springs.", G, True, log=True)
 _i("mass.D", 1, 1, 3, "", "Dispersion exponent D in τ = (1 − d/d_max)^D.", G, True)
-_f("mass.m_min", 0.1, 1e-6, 10.0, "mg", "Smallest particle mass (far from veins).", G, True, log=True)
-_f("mass.m_max", 1.0, 1e-4, 100.0, "mg", "Largest particle mass (along the midrib near the petiole).", G, True, log=True)
-_f("mass.water_fraction", 0.7, 0.05, 0.95, "", "Fraction of the initial mass that is water (rest is cytosol).", G, True)
+_f("mass.lma", 0.06, 0.005, 0.5, "kg/m²", "Leaf mass per area: dry mass of the blade per m² (deciduous broadleaves 0.03–0.12; the blade's mean, veins add their own).", G, True, log=True)
+_f("mass.profile_min", 0.3, 0.01, 1.0, "", "Areal mass far from the veins relative to its peak near the petiole (Jeong's graph-distance profile τ; 1 = uniform lamina).", G, True)
+_f("mass.vein_density", 1100.0, 100.0, 3000.0, "kg/m³", "Fresh density of vein tissue: a vein adds π w²/4 × this per metre (minus the lamina it replaces).", G, True, log=True)
+_f("mass.water_fraction", 0.7, 0.05, 0.95, "", "Fraction of the fresh mass that is water (rest is dry mass); fresh mass per area = lma / (1 − this).", G, True)
 
 # ---------------------------------------------------------------- osmosis (live)
 G = "Osmosis"
-_f("osmosis.diffusion", 1e-4, 0.0, 1e5, "m²/s", "Osmotic diffusivity D in physical units (effective D·τ̄); D·T_dry/L² ≲ 0.1 keeps margin-first drying visible, ≫ 1 dries every layer uniformly.", G, False, log=True)
-_f("osmosis.loss_top", 0.2, 0.0, 1e3, "1/s", "Evaporation rate of the top layer V: every particle loses this fraction of the layer's mean initial water per second (per-area loss, so light margins dry first).", G, False, log=True)
-_f("osmosis.loss_bottom", 0.15, 0.0, 1e3, "1/s", "Evaporation rate of the bottom layer T (same per-area law as the top layer).", G, False, log=True)
+_f("osmosis.diffusion", 1e-4, 0.0, 1e5, "m²/s", "Osmotic diffusivity D of the water concentration (effective D·τ̄ with Jeong's τ); D·T_dry/L² ≲ 0.1 keeps margin-first drying visible, ≫ 1 dries every layer uniformly.", G, False, log=True)
+_f("osmosis.evaporation_top", 0.014, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the top surface (layer V) per unit leaf area and simulated second (the simulated clock is compressed: see docs/method.md).", G, False, log=True)
+_f("osmosis.evaporation_bottom", 0.0105, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the bottom surface (layer T) per unit leaf area and simulated second.", G, False, log=True)
 _c("osmosis.solver", "auto", ("auto", "direct", "cg", "jacobi"), "Linear solver of the implicit osmosis step.", G, False)
 _f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True)
 
@@ -188,7 +189,6 @@ G = "Shrink"
 _f("shrink.sigma_surface_top", 0.165, 0.0, 3.0, "", "σ of surface springs in the top layer V.", G, False)
 _f("shrink.sigma_surface_bottom", 0.15, 0.0, 3.0, "", "σ of surface springs in the bottom layer T.", G, False)
 _f("shrink.sigma_vein", 0.05, 0.0, 3.0, "", "σ of vein springs.", G, False)
-_f("shrink.sigma_link", 0.15, 0.0, 3.0, "", "σ of link springs between the layers.", G, False)
 _f("shrink.alpha", 1.0, 0.1, 4.0, "", "Exponent α of (1 − v_rel) in the shrink law.", G, False)
 _f("shrink.l_min", 0.5, 0.0, 1.0, "× l⁰", "Rest lengths never go below l_min · l⁰.", G, False)
 
@@ -196,15 +196,18 @@ _f("shrink.l_min", 0.5, 0.0, 1.0, "× l⁰", "Rest lengths never go below l_min 
 G = "Dynamics"
 _f("dynamics.dt", 0.002, 1e-5, 0.1, "s", "Time step Δt.", G, False, log=True)
 _f("dynamics.gravity", 9.81, 0.0, 50.0, "m/s²", "Gravity magnitude (acts along −z).", G, False)
-_f("dynamics.damping", 0.05, 0.0, 1.0, "per frame", "Fraction of velocity removed each frame (air drag and internal friction of the tissue).", G, False)
+_f("dynamics.damping", 25.0, 0.0, 1000.0, "1/s", "Velocity damping rate c (v ← v·e^(−c·Δt); air drag and internal friction of the tissue).", G, False, log=True)
 _i("dynamics.substeps", 5, 1, 50, "", "Dynamics substeps per frame (small steps make stiff constraints converge far better than more iterations).", G, False)
 _i("dynamics.iterations", 2, 1, 200, "", "Maximum constraint-projection iterations per substep.", G, False)
 _f("dynamics.tolerance", 1e-4, 1e-9, 1.0, "", "Stop iterating when the largest position change per iteration falls below this × leaf length.", G, False, log=True)
-_f("dynamics.compliance_surface", 2.5e-4, 0.0, 1.0, "m/N", "XPBD compliance of surface, Voronoi and link springs (≈ 1/(E h), fresh lamina E ≈ 10 MPa; 0 = rigid).", G, False, log=True)
-_f("dynamics.compliance_vein", 2.5e-6, 0.0, 1.0, "m/N", "XPBD compliance of vein springs (veins are stiffer).", G, False, log=True)
-_f("dynamics.bending", 5e-5, 0.0, 1.0, "N·m", "Bending stiffness D of the fresh blade (≈ E h³/12; dihedral hinges on layer-T edges).", G, False, log=True)
-_f("dynamics.bending_drying", 20.0, 0.0, 1000.0, "", "Bending stiffness grows to D·(1 + this) as tissue dries out (dry tissue is much stiffer).", G, False, log=True)
 _f("dynamics.plasticity", 2.0, 0.0, 100.0, "1/s", "Rate at which drying tissue sets: bending hinges keep the largest bilayer curl they reached (0 = purely elastic, the curl relaxes when both layers are dry).", G, False, log=True)
+
+# ---------------------------------------------------------------- material (live)
+G = "Material"
+_f("material.modulus", 1e7, 1e4, 1e10, "Pa", "Young's modulus E of the fresh lamina: membrane springs E·(h/2)·ΣA/|e|², bending D = E h³ / 12(1 − ν²) on discrete-shell hinges.", G, False, log=True)
+_f("material.poisson", 0.3, 0.0, 0.49, "", "Poisson ratio ν of the lamina (enters the bending stiffness D).", G, False)
+_f("material.dry_stiffening", 20.0, 0.0, 1000.0, "", "Dry tissue is stiffer: the bending modulus grows to E·(1 + this) as the tissue loses its water.", G, False, log=True)
+_f("material.vein_modulus", 5e8, 1e5, 1e11, "Pa", "Young's modulus of vein tissue: vein springs E_v·πw²/4/l, vein bending E_v·πw⁴/64 on the hinges that bend a vein lengthwise.", G, False, log=True)
 _c("dynamics.voronoi", "free", ("free", "replace"), "Layer V: free particles (stable) or re-placed over their triangle each frame (thesis).", G, False)
 _c("dynamics.scene", "ground", ("ground", "hanging", "free"), "Scene: lying on the ground, hanging from a pinned petiole, or free.", G, False)
 _f("dynamics.friction", 0.6, 0.0, 2.0, "", "Coulomb friction coefficient against the ground.", G, False)
@@ -287,8 +290,6 @@ class ParamSet(Mapping[str, Any]):
             if key not in PARAMS:
                 raise LeafsimError(unknown_key_message(key, where))
             vals[key] = PARAMS[key].coerce(value, where)
-        if vals["mass.m_min"] > vals["mass.m_max"]:
-            raise LeafsimError(f"{where + ': ' if where else ''}parameter 'mass.m_min' = {vals['mass.m_min']:g} must not exceed 'mass.m_max' = {vals['mass.m_max']:g}")
         self._values = vals
 
     def __getitem__(self, key: str) -> Any:

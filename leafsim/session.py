@@ -12,7 +12,7 @@ Example
 -------
 >>> s = Session("oak")                          # doctest: +SKIP  (synchronous first build)
 >>> s.step(10)                                  # doctest: +SKIP
->>> s.set_params(s.params.with_overrides({"osmosis.loss_top": 2.0}))   # live: applies at once
+>>> s.set_params(s.params.with_overrides({"osmosis.evaporation_top": 2.0}))   # live: applies at once
 >>> s.set_params(s.params.with_overrides({"mesh.spacing": 0.04}))      # staged: pending_rebuild
 >>> s.apply_rebuild(); s.wait()                 # doctest: +SKIP
 """
@@ -152,7 +152,7 @@ class Session:
         return {} if self.model is None else self.model.to_report()
 
     def total_water(self) -> float:
-        """Total water [mg] now."""
+        """Total water [kg] now."""
         return 0.0 if self.state is None else float(self.state.particle_water.sum())
 
     def water_fraction(self) -> float:
@@ -400,7 +400,7 @@ class Session:
 
     def _record(self, ms: dict) -> None:
         from .sim.kernels.pbd import residual
-        from .sim.model import LAYER_T, LAYER_V, MASS_UNIT
+        from .sim.model import LAYER_T, LAYER_V
 
         m, s = self.model, self.state
         w = s.particle_water
@@ -413,7 +413,7 @@ class Session:
         h["water_V"].append(float(w[lay == LAYER_V].sum()))
         h["water"].append(float(w.sum() / max(m.particle_water0.sum(), 1e-300)))
         h["residual"].append(float(residual(s.particle_q, m.spring_ij, s.spring_rest)) if finite else float("nan"))
-        mass = (m.particle_cytosol + w) * MASS_UNIT
+        mass = m.particle_cytosol + w
         qd = s.particle_qd
         h["kinetic"].append(float(0.5 * (mass * (qd * qd).sum(1)).sum()) if finite else float("nan"))
         h["iterations"].append(self.simulator.iterations if self.simulator is not None else 0)

@@ -68,11 +68,11 @@ class LeafView:
         return rgb, np.ones_like(rgb)
 
     def scalar_fields(self, state: State) -> dict:
-        """Per layer-T vertex heat-map fields: ``mass`` [mg] now, ``water`` (now / initial) and
+        """Per layer-T vertex heat-map fields: ``mass`` per area [kg/m²] now, ``water`` (now / initial) and
         the pigment fields (relative to the summer content)."""
         m, T = self.model, self.T
         w = state.particle_water[T]
-        out = {"mass": (m.particle_cytosol[T] + w).astype(np.float32),
+        out = {"mass": ((m.particle_cytosol[T] + w) / np.maximum(m.particle_area[T], 1e-300)).astype(np.float32),
                "water": (w / np.maximum(m.particle_water0[T], 1e-300)).astype(np.float32)}
         if state.pigments is not None:
             for name in PIGMENT_VIEWS:

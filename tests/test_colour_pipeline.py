@@ -37,7 +37,7 @@ def test_margins_turn_before_veins(species):
 
 
 def test_no_water_loss_no_senescence_colour_constant():
-    s = Session("oak", overrides={**COLOUR_ONLY, "osmosis.loss_top": 0.0, "osmosis.loss_bottom": 0.0,
+    s = Session("oak", overrides={**COLOUR_ONLY, "osmosis.evaporation_top": 0, "osmosis.evaporation_bottom": 0,
                                   "colour.age_rate": 0.0, "colour.season": 0.0}, build=True)
     rgb0 = _rgb(s).copy()
     s.step(200)
@@ -45,7 +45,7 @@ def test_no_water_loss_no_senescence_colour_constant():
 
 
 def test_water_in_the_pipeline_is_monotone_and_non_negative():
-    s = Session("maple", overrides={**COLOUR_ONLY, "osmosis.loss_top": 5.0, "osmosis.loss_bottom": 4.0}, build=True)
+    s = Session("maple", overrides={**COLOUR_ONLY, "osmosis.evaporation_top": 0.35, "osmosis.evaporation_bottom": 0.28}, build=True)
     prev = s.total_water()
     for _ in range(20):
         s.step(10)

@@ -66,10 +66,10 @@ def test_live_slider_changes_params_and_keeps_state():
         frame, gen = s.frame, s.generation
         water = s.state.particle_water.copy()
         ctx.item_open("**/###group Osmosis")
-        ctx.item_input_value(ref("osmosis.loss_top"), 2.5)
+        ctx.item_input_value(ref("osmosis.evaporation_top"), 2.5)
         ctx.yield_(2)
         seen.update(frame=frame, frame_after=s.frame, gen=gen, gen_after=s.generation,
-                    value=s.params["osmosis.loss_top"], sim_value=s.simulator.params["osmosis.loss_top"],
+                    value=s.params["osmosis.evaporation_top"], sim_value=s.simulator.params["osmosis.evaporation_top"],
                     pending=s.pending_rebuild, same_water=bool(np.array_equal(water, s.state.particle_water)))
 
     run_gui(body)
@@ -200,13 +200,13 @@ def test_param_widget_kinds():
     """param_widget returns valid values for each kind (no window needed for the logic)."""
     from leafsim.gui.widgets import widget_label
 
-    assert widget_label(PARAMS["osmosis.loss_top"]) == "loss_top [1/s]###osmosis.loss_top"
+    assert widget_label(PARAMS["osmosis.evaporation_top"]) == "evaporation_top [kg/(m²·s)]###osmosis.evaporation_top"
     assert widget_label(PARAMS["effects.pbd"]) == "pbd###effects.pbd"
 
 
 def test_errors_are_shown_and_app_keeps_running(tmp_path, monkeypatch):
     bad = tmp_path / "broken.json"
-    bad.write_text('{"params": {"osmosis.loss_top": 1.0,, }')
+    bad.write_text('{"params": {"osmosis.evaporation_top": 0.07,, }')
     unknown = tmp_path / "unknown.json"
     unknown.write_text(json.dumps({"params": {"osmosis.nope": 1}}))
     blocker = tmp_path / "a_file"

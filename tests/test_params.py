@@ -50,10 +50,6 @@ def test_nested_and_flat_keys_agree_and_overrides_validate():
     assert b.rebuild_differs(ParamSet()) and not c.with_overrides({"veins.main.kappa": 7}).rebuild_differs(c)
 
 
-def test_m_min_must_not_exceed_m_max():
-    with pytest.raises(LeafsimError, match="mass.m_min"):
-        ParamSet({"mass.m_min": 5, "mass.m_max": 1})
-
 
 def test_set_args_parse_types():
     d = parse_set_args(["veins.lateral.spacing=4", "effects.pbd=off", "dynamics.voronoi=replace"])

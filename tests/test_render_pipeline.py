@@ -8,7 +8,7 @@ from leafsim.session import Session
 
 
 def test_drying_changes_the_rendered_leaf():
-    s = Session("maple", overrides={"mesh.spacing": 0.04, "osmosis.loss_top": 3.0, "osmosis.loss_bottom": 2.0,
+    s = Session("maple", overrides={"mesh.spacing": 0.04, "osmosis.evaporation_top": 0.21, "osmosis.evaporation_bottom": 0.14,
                                     "colour.age_rate": 3.0}, build=True)
     r = OffscreenRenderer(320, 240, samples=0)
     try:

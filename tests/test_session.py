@@ -58,13 +58,13 @@ def test_build_and_step(s):
 def test_live_param_applies_at_once_and_keeps_state(s):
     s.step(3)
     gen, frame, water = s.generation, s.frame, s.state.particle_water.copy()
-    pending = s.set_params({"osmosis.loss_top": 5.0})
+    pending = s.set_params({"osmosis.evaporation_top": 5.0})
     assert pending is False and not s.pending_rebuild
-    assert s.params["osmosis.loss_top"] == 5.0
-    assert s.simulator.params["osmosis.loss_top"] == 5.0
+    assert s.params["osmosis.evaporation_top"] == 5.0
+    assert s.simulator.params["osmosis.evaporation_top"] == 5.0
     assert s.generation == gen and s.frame == frame
     np.testing.assert_array_equal(s.state.particle_water, water)
-    s.set_params({"osmosis.loss_top": PARAMS["osmosis.loss_top"].default})
+    s.set_params({"osmosis.evaporation_top": PARAMS["osmosis.evaporation_top"].default})
 
 
 def test_effect_toggle_is_live(s):
@@ -143,17 +143,17 @@ def test_seed_and_species_changes_need_rebuild(s):
 
 
 def test_save_load_roundtrip(s, tmp_path):
-    s.set_params({"osmosis.loss_top": 3.5, "veins.main.kappa": 7.0})
+    s.set_params({"osmosis.evaporation_top": 3.5, "veins.main.kappa": 7.0})
     path = tmp_path / "p.json"
     s.save_params(path)
     doc = json.loads(path.read_text())
-    assert doc["species"] == "oak" and doc["params"]["osmosis.loss_top"] == 3.5
+    assert doc["species"] == "oak" and doc["params"]["osmosis.evaporation_top"] == 3.5
     assert [p.name for p in tmp_path.iterdir()] == ["p.json"]
-    s.set_params({"osmosis.loss_top": 0.2, "veins.main.kappa": PARAMS["veins.main.kappa"].default})
+    s.set_params({"osmosis.evaporation_top": 0.014, "veins.main.kappa": PARAMS["veins.main.kappa"].default})
     assert s.load_params(path) is True  # kappa is a rebuild parameter: staged
-    assert s.params["osmosis.loss_top"] == 3.5 and s.simulator.params["osmosis.loss_top"] == 3.5
+    assert s.params["osmosis.evaporation_top"] == 3.5 and s.simulator.params["osmosis.evaporation_top"] == 3.5
     assert s.params["veins.main.kappa"] == 7.0 and s.pending_rebuild
-    s.set_params(s.built_params.with_overrides({"osmosis.loss_top": 0.2}))
+    s.set_params(s.built_params.with_overrides({"osmosis.evaporation_top": 0.014}))
     assert not s.pending_rebuild
 
 
@@ -168,7 +168,7 @@ def test_load_plain_object(s, tmp_path):
 @pytest.mark.parametrize("text,needle", [
     ("{not json", "malformed JSON"),
     ('{"params": {"osmosis.nope": 1}}', "unknown parameter 'osmosis.nope'"),
-    ('{"osmosis.loss_top": -3}', "out of range"),
+    ('{"osmosis.evaporation_top": -0.21}', "out of range"),
     ('{"params": {}, "extra": 1}', "unknown key 'extra'"),
     ('[1, 2]', "expected a JSON object"),
     ('{"params": {}, "species": "nosuch"}', "unknown species"),

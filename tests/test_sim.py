@@ -28,7 +28,7 @@ def _params(**kw):
 
 
 def test_water_nonnegative_and_never_increases(model):
-    p = _params(osmosis__loss_top=40.0, osmosis__loss_bottom=25.0, osmosis__diffusion=1e-3)
+    p = _params(osmosis__evaporation_top=2.8, osmosis__evaporation_bottom=1.75, osmosis__diffusion=1e-3)
     sim = Simulator(model, p, effects=("osmosis",))
     st = model.state()
     prev = st.particle_water.sum()
@@ -43,7 +43,7 @@ def test_water_nonnegative_and_never_increases(model):
 
 @pytest.mark.parametrize("solver", ["direct", "cg", "jacobi"])
 def test_water_conserved_without_loss(model, solver):
-    p = _params(osmosis__loss_top=0.0, osmosis__loss_bottom=0.0, osmosis__diffusion=1e-2, osmosis__solver=solver)
+    p = _params(osmosis__evaporation_top=0, osmosis__evaporation_bottom=0, osmosis__diffusion=1e-2, osmosis__solver=solver)
     sim = Simulator(model, p, effects=("osmosis",))
     st = model.state()
     rng = np.random.default_rng(0)
@@ -72,7 +72,7 @@ def test_solvers_agree(model):
 
 
 def test_leaf_at_rest_stays_put(model):
-    p = _params(osmosis__loss_top=0.0, osmosis__loss_bottom=0.0, dynamics__gravity=0.0)
+    p = _params(osmosis__evaporation_top=0, osmosis__evaporation_bottom=0, dynamics__gravity=0.0)
     sim = Simulator(model, p)
     st = model.state()
     for _ in range(500):
@@ -82,7 +82,7 @@ def test_leaf_at_rest_stays_put(model):
 
 
 def test_rest_lengths_within_bounds(model):
-    p = _params(osmosis__loss_top=5.0, osmosis__loss_bottom=5.0, shrink__sigma_surface_top=3.0, shrink__l_min=0.3)
+    p = _params(osmosis__evaporation_top=0.35, osmosis__evaporation_bottom=0.35, shrink__sigma_surface_top=3.0, shrink__l_min=0.3)
     sim = Simulator(model, p, effects=("osmosis", "shrink"))
     st = model.state()
     l0 = model.spring_rest0
@@ -93,7 +93,7 @@ def test_rest_lengths_within_bounds(model):
 
 
 def test_disabled_effects_leave_state_untouched(model):
-    p = _params(osmosis__loss_top=2.0)
+    p = _params(osmosis__evaporation_top=0.14)
     st = model.state()
     Simulator(model, p, effects=("shrink", "pbd", "gravity", "ground")).step(st)
     assert np.array_equal(st.particle_water, model.particle_water0)  # osmosis off
@@ -119,7 +119,7 @@ def _cup(model, st):
 @pytest.mark.parametrize("top,bottom,sign", [(2.0, 0.5, +1), (0.5, 2.0, -1)])
 def test_top_drying_faster_curls_margin_up(model, top, bottom, sign):
     """Sign test (free, no gravity, equal σ in both layers): the faster-drying side is concave."""
-    p = _params(osmosis__loss_top=top, osmosis__loss_bottom=bottom, dynamics__gravity=0.0, dynamics__scene="free",
+    p = _params(osmosis__evaporation_top=top, osmosis__evaporation_bottom=bottom, dynamics__gravity=0.0, dynamics__scene="free",
                 shrink__sigma_surface_top=0.15, shrink__sigma_surface_bottom=0.15, dynamics__dt=0.01)
     st, stats = run_headless(model, p, 80)
     assert not stats[-1]["nan"]
@@ -132,7 +132,7 @@ def test_live_param_change(model):
     st = model.state()
     sim.step(st)
     w1 = st.particle_water.sum()
-    sim.set_params(p.with_overrides({"osmosis.loss_top": 0.0, "osmosis.loss_bottom": 0.0, "effects.osmosis": True}))
+    sim.set_params(p.with_overrides({"osmosis.evaporation_top": 0, "osmosis.evaporation_bottom": 0, "effects.osmosis": True}))
     sim.step(st)
     assert st.particle_water.sum() == pytest.approx(w1, rel=1e-9)
     sim.set_params(p.with_overrides({"effects.pbd": False, "effects.gravity": False}))
@@ -181,7 +181,7 @@ def test_drying_leaf_on_ground_curls():
 def test_simulator_runs_colour_itself(model):
     """One Simulator runs every effect, colour included: no GUI session needed; a state it makes
     carries pigments, a disabled colour effect leaves them untouched, snapshots copy them."""
-    p = _params(colour__age_rate=2.0, osmosis__loss_top=2.0)
+    p = _params(colour__age_rate=2.0, osmosis__evaporation_top=0.14)
     sim = Simulator(model, p, seed=3)
     st = sim.state()
     assert st.pigments is not None and st.pigments.n == model.particle_count

@@ -3,8 +3,8 @@
 Every parameter gets one widget whose kind follows the declaration: float → slider (log scale
 where declared) with the unit in the label and the help text as tooltip, int → integer
 slider, bool → checkbox, choice → combo.  The visible label is the last name component plus
-the unit; the imgui ID is the full dotted name (``"loss_top [1/s]###osmosis.loss_top"``), so
-tests and scripts can address a widget as ``"**/###osmosis.loss_top"``.
+the unit; the imgui ID is the full dotted name (``"evaporation_top [kg/(m²·s)]###osmosis.evaporation_top"``), so
+tests and scripts can address a widget as ``"**/###osmosis.evaporation_top"``.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ from .kernels import osmosis as ko
 from .kernels import pbd as kp
 from .kernels import shrink as ks
 from .model import (
-    KIND_VEIN, LAYER_T, LAYER_V, MASS_UNIT, SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN, Model, State,
+    LAYER_T, LAYER_V, SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN, Model, State,
 )
 
 #: below this many particles the serial Gauss–Seidel kernel beats the coloured parallel one
@@ -41,18 +41,18 @@ class Osmosis:
     def __init__(self, model: Model):
         self.model = model
         ij = model.spring_ij
-        lay = model.spring_layer
-        sel = lay < 2  # T–T and V–V springs; no flow through links (per layer, as Jeong)
+        sel = model.spring_layer < 2  # T–T and V–V springs; no flow through links (per layer, as Jeong)
         i, j = ij[sel, 0], ij[sel, 1]
-        l = model.spring_rest0[sel]
         n = model.particle_count
-        E = np.bincount(i, l, n) + np.bincount(j, l, n)
         tau = model.particle_tau
         M = model.particle_cytosol
         self.M = M.copy()
-        # k_ij such that a uniform mesh diffuses c with D_eff = D · τ̄ (D in m²/s)
-        kij = 16.0 * 0.5 * (tau[i] + tau[j]) / (l * (E[i] + E[j]))
-        aij = kij * M[i] * M[j] / (M[i] + M[j])
+        # Finite volumes per layer: conductance between neighbours = τ̄ × (dry mass per area,
+        # harmonic mean) × face / distance, so that M dc/dt = D Σ a_ij (c_j − c_i) is
+        # ∂(ρc)/∂t = ∇·(D τ ρ ∇c) on any mesh (units: a [kg], D a [kg/s]).
+        rho = M / np.maximum(model.particle_area, 1e-300)
+        hm = 2.0 * rho[i] * rho[j] / np.maximum(rho[i] + rho[j], 1e-300)
+        aij = 0.5 * (tau[i] + tau[j]) * hm * model.spring_face[sel] / np.maximum(model.spring_rest0[sel], 1e-300)
         self.K = sp.coo_matrix((np.r_[-aij, -aij, aij, aij], (np.r_[i, j, i, j], np.r_[j, i, i, j])), shape=(n, n)).tocsr()
         self.K.sum_duplicates()
         self.key = None
@@ -70,17 +70,12 @@ class Osmosis:
         self.solver = solver
         self.tol = params["osmosis.tolerance"]
         lay = self.model.particle_layer
-        self.rate = np.where(lay == LAYER_V, params["osmosis.loss_top"], params["osmosis.loss_bottom"]).astype(float)
-        # Evaporation acts per unit of leaf surface, and every particle stands for about the same
-        # area, so each particle of a layer loses the same absolute amount: rate × Δt × the
-        # layer's mean initial water (Jeong: w − w_loss Δt 1).  Light tissue at the margin and
-        # between the veins therefore dries first relative to its content — the pattern that
-        # drives margin-first shrinking and colour; diffusion (osmosis) works against it.
-        w0 = self.model.particle_water0
-        self.loss_ref = np.empty_like(w0, dtype=float)
-        for layer in np.unique(lay):
-            sel = lay == layer
-            self.loss_ref[sel] = w0[sel].mean()
+        self.rate = np.where(lay == LAYER_V, params["osmosis.evaporation_top"], params["osmosis.evaporation_bottom"]).astype(float)
+        # Evaporation acts per unit of leaf surface: a particle loses E × Δt × the area it
+        # stands for (Jeong: w − w_loss Δt 1).  Light tissue at the margin and between the veins
+        # therefore dries first relative to its content — the pattern that drives
+        # margin-first shrinking and colour; diffusion (osmosis) works against it.
+        self.loss_ref = self.model.particle_area.astype(float)
         self.dt = dt
         key = (D, dt, solver)
         if key != self.key:
@@ -124,29 +119,41 @@ class Osmosis:
 
 
 class Shrink:
-    """Rest lengths from the mass ratio (SPEC §7), σ per spring type and layer; also the
-    bilayer rest angles of the hinges and the thickness rest values."""
+    """Rest lengths from the mass ratio (SPEC §7), σ per spring type and layer; the links
+    between the layers follow the two layers' shrink (the cross-section keeps its shape), and
+    the thickness rest values follow the in-plane shrink."""
 
     def __init__(self, model: Model):
         self.model = model
+        t = model.spring_type
+        self.links = np.flatnonzero(t == SPRING_LINK).astype(np.int64)
+        ij = model.spring_ij[self.links]
+        rest = model.particle_rest
+        self.link_r0 = np.linalg.norm(rest[ij[:, 0], :2] - rest[ij[:, 1], :2], axis=1)
+        self.link_h0 = np.abs(rest[ij[:, 0], 2] - rest[ij[:, 1], 2])
+        # the triangle of each link (its V particle) → that triangle's three T springs
+        nT = int((model.particle_layer == LAYER_T).sum())
+        self.link_tri_springs = model.vol_springs[np.argsort(model.vol_idx[:, 0])][ij[:, 0] - nT]
 
     def configure(self, params):
         t = self.model.spring_type
-        sig = np.empty(len(t))
+        sig = np.zeros(len(t))
         sig[t == SPRING_SURFACE] = params["shrink.sigma_surface_bottom"]
         sig[t == SPRING_V] = params["shrink.sigma_surface_top"]
         sig[t == SPRING_VEIN] = params["shrink.sigma_vein"]
-        sig[t == SPRING_LINK] = params["shrink.sigma_link"]
         self.sigma = sig
+        self.sig_top = params["shrink.sigma_surface_top"]
         self.alpha = params["shrink.alpha"]
         self.l_min = params["shrink.l_min"]
-        self.bending = params["effects.bending"]
 
     def apply(self, state: State):
         m = self.model
         fn = ks.shrink_springs_par if m.particle_count >= PARALLEL_MIN_PARTICLES else ks.shrink_springs
         fn(m.spring_ij, m.spring_rest0, self.sigma, self.alpha, self.l_min,
-                          m.particle_cytosol, state.particle_water, m.particle_mass0, state.spring_rest)
+           m.particle_cytosol, state.particle_water, m.particle_mass0, state.spring_rest)
+        ks.link_targets(self.links, m.spring_ij, self.link_r0, self.link_h0, self.link_tri_springs, m.spring_rest0,
+                        self.sig_top, self.alpha, self.l_min, m.particle_cytosol, state.particle_water,
+                        m.particle_mass0, state.spring_rest)
         ks.vol_targets(m.vol_springs, m.spring_rest0, state.spring_rest, m.vol_rest0, state.vol_rest)
 
 
@@ -165,19 +172,16 @@ class Dynamics:
         self.hlam = np.zeros(model.hinge_count)
         self.vlam = np.zeros(model.vol_count)
         self.hgt = np.zeros(model.vol_count)
+        self.qa = np.zeros((n, 3))
+        self.dint = np.zeros((n, 3))
         # hinge stiffness geometry factor 3|e|²/(A1+A2) (discrete shells)
         self.hgeom = 3.0 * model.hinge_edge_len ** 2 / np.maximum(model.hinge_area, 1e-30)
         self.halpha = np.zeros(model.hinge_count)
-        # Veins stay straight along their length: a hinge whose two wing vertices are both on a
-        # main or lateral vein bends that vein lengthwise, so it gets no bilayer curl target
-        # (the blade still rolls across the veins). Without this a long narrow leaf (chestnut)
-        # scrolls up from the tip into a lump.
-        if model.hinge_count:
-            on_vein = (model.particle_kind == KIND_VEIN) & (model.particle_vein_order <= 1)
-            wings = model.hinge_idx[:, :2]
-            self.hinge_curl = np.where(on_vein[wings[:, 0]] & on_vein[wings[:, 1]], 0.0, 1.0)
-        else:
-            self.hinge_curl = np.ones(0)
+        self.hrod = np.zeros(model.hinge_count)
+        # Veins stay straight along their length: a hinge that bends a main or lateral vein
+        # lengthwise gets no bilayer curl target (vascular tissue is no mesophyll bilayer) and
+        # carries the vein's own bending stiffness (the blade still rolls across the veins).
+        self.hinge_curl = np.where(model.hinge_vein, 0.0, 1.0)
         T = np.flatnonzero(model.particle_layer == LAYER_T)
         self.T_idx = T.astype(np.int64)
         # power of two ≥ 2 × |T| buckets: the contact hash uses a bit mask, not a 64-bit modulo
@@ -205,13 +209,17 @@ class Dynamics:
         self.substeps = params["dynamics.substeps"]
         self.h = dt / self.substeps
         self.g = -params["dynamics.gravity"] if effects["gravity"] else 0.0
-        self.keep = (1.0 - params["dynamics.damping"]) ** (1.0 / self.substeps)
+        self.keep = math.exp(-params["dynamics.damping"] * self.h)
         self.iters = params["dynamics.iterations"]
         self.tol = params["dynamics.tolerance"] * m.length
-        a = np.where(m.spring_type == SPRING_VEIN, params["dynamics.compliance_vein"], params["dynamics.compliance_surface"])
-        self.salpha = a / (self.h * self.h)
-        self.kbend = params["dynamics.bending"]
-        self.kdry = params["dynamics.bending_drying"]
+        # membranes: k = E (h/2) ΣA/|e|² per layer (Van Gelder), veins add their rod E_v A_c / l
+        E, Ev, h = params["material.modulus"], params["material.vein_modulus"], m.thickness
+        k = E * 0.5 * h * m.spring_weight + Ev * m.spring_rod
+        self.salpha = 1.0 / np.maximum(k, 1e-300) / (self.h * self.h)
+        # bending: D = E h³ / 12(1 − ν²) on discrete-shell hinges, veins add E_v I / ℓ̄
+        self.kbend = E * h ** 3 / (12.0 * (1.0 - params["material.poisson"] ** 2))
+        self.kdry = params["material.dry_stiffening"]
+        np.multiply(Ev, m.hinge_rod, out=self.hrod)
         self.plastic_rate = params["dynamics.plasticity"]
         self.replace = params["dynamics.voronoi"] == "replace"
         self.scene = params["dynamics.scene"]
@@ -232,7 +240,7 @@ class Dynamics:
         m = self.model
         w = state.particle_water
         w0 = m.particle_water0
-        kp.hinge_compliance(m.hinge_idx, w, w0, self.kbend, self.kdry, self.hgeom, 1.0 / (self.h * self.h), self.halpha)
+        kp.hinge_compliance(m.hinge_idx, w, w0, self.kbend, self.kdry, self.hgeom, self.hrod, 1.0 / (self.h * self.h), self.halpha)
         if self.shrink_on:
             ks.hinge_targets(m.hinge_idx, m.hinge_spring_V, m.spring_ij, m.spring_rest0, self.sig_top, self.sig_bot,
                              self.alpha_shrink, self.l_min, m.particle_cytosol, state.particle_water, m.particle_water0,
@@ -243,7 +251,7 @@ class Dynamics:
 
     def apply(self, state: State):
         m = self.model
-        np.divide(1.0 / MASS_UNIT, m.particle_cytosol + state.particle_water, out=self.invm)
+        np.divide(1.0, m.particle_cytosol + state.particle_water, out=self.invm)
         if self.scene == "hanging":
             self.invm[m.particle_pinned] = 0.0
         if self.pbd and self.bending:
@@ -267,7 +275,8 @@ class Dynamics:
                  m.vol_idx, state.vol_rest, self.vlam, m.vol_colour_start,
                  self.pbd, self.ground, self.pen, self.change, self.mu,
                  self.self_coll, m.particle_rest, self.T_idx, 1.5 * self.radius, self.skip2, self.table, self.nxt,
-                 self.pairs, self.radius, self.replace, self.hgt, m.thickness, out)
+                 self.pairs, self.radius, self.replace, self.hgt, m.thickness, self.scene != "hanging",
+                 self.qa, self.dint, out)
         self.last_iterations = int(out[0])
         self.last_contacts = int(out[1])
         self.last_uninverted = int(out[2])
@@ -276,65 +285,6 @@ class Dynamics:
             if k == 4:
                 self.parallel = min(self._probe[True]) < min(self._probe[False])
                 self._probe = {True: [], False: []}
-
-    def _substep(self, state: State) -> int:
-        """Reference (Python-driven) version of one substep of :func:`kernels.pbd.frame`."""
-        m = self.model
-        q, qd = state.particle_q, state.particle_qd
-        h = self.h
-        kp.predict(q, qd, self.q_old, self.invm, self.g, h)
-        if self.replace:
-            kp.voronoi_heights(self.q_old, m.vol_idx, self.hgt)
-        it = 0
-        if self.pbd:
-            hidx = m.hinge_idx
-            hcs = m.hinge_colour_start if self.bending else self.empty_cs
-            self.slam[:] = 0.0
-            self.hlam[:] = 0.0
-            fn = kp.iteration_par if self.parallel else kp.iteration_ser
-            ncont = 0
-            if self.self_coll:
-                # contact candidates once per substep (search 1.5 × radius), projected inside the
-                # iteration loop like every other constraint (outside it they pump energy)
-                ncont = kp.find_contacts(q, m.particle_rest, self.T_idx, 1.5 * self.radius, self.skip2,
-                                         self.table, self.nxt, self.pairs)
-            hits = 0
-            while it < self.iters:
-                it += 1
-                ch = fn(q, self.invm, m.spring_ij, state.spring_rest, self.salpha, self.slam, m.spring_colour_start,
-                        hidx, state.hinge_rest, self.halpha, self.hlam, hcs,
-                        m.vol_idx, state.vol_rest, self.vlam, m.vol_colour_start, self.ground, self.pen, self.change)
-                if ncont:
-                    hits = kp.project_contacts(q, self.invm, self.pairs, ncont, self.radius)
-                if ch < self.tol and hits == 0:
-                    break
-            self.last_contacts = hits
-        if self.ground:
-            low = q[:, 2] < 0
-            if low.any():
-                self.pen[low] = np.maximum(self.pen[low], -q[low, 2])
-                q[low, 2] = 0.0
-            kp.ground_friction(q, self.q_old, self.pen, self.mu)
-        if self.pbd:
-            # no layer inversion: momentum-conserving passes (vertices resting on the ground stay),
-            # then a V-only pass for anything neighbours undid
-            n_fix = 0
-            for _ in range(3):
-                k = kp.uninvert(q, self.invm, m.vol_idx, 0.25 * m.thickness, False, self.ground)
-                n_fix += k
-                if k == 0:
-                    break
-            if k:
-                kp.uninvert(q, self.invm, m.vol_idx, 0.2 * m.thickness, True, self.ground)
-            self.last_uninverted = n_fix
-            if self.ground:
-                np.maximum(q[:, 2], 0.0, out=q[:, 2])
-        kp.update_velocity(q, self.q_old, qd, h, self.keep)
-        if self.replace:
-            kp.voronoi_replace(q, m.vol_idx, self.hgt, 0.25 * m.thickness)
-            if self.ground:
-                np.maximum(q[:, 2], 0.0, out=q[:, 2])
-        return it
 
 
 class Colour:
@@ -358,7 +308,7 @@ class Colour:
 
         m = self.model
         state = replace(state, pigments=init_pigments(m.particle_count, self.params, seed=seed,
-                                                      rest_relative_mass=m.particle_mass0))
+                                                      rest_relative_mass=m.areal_mass0))
         self.apply(state, 0.0)
         return state
 

@@ -19,8 +19,6 @@ KIND_SURFACE, KIND_CONTOUR, KIND_VEIN, KIND_VORONOI = 0, 1, 2, 3
 # spring types
 SPRING_SURFACE, SPRING_VEIN, SPRING_V, SPRING_LINK = 0, 1, 2, 3
 SPRING_TYPE_NAMES = ("surface", "vein", "voronoi", "link")
-#: particle masses are declared in mg; dynamics works in kg
-MASS_UNIT = 1e-6
 
 
 @dataclass(frozen=True)
@@ -65,9 +63,13 @@ class Model:
     Particles
     ---------
     particle_rest (n,3) [m], particle_layer (n,) int8 0=T 1=V, particle_kind (n,) int8,
-    particle_vein_order (n,) int8 (−1 for none), particle_cytosol (n,) [mg],
-    particle_mass0 (n,) [mg], particle_water0 (n,) [mg], particle_tau (n,),
-    particle_texcoord (n,2), particle_pinned (n,) bool (petiole, for the hanging scene).
+    particle_vein_order (n,) int8 (−1 for none), particle_area (n,) [m²] the blade area a
+    particle stands for in its layer (T: a third of its triangles, V: its triangle),
+    particle_cytosol (n,) dry mass [kg], particle_mass0 (n,) fresh mass [kg],
+    particle_water0 (n,) [kg], particle_tau (n,) Jeong's graph-distance weight,
+    particle_vein_width (n,) [m] (0 off the veins), particle_texcoord (n,2),
+    particle_pinned (n,) bool (petiole, for the hanging scene).  Each layer carries half the
+    blade's areal mass; vein particles add their rod.
 
     Triangles (layer T) and Voronoi dual (layer V)
     ----------------------------------------------
@@ -76,13 +78,19 @@ class Model:
     Springs (colour-sorted)
     -----------------------
     spring_ij (s,2), spring_rest0 (s,), spring_type (s,) int8 (SPRING_*), spring_layer (s,)
-    0 T / 1 V / 2 link, spring_order (s,) vein order or −1, spring_colour_start.
+    0 T / 1 V / 2 link, spring_order (s,) vein order or −1, spring_colour_start;
+    spring_weight (s,) membrane weight ΣA/|e|² (the area a spring stands for over its length
+    squared: stiffness = E × layer thickness × weight, Van Gelder), spring_rod (s,) [m] vein
+    cross-section / length (rod stiffness = E_vein × rod), spring_face (s,) [m] finite-volume
+    face across which water flows (T edges: the barycentric dual; V springs: the shared T edge).
 
     Bending hinges on interior T edges (colour-sorted)
     --------------------------------------------------
     hinge_idx (h,4) = (c, d, a, b): opposite vertices c, d and shared edge a–b;
     hinge_spring_T (h,) the T spring a–b, hinge_spring_V (h,) the V spring across it,
-    hinge_edge_len (h,), hinge_area (h,) area of the two triangles, hinge_colour_start.
+    hinge_edge_len (h,), hinge_area (h,) area of the two triangles, hinge_colour_start;
+    hinge_rod (h,) [m³] vein bending weight I/ℓ̄ (stiffness E_vein × rod, for hinges that bend a
+    vein along its length), hinge_vein (h,) bool such a hinge on a main or lateral vein.
 
     Layer thickness (colour-sorted)
     -------------------------------
@@ -99,10 +107,12 @@ class Model:
     particle_layer: np.ndarray
     particle_kind: np.ndarray
     particle_vein_order: np.ndarray
+    particle_area: np.ndarray
     particle_cytosol: np.ndarray
     particle_mass0: np.ndarray
     particle_water0: np.ndarray
     particle_tau: np.ndarray
+    particle_vein_width: np.ndarray
     particle_texcoord: np.ndarray
     particle_pinned: np.ndarray
     tri_T: np.ndarray
@@ -112,12 +122,17 @@ class Model:
     spring_type: np.ndarray
     spring_layer: np.ndarray
     spring_order: np.ndarray
+    spring_weight: np.ndarray
+    spring_rod: np.ndarray
+    spring_face: np.ndarray
     spring_colour_start: np.ndarray
     hinge_idx: np.ndarray
     hinge_spring_T: np.ndarray
     hinge_spring_V: np.ndarray
     hinge_edge_len: np.ndarray
     hinge_area: np.ndarray
+    hinge_rod: np.ndarray
+    hinge_vein: np.ndarray
     hinge_colour_start: np.ndarray
     vol_idx: np.ndarray
     vol_rest0: np.ndarray
@@ -154,6 +169,11 @@ class Model:
     @property
     def vol_count(self) -> int:
         return len(self.vol_idx)
+
+    @property
+    def areal_mass0(self) -> np.ndarray:
+        """(n,) fresh mass per area [kg/m²] of every particle (veins heavier than the lamina)."""
+        return self.particle_mass0 / np.maximum(self.particle_area, 1e-300)
 
     def vein_polylines(self) -> list[tuple[np.ndarray, np.ndarray, int]]:
         """Per vein: (particle indices (k,), widths (k,) m, order)."""
@@ -200,4 +220,7 @@ class Model:
             "length_m": self.length,
             "thickness_m": self.thickness,
             "spacing_m": self.spacing,
+            "area_m2": float(self.particle_area[lay == LAYER_T].sum()),
+            "fresh_mass_kg": float(self.particle_mass0.sum()),
+            "water_kg": float(self.particle_water0.sum()),
         }

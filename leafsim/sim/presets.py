@@ -9,19 +9,18 @@ THESIS_PRESET = {
     "shrink.sigma_vein": 0.5,
     "shrink.sigma_surface_top": 1.5,
     "shrink.sigma_surface_bottom": 1.5,
-    "shrink.sigma_link": 1.5,
     "shrink.l_min": 0.1,
-    "mass.m_min": 0.1,
-    "mass.m_max": 1.0,
-    "osmosis.diffusion": 70.0,   # thesis λ 70–700 (dimensionless in the thesis; see SPEC §6)
-    "osmosis.loss_top": 0.2,     # thesis w_loss −0.1 / −0.2 (sign: loss)
-    "osmosis.loss_bottom": 0.1,
+    "mass.profile_min": 0.1,     # thesis m_min / m_max = 0.1 mg / 1 mg (per particle there; per area here)
+    "osmosis.diffusion": 70.0,   # thesis λ 70–700 (dimensionless in the thesis; see docs/method.md)
+    "osmosis.evaporation_top": 0.014,     # thesis w_loss 0.2 / 0.1 of a layer's mean water per second
+    "osmosis.evaporation_bottom": 0.007,  # (0.07 kg/m² of water per layer at the default mass)
     "dynamics.iterations": 1,
     "dynamics.substeps": 1,
     "dynamics.dt": 0.002,
     "dynamics.gravity": 9.8,
     "dynamics.voronoi": "replace",
     "dynamics.plasticity": 0.0,
+    "dynamics.damping": 0.0,
     "mass.D": 1,
     "shrink.alpha": 1.0,
 }

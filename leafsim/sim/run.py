@@ -12,7 +12,7 @@ from ..errors import LeafsimError
 from ..fileio import atomic_write_bytes
 from ..params import ParamSet
 from .kernels.pbd import residual
-from .model import LAYER_T, LAYER_V, MASS_UNIT, Model, State
+from .model import LAYER_T, LAYER_V, Model, State
 from .simulator import Simulator
 
 
@@ -22,7 +22,7 @@ def frame_stats(model: Model, state: State, ms: dict, sim: Simulator | None = No
     lay = model.particle_layer
     q, qd = state.particle_q, state.particle_qd
     finite = bool(np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(w).all())
-    m = (model.particle_cytosol + w) * MASS_UNIT
+    m = model.particle_cytosol + w
     out = {
         "frame": state.frame,
         "time": state.time,

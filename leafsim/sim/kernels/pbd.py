@@ -157,18 +157,11 @@ def _volume(q, invm, vidx, vrest, t):
 
 def _iteration(q, invm, ij, rest, salpha, slam, scs,
                hidx, hrest, halpha, hlam, hcs,
-               vidx, vrest, vlam, vcs, ground, pen, change):
+               vidx, vrest, vlam, vcs, change):
     """One Gauss–Seidel pass over all constraints, colour by colour.  ``salpha``/``halpha`` are
     compliances already divided by Δt².  Writes |Δx| per constraint into ``change`` (size ≥
     max count) and returns the largest."""
     big = 0.0
-    # ---------------- ground plane z >= 0 first (so constraints restore the thickness after)
-    if ground:
-        for i in prange(q.shape[0]):
-            if q[i, 2] < 0.0 and invm[i] > 0.0:
-                if -q[i, 2] > pen[i]:
-                    pen[i] = -q[i, 2]
-                q[i, 2] = 0.0
     # ---------------- distance constraints
     for c in range(scs.shape[0] - 1):
         for s in prange(scs[c], scs[c + 1]):
@@ -199,19 +192,12 @@ iteration_par = njit(cache=True, parallel=True, fastmath=True)(_iteration)
 @njit(cache=True, fastmath=True)
 def iteration_ser(q, invm, ij, rest, salpha, slam, scs,
                   hidx, hrest, halpha, hlam, hcs,
-                  vidx, vrest, vlam, vcs, ground, pen, change):
+                  vidx, vrest, vlam, vcs, change):
     """Serial twin of :func:`_iteration` (same projection, same order; ``prange`` → ``range``
     and the largest change tracked inline, so ``change`` is not written and not scanned —
     keep the two in sync).  Returns the largest |Δx| of the pass.  Write-up of the
     arguments: :func:`_iteration`."""
     big = 0.0
-    # ---------------- ground plane z >= 0 first (so constraints restore the thickness after)
-    if ground:
-        for i in range(q.shape[0]):
-            if q[i, 2] < 0.0 and invm[i] > 0.0:
-                if -q[i, 2] > pen[i]:
-                    pen[i] = -q[i, 2]
-                q[i, 2] = 0.0
     # ---------------- distance constraints
     for c in range(scs.shape[0] - 1):
         for s in range(scs[c], scs[c + 1]):
@@ -535,9 +521,10 @@ def springs_multi_par(q, invm, ij, rest, salpha, slam, scs, change, niter, tol):
 
 
 @njit(cache=True, fastmath=True)
-def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, inv_h2, halpha):
-    """XPBD compliance / Δt² of every hinge: k = k_bend (1 + k_dry · clip(dry, 0, 1)) · geom,
-    dry = 1 − (w_a + w_b) / (w0_a + w0_b) over the hinge's shared edge a–b."""
+def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha):
+    """XPBD compliance / Δt² of every hinge: k = D (1 + k_dry · clip(dry, 0, 1)) · geom + k_rod
+    [N·m/rad], D the blade's bending stiffness [N·m], geom = 3|e|²/(A₁+A₂), k_rod the vein's
+    E_v I/ℓ̄ share; dry = 1 − (w_a + w_b) / (w0_a + w0_b) over the hinge's shared edge a–b."""
     for e in range(hidx.shape[0]):
         a = hidx[e, 2]
         b = hidx[e, 3]
@@ -546,7 +533,79 @@ def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, inv_h2, halpha):
             dry = 0.0
         elif dry > 1.0:
             dry = 1.0
-        halpha[e] = inv_h2 / (kbend * (1.0 + kdry * dry) * hgeom[e])
+        halpha[e] = inv_h2 / (kbend * (1.0 + kdry * dry) * hgeom[e] + krod[e])
+
+
+@njit(cache=True, fastmath=True)
+def ground_clamp(q, invm, pen):
+    """Ground plane z ≥ 0: lift penetrating particles, remember the deepest penetration of
+    the substep (the friction budget of :func:`ground_friction`)."""
+    for i in range(q.shape[0]):
+        if q[i, 2] < 0.0 and invm[i] > 0.0:
+            if -q[i, 2] > pen[i]:
+                pen[i] = -q[i, 2]
+            q[i, 2] = 0.0
+
+
+@njit(cache=True, fastmath=True)
+def add_delta(q, qa, dint):
+    """dint += q − qa (the displacement of the internal projections since the snapshot qa)."""
+    for i in range(q.shape[0]):
+        for k in range(3):
+            dint[i, k] += q[i, k] - qa[i, k]
+
+
+@njit(cache=True, fastmath=True)
+def remove_rigid(q, q_old, invm, dint):
+    """Internal forces carry no net momentum.  A Gauss–Seidel sweep conserves linear and
+    angular momentum only to first order (each projection is exact at the positions it sees,
+    the sweep's sum is not), and on frustrated constraints the second-order remainder adds up
+    to a steady spin or crawl.  This removes from the positions the translation and the
+    rotation about the old centre of mass contained in the internal displacement ``dint``:
+    afterwards Σ m Δ = 0 and Σ m (x_old − c) × Δ = 0, i.e. the substep's internal impulses
+    leave L = Σ m x × v exactly unchanged (x_new = x_old + h v_new).  Returns nothing."""
+    n = q.shape[0]
+    M = 0.0
+    cx = 0.0; cy = 0.0; cz = 0.0
+    px = 0.0; py = 0.0; pz = 0.0
+    for i in range(n):
+        if invm[i] <= 0.0:
+            continue
+        m = 1.0 / invm[i]
+        M += m
+        cx += m * q_old[i, 0]; cy += m * q_old[i, 1]; cz += m * q_old[i, 2]
+        px += m * dint[i, 0]; py += m * dint[i, 1]; pz += m * dint[i, 2]
+    if M <= 0.0:
+        return
+    cx /= M; cy /= M; cz /= M
+    tx = px / M; ty = py / M; tz = pz / M
+    Lx = 0.0; Ly = 0.0; Lz = 0.0
+    Ixx = 0.0; Iyy = 0.0; Izz = 0.0; Ixy = 0.0; Ixz = 0.0; Iyz = 0.0
+    for i in range(n):
+        if invm[i] <= 0.0:
+            continue
+        m = 1.0 / invm[i]
+        rx = q_old[i, 0] - cx; ry = q_old[i, 1] - cy; rz = q_old[i, 2] - cz
+        dx = dint[i, 0] - tx; dy = dint[i, 1] - ty; dz = dint[i, 2] - tz
+        Lx += m * (ry * dz - rz * dy); Ly += m * (rz * dx - rx * dz); Lz += m * (rx * dy - ry * dx)
+        Ixx += m * (ry * ry + rz * rz); Iyy += m * (rx * rx + rz * rz); Izz += m * (rx * rx + ry * ry)
+        Ixy -= m * rx * ry; Ixz -= m * rx * rz; Iyz -= m * ry * rz
+    # ω = I⁻¹ L (3 × 3, symmetric; adjugate / determinant)
+    a00 = Iyy * Izz - Iyz * Iyz; a01 = Ixz * Iyz - Ixy * Izz; a02 = Ixy * Iyz - Ixz * Iyy
+    a11 = Ixx * Izz - Ixz * Ixz; a12 = Ixy * Ixz - Ixx * Iyz; a22 = Ixx * Iyy - Ixy * Ixy
+    det = Ixx * a00 + Ixy * a01 + Ixz * a02
+    if abs(det) < 1e-300:
+        return
+    wx = (a00 * Lx + a01 * Ly + a02 * Lz) / det
+    wy = (a01 * Lx + a11 * Ly + a12 * Lz) / det
+    wz = (a02 * Lx + a12 * Ly + a22 * Lz) / det
+    for i in range(n):
+        if invm[i] <= 0.0:
+            continue
+        rx = q_old[i, 0] - cx; ry = q_old[i, 1] - cy; rz = q_old[i, 2] - cz
+        q[i, 0] -= tx + wy * rz - wz * ry
+        q[i, 1] -= ty + wz * rx - wx * rz
+        q[i, 2] -= tz + wx * ry - wy * rx
 
 
 @njit(cache=True, fastmath=True)
@@ -556,16 +615,20 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
           vidx, vrest, vlam, vcs,
           pbd, ground, pen, change, mu,
           self_coll, qrest, T_idx, search, skip2, table, nxt, pairs, radius,
-          replace, hgt, thick, out):
+          replace, hgt, thick, conserve, qa, dint, out):
     """All ``substeps`` of one dynamics frame in one call (no Python between substeps or
-    iterations; SPEC §8 order, see :meth:`leafsim.sim.effects.Dynamics._substep`).  ``par``
-    picks the coloured-parallel projection.  Writes (iterations, contacts, uninverted) to
-    ``out`` (int64[3])."""
+    iterations; SPEC §8 order).  Per substep: predict; iterate (ground clamp — external —
+    then the internal constraints: springs, hinges, volumes, self-contacts); un-invert layers;
+    with ``conserve`` remove the rigid part of the internal displacement (see
+    :func:`remove_rigid`; not with pinned particles); ground contact + friction; velocity
+    update with damping.  ``par`` picks the coloured-parallel projection; ``qa``/``dint``
+    (n, 3) scratch.  Writes (iterations, contacts, uninverted) to ``out`` (int64[3])."""
     its = 0
     for _ in range(substeps):
         predict(q, qd, q_old, invm, gz, h)
         if replace:
             voronoi_heights(q_old, vidx, hgt)
+        dint[:] = 0.0
         it = 0
         if pbd:
             slam[:] = 0.0
@@ -576,25 +639,22 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
             hits = 0
             while it < iters:
                 it += 1
+                if ground:
+                    ground_clamp(q, invm, pen)
+                qa[:] = q
                 if par:
                     ch = iteration_par(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs,
-                                       vidx, vrest, vlam, vcs, ground, pen, change)
+                                       vidx, vrest, vlam, vcs, change)
                 else:
                     ch = iteration_ser(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs,
-                                       vidx, vrest, vlam, vcs, ground, pen, change)
+                                       vidx, vrest, vlam, vcs, change)
                 if ncont:
                     hits = project_contacts(q, invm, pairs, ncont, radius)
+                add_delta(q, qa, dint)
                 if ch < tol and hits == 0:
                     break
             out[1] = hits
-        if ground:
-            for i in range(q.shape[0]):
-                if q[i, 2] < 0.0:
-                    if -q[i, 2] > pen[i]:
-                        pen[i] = -q[i, 2]
-                    q[i, 2] = 0.0
-            ground_friction(q, q_old, pen, mu)
-        if pbd:
+            qa[:] = q
             n_fix = 0
             k = 0
             for _r in range(3):
@@ -605,10 +665,16 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
             if k:
                 uninvert(q, invm, vidx, 0.2 * thick, True, ground)
             out[2] = n_fix
-            if ground:
-                for i in range(q.shape[0]):
-                    if q[i, 2] < 0.0:
-                        q[i, 2] = 0.0
+            add_delta(q, qa, dint)
+            if conserve:
+                remove_rigid(q, q_old, invm, dint)
+        if ground:
+            for i in range(q.shape[0]):
+                if q[i, 2] < 0.0:
+                    if -q[i, 2] > pen[i]:
+                        pen[i] = -q[i, 2]
+                    q[i, 2] = 0.0
+            ground_friction(q, q_old, pen, mu)
         update_velocity(q, q_old, qd, h, keep)
         if replace:
             voronoi_replace(q, vidx, hgt, 0.25 * thick)

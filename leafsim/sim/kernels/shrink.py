@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
 
@@ -91,3 +93,23 @@ def vol_targets(vsp, rest0, rest, vol0, vrest):
     for t in range(vsp.shape[0]):
         f = (rest[vsp[t, 0]] / rest0[vsp[t, 0]] + rest[vsp[t, 1]] / rest0[vsp[t, 1]] + rest[vsp[t, 2]] / rest0[vsp[t, 2]]) / 3.0
         vrest[t] = vol0[t] * f * f
+
+
+@njit(cache=True, fastmath=True)
+def link_targets(links, ij, r0, h0, tri_springs, rest0, sig_top, alpha, l_min, cyt, water, m0, rest):
+    """Rest length of each link V → T vertex from the two layers' shrink: its in-plane offset
+    shrinks by the mean of the top layer's strain (the V particle's mass ratio, σ_top law) and
+    the bottom layer's (the mean ratio of its triangle's three T springs, already updated in
+    ``rest``); the thickness h0 is kept.  So the cross-section keeps its shape and the layers'
+    mismatch is carried by the V and T springs alone (bending), not by the links."""
+    for k in range(links.shape[0]):
+        s = links[k]
+        v = ij[s, 0]
+        fb = 0.0
+        for j in range(3):
+            t = tri_springs[k, j]
+            fb += rest[t] / rest0[t]
+        fb /= 3.0
+        ft = 1.0 - _strain(sig_top, alpha, l_min, cyt[v] + water[v], m0[v])
+        f = 0.5 * (fb + ft)
+        rest[s] = math.sqrt((r0[k] * f) ** 2 + h0[k] * h0[k])

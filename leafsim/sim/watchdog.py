@@ -1,0 +1,106 @@
+"""Energy and momentum watchdog: a run that is silently wrong stops with a clear error.
+
+Every frame the :class:`Watchdog` measures (O(n) numpy) the kinetic energy split into the
+leaf's rigid motion and its internal motion, the linear and angular momentum about the centre
+of mass and the largest internal speed.  A drying leaf deforms at millimetres per second; its
+internal motion is bounded by what the shrinking can drive.  Two signatures of a numerical
+blow-up that produce no NaN are caught:
+
+* an internal speed above :data:`MAX_INTERNAL_SPEED` (no drying tissue moves that fast);
+* internal kinetic energy growing exponentially (doubling every ≤ :data:`DOUBLING_FRAMES`
+  frames for :data:`GROWTH_WINDOWS` windows in a row) above a floor.
+
+The error names the parameters most likely responsible (those changed from their defaults
+among the ones that drive the dynamics).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import LeafsimError
+from ..params import PARAMS, ParamSet
+
+#: largest internal (non-rigid) particle speed a drying leaf can reach [m/s]
+MAX_INTERNAL_SPEED = 2.0
+#: a growth window: internal kinetic energy compared every this many frames
+DOUBLING_FRAMES = 50
+#: consecutive windows of doubling (or faster) growth that count as a blow-up
+GROWTH_WINDOWS = 6
+#: ignore growth while the internal kinetic energy is below this × (mass × (L / s)²)
+ENERGY_FLOOR = 1e-4
+#: parameters that drive the dynamics, in the order they are blamed
+SUSPECTS = ("shrink.sigma_surface_top", "shrink.sigma_surface_bottom", "shrink.sigma_vein", "shrink.l_min",
+            "shrink.alpha", "dynamics.dt", "dynamics.substeps", "dynamics.iterations", "dynamics.damping",
+            "material.modulus", "material.vein_modulus", "material.dry_stiffening", "dynamics.plasticity",
+            "dynamics.gravity", "osmosis.evaporation_top", "osmosis.evaporation_bottom", "mesh.thickness")
+
+
+def momenta(mass: np.ndarray, q: np.ndarray, qd: np.ndarray) -> dict:
+    """Kinetic energy (total, rigid, internal) [J], linear momentum (3,) [kg·m/s], angular
+    momentum about the centre of mass (3,) [kg·m²/s], largest internal speed [m/s].  The
+    rigid part is the best-fit rigid motion (COM velocity + ω × r with I ω = L)."""
+    M = float(mass.sum())
+    c = (mass[:, None] * q).sum(0) / M
+    v = (mass[:, None] * qd).sum(0) / M
+    r = q - c
+    u = qd - v
+    Lang = (mass[:, None] * np.cross(r, u)).sum(0)
+    r2 = (r * r).sum(1)
+    I = np.eye(3) * float((mass * r2).sum()) - np.einsum("i,ij,ik->jk", mass, r, r)
+    try:
+        w = np.linalg.solve(I, Lang)
+    except np.linalg.LinAlgError:
+        w = np.zeros(3)
+    internal = u - np.cross(w, r)
+    ke = 0.5 * float((mass * (qd * qd).sum(1)).sum())
+    ke_int = 0.5 * float((mass * (internal * internal).sum(1)).sum())
+    return {"kinetic": ke, "kinetic_internal": ke_int, "kinetic_rigid": ke - ke_int, "momentum": M * v,
+            "angular_momentum": Lang, "omega": w, "max_internal_speed": float(np.sqrt((internal * internal).sum(1).max()))}
+
+
+class Watchdog:
+    """Per-frame checks of one run (see the module docstring).
+
+    Parameters
+    ----------
+    model : Model; params : ParamSet (for blaming); every : check every this many frames.
+    """
+
+    def __init__(self, model, params: ParamSet, every: int = 1):
+        self.model = model
+        self.params = params
+        self.every = max(int(every), 1)
+        self.floor = ENERGY_FLOOR * float(model.particle_mass0.sum()) * model.length ** 2
+        self.history: list[float] = []
+        self.last: dict = {}
+
+    def check(self, state) -> dict | None:
+        """Measure ``state``; raise LeafsimError on a blow-up.  Returns the measures (or None
+        on frames that are skipped)."""
+        if state.frame % self.every:
+            return None
+        m = self.model
+        q, qd = state.particle_q, state.particle_qd
+        if not (np.isfinite(q).all() and np.isfinite(qd).all()):
+            self._fail(state, "positions or velocities became NaN/Inf")
+        mom = momenta(m.particle_cytosol + state.particle_water, q, qd)
+        self.last = mom
+        if mom["max_internal_speed"] > MAX_INTERNAL_SPEED:
+            self._fail(state, f"internal speed {mom['max_internal_speed']:.3g} m/s exceeds {MAX_INTERNAL_SPEED:g} m/s "
+                              "(drying tissue moves at millimetres per second)")
+        if state.frame % DOUBLING_FRAMES == 0:
+            self.history.append(mom["kinetic_internal"])
+            h = self.history[-(GROWTH_WINDOWS + 1):]
+            if (len(h) == GROWTH_WINDOWS + 1 and h[0] > self.floor
+                    and all(b >= 2.0 * a for a, b in zip(h[:-1], h[1:]))):
+                self._fail(state, f"internal kinetic energy grew {h[-1] / h[0]:.3g}× in {GROWTH_WINDOWS * DOUBLING_FRAMES} "
+                                  "frames without a source")
+        return mom
+
+    def _fail(self, state, what: str):
+        changed = [k for k in SUSPECTS if k in self.params and self.params[k] != PARAMS[k].default]
+        blame = (", ".join(f"{k} = {self.params[k]:g} (default {PARAMS[k].default:g})" for k in changed[:3])
+                 if changed else "none of the dynamics parameters differ from their defaults")
+        raise LeafsimError(f"simulation unstable at frame {state.frame} (t = {state.time:.3f} s): {what}; "
+                           f"likely cause: {blame}")
