@@ -35,34 +35,49 @@ HINGE_MAX_ANGLE = 0.35
 
 
 class Osmosis:
-    """Implicit conservative osmosis + evaporation (SPEC §6), both layers in one block-diagonal
-    SPD system (diag(M) + Δt K) cⁿ⁺¹ = M cⁿ − loss, c = w / M."""
+    """Implicit conservative osmosis + evaporation (SPEC §6), both layers in one SPD system
+    (diag(M) + Δt D K) cⁿ⁺¹ = M cⁿ − loss, c = w / M (water per dry mass).
+
+    K is a finite-volume Laplacian: the conductance between two neighbours of one layer is
+    τ̄ × (dry mass per area, harmonic mean) × face / distance, so M dc/dt = D Σ a_ij (c_j − c_i)
+    is ∂(ρc)/∂t = ∇·(D τ ρ ∇c) on any mesh (a [kg/m²], D a [kg/s]).  With
+    ``osmosis.through_thickness`` the links also carry water between the layers: a third of
+    their triangle's area over the distance h/2 of the half-layers' centres, with the
+    volumetric density ρ/(h/2): a = τ̄ ρ · 4A/(3h²).  Jeong kept the layers separate."""
 
     def __init__(self, model: Model):
         self.model = model
-        ij = model.spring_ij
-        sel = model.spring_layer < 2  # T–T and V–V springs; no flow through links (per layer, as Jeong)
-        i, j = ij[sel, 0], ij[sel, 1]
         n = model.particle_count
-        tau = model.particle_tau
-        M = model.particle_cytosol
-        self.M = M.copy()
-        # Finite volumes per layer: conductance between neighbours = τ̄ × (dry mass per area,
-        # harmonic mean) × face / distance, so that M dc/dt = D Σ a_ij (c_j − c_i) is
-        # ∂(ρc)/∂t = ∇·(D τ ρ ∇c) on any mesh (units: a [kg], D a [kg/s]).
-        rho = M / np.maximum(model.particle_area, 1e-300)
-        hm = 2.0 * rho[i] * rho[j] / np.maximum(rho[i] + rho[j], 1e-300)
-        aij = 0.5 * (tau[i] + tau[j]) * hm * model.spring_face[sel] / np.maximum(model.spring_rest0[sel], 1e-300)
-        self.K = sp.coo_matrix((np.r_[-aij, -aij, aij, aij], (np.r_[i, j, i, j], np.r_[j, i, i, j])), shape=(n, n)).tocsr()
-        self.K.sum_duplicates()
+        self.M = model.particle_cytosol.copy()
+        self.K_plane = self._conductance(model, model.spring_layer < 2)
+        self.K_link = self._conductance(model, model.spring_layer == 2)
         self.key = None
         self.loss = np.zeros(n)
         self.rhs = np.zeros(n)
         self.c = np.zeros(n)
         self.last_iterations = 0
 
+    @staticmethod
+    def _conductance(model: Model, sel: np.ndarray):
+        ij = model.spring_ij[sel]
+        i, j = ij[:, 0], ij[:, 1]
+        n = model.particle_count
+        tau, M = model.particle_tau, model.particle_cytosol
+        rho = M / np.maximum(model.particle_area, 1e-300)
+        hm = 2.0 * rho[i] * rho[j] / np.maximum(rho[i] + rho[j], 1e-300)
+        lay = model.particle_layer
+        # in-plane springs: face / distance; links: 4 A_tri / (3 h²) (A_tri = area of the V end)
+        v = np.where(lay[i] == LAYER_V, i, j)
+        geo = np.where(model.spring_layer[sel] == 2, 4.0 * model.particle_area[v] / (3.0 * model.thickness ** 2),
+                       model.spring_face[sel] / np.maximum(model.spring_rest0[sel], 1e-300))
+        a = 0.5 * (tau[i] + tau[j]) * hm * geo
+        K = sp.coo_matrix((np.r_[-a, -a, a, a], (np.r_[i, j, i, j], np.r_[j, i, i, j])), shape=(n, n)).tocsr()
+        K.sum_duplicates()
+        return K
+
     def configure(self, params):
         D = params["osmosis.diffusion"]
+        through = params["osmosis.through_thickness"]
         dt = params["dynamics.dt"]
         solver = params["osmosis.solver"]
         if solver == "auto":
@@ -77,8 +92,9 @@ class Osmosis:
         # margin-first shrinking and colour; diffusion (osmosis) works against it.
         self.loss_ref = self.model.particle_area.astype(float)
         self.dt = dt
-        key = (D, dt, solver)
+        key = (D, dt, solver, through)
         if key != self.key:
+            self.K = self.K_plane + self.K_link if through else self.K_plane
             A = (sp.diags(self.M) + (dt * D) * self.K).tocsr()
             A.sort_indices()
             self.A = A
@@ -119,9 +135,20 @@ class Osmosis:
 
 
 class Shrink:
-    """Rest lengths from the mass ratio (SPEC §7), σ per spring type and layer; the links
-    between the layers follow the two layers' shrink (the cross-section keeps its shape), and
-    the thickness rest values follow the in-plane shrink."""
+    """The rest shape as the tissue dries (SPEC §7), one consistent bent state:
+
+    * T springs (surface, veins): Jeong's law, σ per type, from the mass ratio;
+    * bending hinges: the bilayer rest angle θ0 = gain (ε_top − ε_bottom)/h × d (Timoshenko;
+      d the dual edge), which drying tissue keeps (plasticity); clamped, and 0 on hinges that
+      bend a main/lateral vein lengthwise;
+    * V springs: the top surface of that bent state, d (1 − h θ0 / d) × the T layer's shrink;
+    * links: the cross-section keeps its shape (V over its triangle's centroid at height h);
+      thickness volumes follow the in-plane shrink.
+
+    So every constraint agrees with one shape whenever the bilayer curvature is developable;
+    what remains is the physical frustration of a curvature that is not (cups), resolved by
+    the energy, not by the solver's order (two layers and hinges each demanding their own
+    curl made the result depend on the iteration count)."""
 
     def __init__(self, model: Model):
         self.model = model
@@ -131,29 +158,41 @@ class Shrink:
         rest = model.particle_rest
         self.link_r0 = np.linalg.norm(rest[ij[:, 0], :2] - rest[ij[:, 1], :2], axis=1)
         self.link_h0 = np.abs(rest[ij[:, 0], 2] - rest[ij[:, 1], 2])
-        # the triangle of each link (its V particle) → that triangle's three T springs
+        # the triangle of each V particle → that triangle's three T springs
         nT = int((model.particle_layer == LAYER_T).sum())
-        self.link_tri_springs = model.vol_springs[np.argsort(model.vol_idx[:, 0])][ij[:, 0] - nT]
+        self.nT = nT
+        self.tri_springs = np.ascontiguousarray(model.vol_springs[np.argsort(model.vol_idx[:, 0])])
+        self.link_tri_springs = self.tri_springs[ij[:, 0] - nT]
+        # veins stay straight along their length: no bilayer curl on hinges that bend them
+        self.hinge_curl = np.where(model.hinge_vein, 0.0, 1.0)
 
     def configure(self, params):
         t = self.model.spring_type
         sig = np.zeros(len(t))
         sig[t == SPRING_SURFACE] = params["shrink.sigma_surface_bottom"]
-        sig[t == SPRING_V] = params["shrink.sigma_surface_top"]
         sig[t == SPRING_VEIN] = params["shrink.sigma_vein"]
         self.sigma = sig
         self.sig_top = params["shrink.sigma_surface_top"]
+        self.sig_bot = params["shrink.sigma_surface_bottom"]
         self.alpha = params["shrink.alpha"]
         self.l_min = params["shrink.l_min"]
+        self.setw = min(params["dynamics.plasticity"] * params["dynamics.dt"], 1.0)
 
     def apply(self, state: State):
         m = self.model
         fn = ks.shrink_springs_par if m.particle_count >= PARALLEL_MIN_PARTICLES else ks.shrink_springs
         fn(m.spring_ij, m.spring_rest0, self.sigma, self.alpha, self.l_min,
            m.particle_cytosol, state.particle_water, m.particle_mass0, state.spring_rest)
+        if m.hinge_count:
+            ks.hinge_targets(m.hinge_idx, m.hinge_spring_V, m.spring_ij, m.spring_rest0, self.sig_top, self.sig_bot,
+                             self.alpha, self.l_min, m.particle_cytosol, state.particle_water, m.particle_water0,
+                             m.particle_mass0, m.thickness, BILAYER_GAIN, self.setw, state.hinge_plastic, state.hinge_rest)
+            np.clip(state.hinge_rest, -HINGE_MAX_ANGLE, HINGE_MAX_ANGLE, out=state.hinge_rest)
+            np.multiply(state.hinge_rest, self.hinge_curl, out=state.hinge_rest)
+            ks.dual_targets(m.hinge_spring_V, m.spring_ij, self.tri_springs, self.nT, m.spring_rest0,
+                            state.hinge_rest, m.thickness, state.spring_rest)
         ks.link_targets(self.links, m.spring_ij, self.link_r0, self.link_h0, self.link_tri_springs, m.spring_rest0,
-                        self.sig_top, self.alpha, self.l_min, m.particle_cytosol, state.particle_water,
-                        m.particle_mass0, state.spring_rest)
+                        state.spring_rest)
         ks.vol_targets(m.vol_springs, m.spring_rest0, state.spring_rest, m.vol_rest0, state.vol_rest)
 
 
@@ -177,11 +216,7 @@ class Dynamics:
         # hinge stiffness geometry factor 3|e|²/(A1+A2) (discrete shells)
         self.hgeom = 3.0 * model.hinge_edge_len ** 2 / np.maximum(model.hinge_area, 1e-30)
         self.halpha = np.zeros(model.hinge_count)
-        self.hrod = np.zeros(model.hinge_count)
-        # Veins stay straight along their length: a hinge that bends a main or lateral vein
-        # lengthwise gets no bilayer curl target (vascular tissue is no mesophyll bilayer) and
-        # carries the vein's own bending stiffness (the blade still rolls across the veins).
-        self.hinge_curl = np.where(model.hinge_vein, 0.0, 1.0)
+        self.hrod = np.zeros(model.hinge_count)  # vein bending stiffness of the hinges that bend a vein
         T = np.flatnonzero(model.particle_layer == LAYER_T)
         self.T_idx = T.astype(np.int64)
         # power of two ≥ 2 × |T| buckets: the contact hash uses a bit mask, not a 64-bit modulo
@@ -211,6 +246,7 @@ class Dynamics:
         self.g = -params["dynamics.gravity"] if effects["gravity"] else 0.0
         self.keep = math.exp(-params["dynamics.damping"] * self.h)
         self.iters = params["dynamics.iterations"]
+        self.warm = params["dynamics.warm_start"]
         self.tol = params["dynamics.tolerance"] * m.length
         # membranes: k = E (h/2) ΣA/|e|² per layer (Van Gelder), veins add their rod E_v A_c / l
         E, Ev, h = params["material.modulus"], params["material.vein_modulus"], m.thickness
@@ -220,7 +256,6 @@ class Dynamics:
         self.kbend = E * h ** 3 / (12.0 * (1.0 - params["material.poisson"] ** 2))
         self.kdry = params["material.dry_stiffening"]
         np.multiply(Ev, m.hinge_rod, out=self.hrod)
-        self.plastic_rate = params["dynamics.plasticity"]
         self.replace = params["dynamics.voronoi"] == "replace"
         self.scene = params["dynamics.scene"]
         self.mu = params["dynamics.friction"]
@@ -230,24 +265,11 @@ class Dynamics:
         self.bending = effects["bending"] and m.hinge_count > 0 and self.kbend > 0
         self.ground = effects["ground"] and self.scene == "ground"
         self.self_coll = effects["self_collision"]
-        self.shrink_on = effects["shrink"]
-        self.sig_top = params["shrink.sigma_surface_top"]
-        self.sig_bot = params["shrink.sigma_surface_bottom"]
-        self.alpha_shrink = params["shrink.alpha"]
-        self.l_min = params["shrink.l_min"]
 
     def _hinges(self, state):
         m = self.model
-        w = state.particle_water
-        w0 = m.particle_water0
-        kp.hinge_compliance(m.hinge_idx, w, w0, self.kbend, self.kdry, self.hgeom, self.hrod, 1.0 / (self.h * self.h), self.halpha)
-        if self.shrink_on:
-            ks.hinge_targets(m.hinge_idx, m.hinge_spring_V, m.spring_ij, m.spring_rest0, self.sig_top, self.sig_bot,
-                             self.alpha_shrink, self.l_min, m.particle_cytosol, state.particle_water, m.particle_water0,
-                             m.particle_mass0, m.thickness, BILAYER_GAIN, min(self.plastic_rate * self.dt, 1.0),
-                             state.hinge_plastic, state.hinge_rest)
-            np.clip(state.hinge_rest, -HINGE_MAX_ANGLE, HINGE_MAX_ANGLE, out=state.hinge_rest)
-            np.multiply(state.hinge_rest, self.hinge_curl, out=state.hinge_rest)
+        kp.hinge_compliance(m.hinge_idx, state.particle_water, m.particle_water0, self.kbend, self.kdry, self.hgeom,
+                            self.hrod, 1.0 / (self.h * self.h), self.halpha)
 
     def apply(self, state: State):
         m = self.model
@@ -276,7 +298,7 @@ class Dynamics:
                  self.pbd, self.ground, self.pen, self.change, self.mu,
                  self.self_coll, m.particle_rest, self.T_idx, 1.5 * self.radius, self.skip2, self.table, self.nxt,
                  self.pairs, self.radius, self.replace, self.hgt, m.thickness, self.scene != "hanging",
-                 self.qa, self.dint, out)
+                 self.qa, self.dint, self.warm, out)
         self.last_iterations = int(out[0])
         self.last_contacts = int(out[1])
         self.last_uninverted = int(out[2])

@@ -14,6 +14,7 @@ THESIS_PRESET = {
     "osmosis.diffusion": 70.0,   # thesis λ 70–700 (dimensionless in the thesis; see docs/method.md)
     "osmosis.evaporation_top": 0.014,     # thesis w_loss 0.2 / 0.1 of a layer's mean water per second
     "osmosis.evaporation_bottom": 0.007,  # (0.07 kg/m² of water per layer at the default mass)
+    "osmosis.through_thickness": False,   # Jeong / thesis: water flows within each layer only
     "dynamics.iterations": 1,
     "dynamics.substeps": 1,
     "dynamics.dt": 0.002,

@@ -20,6 +20,8 @@ from ..params import ParamSet
 from .effects import Colour, Dynamics, Osmosis, Shrink
 from .model import Model, State
 
+#: the watchdog measures energy and momentum every this many frames
+WATCH_EVERY = 5
 EFFECTS = ("osmosis", "shrink", "gravity", "pbd", "bending", "ground", "self_collision", "colour")
 
 
@@ -32,11 +34,15 @@ class Simulator:
     params : ParamSet — ``osmosis.*``, ``shrink.*``, ``dynamics.*``, ``colour.*`` and ``effects.*``.
     effects : optional iterable of effect names to enable (overrides ``effects.*``).
     seed : seeds the per-leaf colour variation of the states this simulator makes.
+    watchdog : check energy and momentum every few frames and raise LeafsimError on a
+        blow-up that produces no NaN (see :mod:`leafsim.sim.watchdog`).
     """
 
-    def __init__(self, model: Model, params: ParamSet, effects=None, seed: int = 0):
+    def __init__(self, model: Model, params: ParamSet, effects=None, seed: int = 0, watchdog: bool = True):
         self.model = model
         self.seed = int(seed)
+        self.watchdog = None
+        self._watch = watchdog
         self._osmosis = None
         self._shrink = None
         self._dynamics = None
@@ -72,6 +78,14 @@ class Simulator:
             self._colour = self._colour or Colour(self.model)
             self._colour.configure(params)
         self.dt = params["dynamics.dt"]
+        if self._watch and self.dynamic:
+            from .watchdog import Watchdog
+
+            if self.watchdog is None:
+                self.watchdog = Watchdog(self.model, params, every=WATCH_EVERY)
+            self.watchdog.params = params  # blame the values in force
+        else:
+            self.watchdog = None
 
     def state(self) -> State:
         """A fresh leaf: rest positions, full water, summer pigments."""
@@ -105,6 +119,11 @@ class Simulator:
             t0 = t1
         state.scalars[0] += self.dt
         state.scalars[1] += 1
+        if self.watchdog is not None:
+            self.watchdog.check(state)
+            t1 = time.perf_counter()
+            ms["watchdog"] = (t1 - t0) * 1e3
+            t0 = t1
         if self.effects["colour"] and state.pigments is not None:
             self._colour.apply(state, self.dt)
             ms["colour"] = (time.perf_counter() - t0) * 1e3

@@ -96,20 +96,35 @@ def vol_targets(vsp, rest0, rest, vol0, vrest):
 
 
 @njit(cache=True, fastmath=True)
-def link_targets(links, ij, r0, h0, tri_springs, rest0, sig_top, alpha, l_min, cyt, water, m0, rest):
-    """Rest length of each link V → T vertex from the two layers' shrink: its in-plane offset
-    shrinks by the mean of the top layer's strain (the V particle's mass ratio, σ_top law) and
-    the bottom layer's (the mean ratio of its triangle's three T springs, already updated in
-    ``rest``); the thickness h0 is kept.  So the cross-section keeps its shape and the layers'
-    mismatch is carried by the V and T springs alone (bending), not by the links."""
+def link_targets(links, ij, r0, h0, tri_springs, rest0, rest):
+    """Rest length of each link V → T vertex: the V particle sits over its triangle's centroid
+    at the thickness h0, so the link's in-plane offset shrinks with the triangle (the mean
+    ratio of its three T springs, already updated in ``rest``) and its height is kept."""
     for k in range(links.shape[0]):
         s = links[k]
-        v = ij[s, 0]
-        fb = 0.0
+        f = 0.0
         for j in range(3):
             t = tri_springs[k, j]
-            fb += rest[t] / rest0[t]
-        fb /= 3.0
-        ft = 1.0 - _strain(sig_top, alpha, l_min, cyt[v] + water[v], m0[v])
-        f = 0.5 * (fb + ft)
+            f += rest[t] / rest0[t]
+        f /= 3.0
         rest[s] = math.sqrt((r0[k] * f) ** 2 + h0[k] * h0[k])
+
+
+@njit(cache=True, fastmath=True)
+def dual_targets(hV, ij, tri_springs, nT, rest0, hrest, h, rest):
+    """Rest length of each V spring (the top surface across hinge e): the dual edge d0 bent to
+    the hinge's rest angle θ0 at height h, d0 − h θ0 (a strip of curvature θ0/d0 is shorter by
+    that on its upper side), times the in-plane shrink of the T layer under it (the mean ratio
+    of the two triangles' T springs, already updated in ``rest``)."""
+    for e in range(hV.shape[0]):
+        s = hV[e]
+        f = 0.0
+        for v in (ij[s, 0], ij[s, 1]):
+            for j in range(3):
+                t = tri_springs[v - nT, j]
+                f += rest[t] / rest0[t]
+        f /= 6.0
+        d = rest0[s] - h * hrest[e]
+        if d < 0.1 * rest0[s]:
+            d = 0.1 * rest0[s]
+        rest[s] = f * d
