@@ -87,14 +87,21 @@ def resample_polyline(line: np.ndarray, spacing: float) -> np.ndarray:
 
 def points_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Boolean (n,) mask of points strictly inside a closed polygon (even-odd rule)."""
-    pts = np.asarray(pts, float)
-    x, y = pts[:, 0:1], pts[:, 1:2]
+    pts = np.asarray(pts, float).reshape(-1, 2)
+    poly = np.asarray(poly, float)
     x0, y0 = poly[:, 0], poly[:, 1]
     x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
-    cond = (y0 > y) != (y1 > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xi = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
-    return (np.count_nonzero(cond & (x < xi), axis=1) % 2) == 1
+    out = np.zeros(len(pts), bool)
+    # chunks of points keep the (points × edges) temporaries at a few MB (a dense mesh tests
+    # millions of candidate points against the outline)
+    step = max(1, 262144 // max(len(poly), 1))
+    for k in range(0, len(pts), step):
+        x, y = pts[k : k + step, 0:1], pts[k : k + step, 1:2]
+        cond = (y0 > y) != (y1 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xi = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+        out[k : k + step] = (np.count_nonzero(cond & (x < xi), axis=1) % 2) == 1
+    return out
 
 
 def segments_intersect(p1, p2, q1, q2) -> bool:
