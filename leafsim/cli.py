@@ -23,13 +23,27 @@ class _Parser(argparse.ArgumentParser):
         raise LeafsimError(f"{self.prog}: {message}")
 
 
+#: seeds are non-negative integers below 2**63 (numpy's generators take them as-is)
+SEED_MAX = 2**63 - 1
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a non-negative integer") from None
+    if not 0 <= v <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"{text}: expected a non-negative integer up to 2**63-1")
+    return v
+
+
 def _common(p: argparse.ArgumentParser, seed=True):
     p.add_argument("--species", default=None, help="species key from the config (see `leafsim species`)")
     p.add_argument("--config", default=None, help="species config JSON (default: configs/leaves.json)")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                    help="override a declared parameter, e.g. --set veins.main.kappa=4 (repeatable)")
     if seed:
-        p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+        p.add_argument("--seed", type=_seed, default=0, help="random seed, a non-negative integer (default 0)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -88,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         return COMMANDS[args.cmd](args) or 0
     except LeafsimError as e:
-        print(f"leafsim: {e}", file=sys.stderr)
+        print(f"leafsim: {one_line(str(e))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("leafsim: interrupted", file=sys.stderr)
@@ -98,8 +112,13 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as e:  # never a traceback for the user
         if os.environ.get("LEAFSIM_DEBUG"):
             raise
-        print(f"leafsim: internal error: {type(e).__name__}: {e} (set LEAFSIM_DEBUG=1 for a traceback)", file=sys.stderr)
+        print(f"leafsim: internal error: {type(e).__name__}: {one_line(str(e))[:300]} (set LEAFSIM_DEBUG=1 for a traceback)", file=sys.stderr)
         return 1
+
+
+def one_line(text: str) -> str:
+    """The contract's last line of defence: a message never spans several lines."""
+    return " ".join(text.split("\n")).replace("\r", " ")
 
 
 def _emit(args, obj: dict, text: str) -> None:

@@ -65,6 +65,7 @@ from scipy.spatial import ConvexHull, cKDTree  # noqa: E402
 
 from .geometry import (  # noqa: E402
     LeafShape,
+    crossing_pairs,
     points_in_polygon,
     ray_polygon_hit,
     segment_hits,
@@ -557,22 +558,7 @@ def _proper(p1, p2, q1, q2) -> bool:
 def count_crossings(graph: VeinGraph) -> int:
     """Number of proper intersections between vein segments (shared end points do not count)."""
     P, Q, _ = graph.segments()
-    n = len(P)
-    total = 0
-    eps = 1e-9
-    for k in range(0, n, 256):
-        a, b = P[k : k + 256, None, :], Q[k : k + 256, None, :]
-        r = b - a
-        s = (Q - P)[None]
-        qp = P[None] - a
-        denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (qp[..., 0] * s[..., 1] - qp[..., 1] * s[..., 0]) / denom
-            u = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
-        hit = (np.abs(denom) > 1e-18) & (t > eps) & (t < 1 - eps) & (u > eps) & (u < 1 - eps)
-        i = np.arange(k, min(k + 256, n))[:, None]
-        total += int(np.count_nonzero(hit & (np.arange(n)[None] > i)))
-    return total
+    return len(crossing_pairs(P, Q))
 
 
 def outside_length(graph: VeinGraph, contour: np.ndarray, samples: int = 8) -> float:
