@@ -201,11 +201,12 @@ def cmd_veins(args):
 
 
 def _model(args):
-    from .blade import build_blade
+    from .blade import build_blade, check_mesh_budget
     from .leaf import leaf_shape, species_veins
 
     sp, params = _load(args)
     shape = leaf_shape(sp, params)
+    check_mesh_budget(shape, params)  # before the veins: a refused model costs no growth
     graph = species_veins(sp, shape, params, args.seed)
     model = build_blade(shape, graph, params, args.seed)
     return sp, params, shape, graph, model

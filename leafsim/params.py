@@ -256,6 +256,14 @@ _f("render.translucency", 0.35, 0.0, 1.0, "", "Back-lit translucency of the blad
 _f("render.specular", 0.25, 0.0, 1.0, "", "Specular strength of the blade.", G, False)
 _b("render.texture", True, "Use the species photo as the blade's albedo when the species has one.", G, False)
 
+# ---------------------------------------------------------------- resource limits (rebuild)
+# Guards against parameter combinations or inputs that would take minutes or gigabytes; each
+# error names the limit, so a user who means it can raise it deliberately with --set.
+G = "Limits"
+_i("limits.max_particles", 200_000, 1_000, 50_000_000, "", "Largest blade model (both layers) the builder makes; the count is estimated from outline area / spacing² before anything is built.", G, True)
+_i("limits.vein_tests", 100_000_000, 100_000, 1_000_000_000, "", "Budget of segment-against-segment collision tests while growing the venation (about 10 million per second here); growth stops with an error past it.", G, True)
+_i("limits.image_pixels", 4_000_000, 10_000, 1_000_000_000, "px", "Photos with more pixels are traced on a copy downscaled to this many (coordinates stay in photo pixels).", G, True)
+
 PARAMS: dict[str, Param] = {p.name: p for p in _DECL}
 GROUPS: list[str] = list(dict.fromkeys(p.group for p in _DECL))
 

@@ -63,14 +63,18 @@ public_mode = _public_mode  # file mode a plain open() would give (used for scre
 PIGMENT_VIEWS = ("chlorophyll", "carotenoid", "anthocyanin", "browning")
 
 
-def load_photo_rgba(path) -> np.ndarray:
+def load_photo_rgba(path, max_pixels: int | None = None) -> np.ndarray:
     """The species photo as (H, W, 4) uint8 RGB with alpha = leaf mask (for textures and the
-    GUI's photo panel).  Raises LeafsimError naming the file when it cannot be read."""
+    GUI's photo panel), downscaled to at most ``max_pixels`` (default ``limits.image_pixels``;
+    texture coordinates are relative, so any size fits).  Raises LeafsimError naming the file
+    when it cannot be read."""
     import cv2
 
-    from .outline import load_image, segment_leaf
+    from .outline import load_image, segment_leaf, working_image
 
-    img = load_image(path)
+    if max_pixels is None:
+        max_pixels = PARAMS["limits.image_pixels"].default
+    img, _ = working_image(load_image(path), int(max_pixels))
     mask = segment_leaf(img, str(path))
     rgb = cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_BGR2RGB)
     return np.ascontiguousarray(np.dstack([rgb, mask]))
@@ -176,7 +180,7 @@ class Session:
 
     # ------------------------------------------------------------------ building
     def _build(self, sp, seed: int, params: ParamSet, report: Callable[[float, str], None], build_id: int) -> BuildResult:
-        from .blade import build_blade
+        from .blade import build_blade, check_mesh_budget
         from .leaf import leaf_shape, species_veins
 
         t0 = time.perf_counter()
@@ -187,12 +191,13 @@ class Session:
 
         report(0.02, "outline: tracing the leaf contour")
         shape = leaf_shape(sp, params)
+        check_mesh_budget(shape, params)  # refuse a too-large model before growing the veins
         check()
         photo, photo_error = None, None
         if sp.image is not None:
             report(0.12, "photo: loading the species photo")
             try:
-                photo = load_photo_rgba(sp.image)
+                photo = load_photo_rgba(sp.image, params["limits.image_pixels"])
             except LeafsimError as e:
                 photo_error = str(e)
             check()
