@@ -201,14 +201,10 @@ def cmd_veins(args):
 
 
 def _model(args):
-    from .blade import build_blade, check_mesh_budget
-    from .leaf import leaf_shape, species_veins
+    from .leaf import build_leaf
 
     sp, params = _load(args)
-    shape = leaf_shape(sp, params)
-    check_mesh_budget(shape, params)  # before the veins: a refused model costs no growth
-    graph = species_veins(sp, shape, params, args.seed)
-    model = build_blade(shape, graph, params, args.seed)
+    shape, graph, model = build_leaf(sp, params, args.seed)
     return sp, params, shape, graph, model
 
 
@@ -235,10 +231,11 @@ def _effects_overrides(spec: str | None) -> dict:
 def cmd_run(args):
     import numpy as np
 
-    from .fileio import atomic_write_bytes
+    from .leaf import build_leaf, load_photo_rgba
     from .params import parse_set_args
-    from .session import Session
-    from .sim.run import frame_stats, save_npz, shape_metrics
+    from .sim.run import run_headless, save_npz, shape_metrics
+    from .sim.simulator import Simulator
+    from .species import get_species
 
     if args.frames < 0:
         raise LeafsimError(f"--frames {args.frames}: expected a non-negative number of frames")
@@ -256,62 +253,75 @@ def cmd_run(args):
         raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
     overrides = {**parse_set_args(args.sets), **_effects_overrides(args.effects)}
     t0 = time.perf_counter()
-    sess = Session(args.species, args.config, args.seed, overrides, build=True)
+    sp = get_species(args.species, args.config)
+    params = sp.params.with_overrides(overrides, where="--set")
+    shape, veins, model = build_leaf(sp, params, args.seed)
     build_s = time.perf_counter() - t0
+    snap = None
     if out is not None:
         out.mkdir(exist_ok=True)
-    renderer = camera = None
-    frames_written = 0
-
-    def snap(k):
-        nonlocal renderer, camera, frames_written
-        from .render.offscreen import OffscreenRenderer, default_camera
-
-        from .render.options import RenderOptions
-
-        # photo species: the pigment colour carrying the photo's detail (as the GUI shows it)
-        opts = RenderOptions(albedo="detail" if sess.use_texture() else "colours")
-        if renderer is None:
-            sess.photo_tint = False
-            renderer = OffscreenRenderer(960, 720)
-            mesh = sess.render_mesh()
-            camera = default_camera(mesh.positions)
-            renderer.render_png(mesh, out / f"frame_{k:05d}.png", camera=camera, options=opts)
-        else:
-            renderer.render_png(sess.render_update(), out / f"frame_{k:05d}.png", camera=camera, options=opts)
-        frames_written += 1
-
-    stats = []
     if args.every:
-        snap(0)
+        photo = load_photo_rgba(sp.image, params["limits.image_pixels"]) if (sp.image is not None and params["render.texture"]) else None
+        snap = _FrameWriter(model, params, photo, out)
+
+    sim = Simulator(model, params, seed=args.seed)
+    state = sim.state()
+    if snap is not None:
+        snap.write(0, state)
+
+    def on_frame(k, state, st):
+        if snap is not None and k % args.every == 0:
+            snap.write(k, state)
+
     t1 = time.perf_counter()
-    for k in range(1, args.frames + 1):
-        sess.step(1)
-        st = frame_stats(sess.model, sess.state, sess.last_ms, sess.simulator)
-        stats.append(st)
-        if st.get("nan"):
-            break
-        if args.every and k % args.every == 0:
-            snap(k)
+    state, stats = run_headless(model, params, args.frames, stats_path=args.stats, on_frame=on_frame,
+                                state=state, simulator=sim)
     sim_s = time.perf_counter() - t1
-    if args.stats:
-        atomic_write_bytes(args.stats, "".join(json.dumps(s, sort_keys=True) + "\n" for s in stats).encode(), "statistics")
     if out is not None:
-        save_npz(out / "final.npz", sess.model, sess.state)
+        save_npz(out / "final.npz", model, state)
     ms = [sum(s["ms"].values()) for s in stats]
+    water = float(state.particle_water.sum() / max(model.particle_water0.sum(), 1e-300))
     rep = {
-        "species": sess.species_key, "seed": args.seed, "frames": len(stats),
+        "species": sp.key, "seed": args.seed, "frames": len(stats),
         "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
         "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
-        "water_fraction": round(sess.water_fraction(), 6),
+        "water_fraction": round(water, 6),
         "nan": bool(any(s.get("nan") for s in stats)),
-        "png_frames": frames_written,
-        **{f"shape_{k}": v for k, v in shape_metrics(sess.model, sess.state).items()},
-        **sess.counts(),
+        "png_frames": 0 if snap is None else snap.written,
+        **{f"shape_{k}": v for k, v in shape_metrics(model, state).items()},
+        **model.to_report(),
     }
     if rep["nan"]:
-        raise LeafsimError(f"{sess.species_key}: the simulation produced NaN at frame {len(stats)} (parameters: {sess.params.changed()})")
+        raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {len(stats)} (parameters: {params.changed()})")
     _emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
+
+
+class _FrameWriter:
+    """Offscreen PNG frames of one leaf (photo species: the pigment colour carrying the photo's
+    detail, as the GUI shows it); the camera is fixed by the first frame."""
+
+    def __init__(self, model, params, photo, out: Path):
+        from .view import LeafView
+
+        self.view = LeafView(model, photo, photo_tint=False)
+        self.params, self.out = params, out
+        self.renderer = self.camera = None
+        self.written = 0
+
+    def write(self, k: int, state) -> None:
+        from .render.offscreen import OffscreenRenderer, default_camera
+        from .render.options import RenderOptions
+
+        opts = RenderOptions(albedo="detail" if self.view.use_texture(self.params) else "colours")
+        path = self.out / f"frame_{k:05d}.png"
+        if self.renderer is None:
+            self.renderer = OffscreenRenderer(960, 720)
+            mesh = self.view.mesh(state, self.params)
+            self.camera = default_camera(mesh.positions)
+            self.renderer.render_png(mesh, path, camera=self.camera, options=opts)
+        else:
+            self.renderer.render_png(self.view.update(state, self.params), path, camera=self.camera, options=opts)
+        self.written += 1
 
 
 def cmd_bench(args):

@@ -72,3 +72,39 @@ def species_veins(sp: Species, shape: LeafShape, params: ParamSet, seed: int) ->
 def resolve_params(sp: Species, overrides: dict | None = None) -> ParamSet:
     """Species parameters with user overrides applied (validated)."""
     return sp.params.with_overrides(overrides or {}, where="--set")
+
+
+def load_photo_rgba(path, max_pixels: int | None = None) -> np.ndarray:
+    """The species photo as (H, W, 4) uint8 RGB with alpha = leaf mask (textures, the GUI's
+    photo panel), downscaled to at most ``max_pixels`` (default ``limits.image_pixels``;
+    texture coordinates are relative, so any size fits).  Raises LeafsimError naming the file
+    when it cannot be read."""
+    import cv2
+
+    from .outline import load_image, segment_leaf, working_image
+    from .params import PARAMS
+
+    if max_pixels is None:
+        max_pixels = PARAMS["limits.image_pixels"].default
+    img, _ = working_image(load_image(path), int(max_pixels))
+    mask = segment_leaf(img, str(path))
+    rgb = cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_BGR2RGB)
+    return np.ascontiguousarray(np.dstack([rgb, mask]))
+
+
+def build_leaf(sp: Species, params: ParamSet, seed: int, report=None):
+    """Species entry → (shape, veins, model): outline in metres, vein graph, blade Model.
+
+    ``report(fraction, text)`` is called before each stage (progress bars; it may raise to
+    cancel a build between stages)."""
+    from .blade import build_blade, check_mesh_budget
+
+    report = report or (lambda p, t: None)
+    report(0.02, "outline: tracing the leaf contour")
+    shape = leaf_shape(sp, params)
+    check_mesh_budget(shape, params)  # refuse a too-large model before growing the veins
+    report(0.2, "veins: growing the venation")
+    veins = species_veins(sp, shape, params, seed)
+    report(0.5, "blade: particles, Delaunay/Voronoi layers, springs")
+    model = build_blade(shape, veins, params, seed)
+    return shape, veins, model

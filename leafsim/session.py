@@ -58,26 +58,8 @@ class BuildResult:
 
 public_mode = _public_mode  # file mode a plain open() would give (used for screenshots)
 
-
-#: pigment fields offered as heat-map debug views
-PIGMENT_VIEWS = ("chlorophyll", "carotenoid", "anthocyanin", "browning")
-
-
-def load_photo_rgba(path, max_pixels: int | None = None) -> np.ndarray:
-    """The species photo as (H, W, 4) uint8 RGB with alpha = leaf mask (for textures and the
-    GUI's photo panel), downscaled to at most ``max_pixels`` (default ``limits.image_pixels``;
-    texture coordinates are relative, so any size fits).  Raises LeafsimError naming the file
-    when it cannot be read."""
-    import cv2
-
-    from .outline import load_image, segment_leaf, working_image
-
-    if max_pixels is None:
-        max_pixels = PARAMS["limits.image_pixels"].default
-    img, _ = working_image(load_image(path), int(max_pixels))
-    mask = segment_leaf(img, str(path))
-    rgb = cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_BGR2RGB)
-    return np.ascontiguousarray(np.dstack([rgb, mask]))
+from .leaf import load_photo_rgba  # noqa: E402  (re-exported: the GUI's photo panel)
+from .view import PIGMENT_VIEWS  # noqa: E402,F401
 
 
 class Session:
@@ -114,7 +96,8 @@ class Session:
         self.built_seed: int | None = None
         self.built_species: str | None = None
         self.shape = self.veins = self.model = self.state = self.simulator = None
-        self.pigments = self.pigments0 = None
+        self.pigments0 = None
+        self.view = None
         self.photo_rgba: np.ndarray | None = None
         self.photo_error: str | None = None
         self.generation = 0
@@ -180,34 +163,24 @@ class Session:
 
     # ------------------------------------------------------------------ building
     def _build(self, sp, seed: int, params: ParamSet, report: Callable[[float, str], None], build_id: int) -> BuildResult:
-        from .blade import build_blade, check_mesh_budget
-        from .leaf import leaf_shape, species_veins
+        from .leaf import build_leaf
 
         t0 = time.perf_counter()
 
-        def check():
+        def stage(p, text):
             if build_id and build_id != self._build_id:
                 raise _Cancelled()
+            report(p, text)
 
-        report(0.02, "outline: tracing the leaf contour")
-        shape = leaf_shape(sp, params)
-        check_mesh_budget(shape, params)  # refuse a too-large model before growing the veins
-        check()
+        shape, veins, model = build_leaf(sp, params, seed, stage)
         photo, photo_error = None, None
         if sp.image is not None:
-            report(0.12, "photo: loading the species photo")
+            stage(0.97, "photo: loading the species photo")
             try:
                 photo = load_photo_rgba(sp.image, params["limits.image_pixels"])
             except LeafsimError as e:
                 photo_error = str(e)
-            check()
-        report(0.2, "veins: growing the venation")
-        veins = species_veins(sp, shape, params, seed)
-        check()
-        report(0.5, "blade: particles, Delaunay/Voronoi layers, springs")
-        model = build_blade(shape, veins, params, seed)
-        check()
-        report(0.97, "simulator: preparing the stages")
+        stage(0.98, "simulator: preparing the stages")
         return BuildResult(sp, int(seed), params, shape, veins, model, photo, photo_error, time.perf_counter() - t0)
 
     def _install(self, res: BuildResult) -> None:
@@ -219,11 +192,10 @@ class Session:
         self.built_seed = res.seed
         self.built_params = res.params
         self.shape, self.veins, self.model = res.shape, res.veins, res.model
-        self._T, self._V, _ = self._render_index()
         self.photo_rgba, self.photo_error = res.photo_rgba, res.photo_error
         self.build_seconds = res.seconds
         # live values may have changed while building: the simulator takes the current ones
-        self.simulator = Simulator(self.model, self._sim_params())
+        self.simulator = Simulator(self.model, self._sim_params(), seed=self.built_seed)
         self._fresh_state()
         self.generation += 1
         self.build_error = None
@@ -403,17 +375,19 @@ class Session:
         self.last_ms = {}
 
     def _fresh_state(self) -> None:
-        from .sim.colour import init_pigments
+        from .view import LeafView
 
-        m = self.model
-        self.state = m.state()
-        self.pigments = init_pigments(m.particle_count, self._sim_params(), seed=self.built_seed or 0,
-                                      rest_relative_mass=m.particle_mass0)
-        self.pigments0 = self.pigments.copy()
+        self.state = self.simulator.state()
+        self.pigments0 = self.state.pigments.copy()
+        self.view = LeafView(self.model, self.photo_rgba, self.pigments0, self.photo_tint)
         self.sim_error = None
         self._clear_history()
         self._record({})
-        self._colour_step(0.0)
+
+    @property
+    def pigments(self):
+        """Pigments of the current state (None before the first build)."""
+        return None if self.state is None else self.state.pigments
 
     def reset(self) -> None:
         """Back to the fresh leaf (frame 0, full water, young colour); same model."""
@@ -421,20 +395,8 @@ class Session:
             return
         from .sim.simulator import Simulator
 
-        self.simulator = Simulator(self.model, self._sim_params())
+        self.simulator = Simulator(self.model, self._sim_params(), seed=self.built_seed)
         self._fresh_state()
-
-    def _colour_step(self, dt: float) -> float:
-        from .sim.colour import age_at, step_pigments
-
-        if self.pigments is None:
-            return 0.0
-        t0 = time.perf_counter()
-        p = self.simulator.params if self.simulator is not None else self.params
-        w = self.state.particle_water / np.maximum(self.model.particle_water0, 1e-300)
-        np.clip(w, 0.0, 1.0, out=w)
-        step_pigments(self.pigments, w.astype(np.float32), age_at(self.state.time, p), dt, p)
-        return (time.perf_counter() - t0) * 1e3
 
     def _record(self, ms: dict) -> None:
         from .sim.kernels.pbd import residual
@@ -475,8 +437,6 @@ class Session:
         ms: dict[str, float] = {}
         for _ in range(max(int(n), 0)):
             ms = self.simulator.step(self.state)
-            if self.params["effects.colour"]:
-                ms["colour"] = self._colour_step(self.simulator.dt)
             if not np.isfinite(self.state.particle_q[:1]).all():
                 break
         if n > 0:
@@ -484,84 +444,31 @@ class Session:
         return ms
 
     # ------------------------------------------------------------------ rendering data
-    def _render_index(self):
-        m = self.model
-        T = np.flatnonzero(m.particle_layer == 0)
-        V = np.flatnonzero(m.particle_layer != 0)
-        remap = np.empty(m.particle_count, np.int64)
-        remap[T] = np.arange(len(T))
-        remap[V] = len(T) + np.arange(len(V))
-        return T, V, remap
+    def _view(self):
+        self.view.photo_tint = self.photo_tint
+        return self.view
 
     def render_colours(self):
-        """(colours (nT, 3) linear RGB, tint (nT, 3) or None) of layer T from the pigments.
-        The tint (photo species only) is rgb(now) / rgb(young), clipped to [0, 4], or ones when
-        :attr:`photo_tint` is False."""
-        from .sim.colour import pigments_to_rgb, tint_for_texture
-
-        T = self._T
-        p = self.simulator.params if self.simulator is not None else self.params
-        rgb = pigments_to_rgb(self.pigments, p)[T]
-        if self.use_texture():
-            if self.photo_tint:
-                return rgb, np.clip(tint_for_texture(self.pigments, self.pigments0, p)[T], 0.0, 4.0)
-            return rgb, np.ones_like(rgb)
-        return rgb, None
+        """(colours, tint) of layer T — see :meth:`leafsim.view.LeafView.colours`."""
+        return self._view().colours(self.state, self._sim_params())
 
     def use_texture(self) -> bool:
         return bool(self.params["render.texture"]) and self.photo_rgba is not None
 
     def scalar_fields(self) -> dict:
-        """Per layer-T vertex heat-map fields: ``mass`` [mg] now and ``water`` (now / initial)."""
-        m, s, T = self.model, self.state, self._T
-        w = s.particle_water[T]
-        out = {"mass": (m.particle_cytosol[T] + w).astype(np.float32),
-               "water": (w / np.maximum(m.particle_water0[T], 1e-300)).astype(np.float32)}
-        if self.pigments is not None:  # pigment heat maps (relative to the summer content)
-            for name in PIGMENT_VIEWS:
-                out[name] = np.asarray(getattr(self.pigments, name), np.float32)[T]
-        return out
+        """Per layer-T vertex heat-map fields (see :meth:`leafsim.view.LeafView.scalar_fields`)."""
+        return self._view().scalar_fields(self.state)
 
     def render_mesh(self):
         """A :class:`leafsim.render.RenderMesh` of the current model and state (populate once
         per :attr:`generation`, then pass :meth:`render_update` to ``Renderer.update``)."""
-        from .render.mesh import SPRING_LINK as R_LINK, SPRING_SURFACE_T, SPRING_SURFACE_V, SPRING_VEIN as R_VEIN, RenderMesh
-        from .sim.model import SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN
-
         if self.model is None:
             raise LeafsimError("session: no model yet (the first build has not finished)")
-        m, s = self.model, self.state
-        T, V, remap = self._render_index()
-        self._T, self._V = T, V
-        kind_map = np.zeros(4, np.int8)
-        kind_map[SPRING_SURFACE], kind_map[SPRING_V] = SPRING_SURFACE_T, SPRING_SURFACE_V
-        kind_map[SPRING_LINK], kind_map[SPRING_VEIN] = R_LINK, R_VEIN
-        colours, tint = self.render_colours()
-        veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()]
-        return RenderMesh(
-            positions=s.particle_q[T].astype(np.float32),
-            triangles=remap[m.tri_T].astype(np.int32),
-            texcoords=m.particle_texcoord[T].astype(np.float32),
-            colours=colours,
-            texture_rgba=self.photo_rgba if self.use_texture() else None,
-            tint=tint,
-            vein_lines=veins,
-            springs=remap[m.spring_ij].astype(np.int32),
-            spring_kind=kind_map[m.spring_type],
-            top_positions=s.particle_q[V].astype(np.float32),
-            scalars=self.scalar_fields(),
-        )
+        return self._view().mesh(self.state, self._sim_params())
 
     def render_update(self) -> dict:
         """Keyword arguments for ``Renderer.update`` with the current state."""
-        s = self.state
-        colours, tint = self.render_colours()
-        out = {"positions": s.particle_q[self._T], "colours": colours, "scalar": self.scalar_fields(),
-               "top_positions": s.particle_q[self._V]}
-        if tint is not None:
-            out["tint"] = tint
-        return out
-
+        return self._view().update(self.state, self._sim_params())
 
 class _Cancelled(Exception):
     pass

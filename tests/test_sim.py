@@ -176,3 +176,41 @@ def test_drying_leaf_on_ground_curls():
     assert 0.70 <= met["area_ratio"] <= 0.95, met
     assert met["inverted"] == 0
     assert st.particle_q[:, 2].min() >= -1e-9
+
+
+def test_simulator_runs_colour_itself(model):
+    """One Simulator runs every effect, colour included: no GUI session needed; a state it makes
+    carries pigments, a disabled colour effect leaves them untouched, snapshots copy them."""
+    p = _params(colour__age_rate=2.0, osmosis__loss_top=2.0)
+    sim = Simulator(model, p, seed=3)
+    st = sim.state()
+    assert st.pigments is not None and st.pigments.n == model.particle_count
+    snap = st.copy()
+    for _ in range(20):
+        ms = sim.step(st)
+    assert "colour" in ms
+    assert st.pigments.chlorophyll.mean() < snap.pigments.chlorophyll.mean()  # aged
+    np.testing.assert_array_equal(snap.pigments.chlorophyll, 1.0)  # the snapshot did not move
+    off = Simulator(model, p.with_overrides({"effects.colour": False}), seed=3)
+    st2 = off.state()
+    chl = st2.pigments.chlorophyll.copy()
+    for _ in range(20):
+        ms = off.step(st2)
+    assert "colour" not in ms
+    np.testing.assert_array_equal(st2.pigments.chlorophyll, chl)
+    # same seed, same leaf: two simulators give identical pigments
+    a, b = Simulator(model, p, seed=5).state(), Simulator(model, p, seed=5).state()
+    np.testing.assert_array_equal(a.pigments.leaf, b.pigments.leaf)
+
+
+def test_cli_run_does_not_use_the_gui_session(tmp_path):
+    import subprocess
+    import sys
+
+    code = ("import sys; from leafsim.cli import main; rc = main(['run', '--species', 'oak', '--frames', '3', "
+            "'--set', 'mesh.spacing=0.08', '--json']); "
+            "sys.stderr.write('SESSION' if 'leafsim.session' in sys.modules else 'OK'); sys.exit(rc)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.endswith("OK"), r.stderr
+    assert json.loads(r.stdout)["frames"] == 3

@@ -9,6 +9,7 @@ projected in parallel (Gauss–Seidel between colours, no write conflicts inside
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +30,9 @@ class State:
     particle_q : (n, 3) float64 positions [m];  particle_qd : (n, 3) velocities [m/s];
     particle_water : (n,) water [mg];  spring_rest : (s,) current rest lengths [m];
     hinge_plastic : (h,) plastic rest angle of the bending hinges [rad];
-    time [s], frame.  Arrays are mutated in place by the simulator; ``copy()`` snapshots.
+    time [s], frame; pigments : :class:`leafsim.sim.colour.PigmentState` or None (the
+    :class:`~leafsim.sim.simulator.Simulator` gives every state it makes one).  Arrays are
+    mutated in place by the simulator; ``copy()`` snapshots everything.
     """
 
     particle_q: np.ndarray
@@ -40,6 +43,7 @@ class State:
     hinge_plastic: np.ndarray
     vol_rest: np.ndarray
     scalars: np.ndarray = field(default_factory=lambda: np.zeros(2))  # [time, frame]
+    pigments: Any = None
 
     @property
     def time(self) -> float:
@@ -50,7 +54,8 @@ class State:
         return int(self.scalars[1])
 
     def copy(self) -> "State":
-        return State(*(np.array(getattr(self, f)) for f in self.__dataclass_fields__))
+        arrays = {f: np.array(getattr(self, f)) for f in self.__dataclass_fields__ if f != "pigments"}
+        return State(**arrays, pigments=None if self.pigments is None else self.pigments.copy())
 
 
 @dataclass(frozen=True)

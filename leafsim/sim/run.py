@@ -38,17 +38,20 @@ def frame_stats(model: Model, state: State, ms: dict, sim: Simulator | None = No
     return out
 
 
-def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stats_path=None, on_frame=None):
-    """Simulate ``frames`` frames; returns (state, stats list).
+def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stats_path=None, on_frame=None,
+                 seed: int = 0, state: State | None = None, simulator: Simulator | None = None):
+    """Simulate ``frames`` frames with one :class:`Simulator`; returns (state, stats list).
 
     ``effects``: iterable of effect names (default: the ``effects.*`` parameters).
     ``stats_path``: write the stats as JSON lines (atomically, at the end).
     ``on_frame(frame, state, stats)``: called after every frame; return False to stop.
+    ``seed``: colour variation of the fresh leaf; ``state``: continue from this state instead
+    of a fresh leaf; ``simulator``: use this one (made for ``model``/``params``) instead of a new one.
     """
     if frames < 0:
         raise LeafsimError(f"run: frames = {frames} must be ≥ 0")
-    sim = Simulator(model, params, effects)
-    state = model.state()
+    sim = simulator if simulator is not None else Simulator(model, params, effects, seed=seed)
+    state = sim.state() if state is None else state
     stats = []
     for _ in range(frames):
         ms = sim.step(state)
@@ -59,7 +62,7 @@ def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stat
         if st["nan"]:
             break
     if stats_path:
-        atomic_write_bytes(stats_path, "".join(json.dumps(s) + "\n" for s in stats).encode())
+        atomic_write_bytes(stats_path, "".join(json.dumps(s, sort_keys=True) + "\n" for s in stats).encode(), "statistics")
     return state, stats
 
 

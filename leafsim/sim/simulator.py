@@ -1,18 +1,23 @@
 """The simulator: runs only the enabled effects, in SPEC order, and times each stage.
 
+One :class:`Simulator` serves every driver: the GUI's session, ``leafsim run``, the accuracy
+study and scenes.  A disabled effect is never constructed (costs nothing) and leaves its part
+of the state untouched.
+
 Example
 -------
->>> sim = Simulator(model, ParamSet())          # doctest: +SKIP
->>> state = model.state()                        # doctest: +SKIP
->>> ms = sim.step(state)                         # {'osmosis': 0.3, 'shrink': 0.05, 'dynamics': 0.9}
+>>> sim = Simulator(model, ParamSet(), seed=0)   # doctest: +SKIP
+>>> state = sim.state()                          # fresh leaf, pigments included
+>>> ms = sim.step(state)                         # {'osmosis': 0.3, 'shrink': 0.05, 'dynamics': 0.9, 'colour': 0.01}
 """
 
 from __future__ import annotations
 
 import time
 
+from ..errors import LeafsimError
 from ..params import ParamSet
-from .effects import Dynamics, Osmosis, Shrink
+from .effects import Colour, Dynamics, Osmosis, Shrink
 from .model import Model, State
 
 EFFECTS = ("osmosis", "shrink", "gravity", "pbd", "bending", "ground", "self_collision", "colour")
@@ -24,20 +29,22 @@ class Simulator:
     Parameters
     ----------
     model : Model
-    params : ParamSet — ``osmosis.*``, ``shrink.*``, ``dynamics.*`` and ``effects.*``.
+    params : ParamSet — ``osmosis.*``, ``shrink.*``, ``dynamics.*``, ``colour.*`` and ``effects.*``.
     effects : optional iterable of effect names to enable (overrides ``effects.*``).
+    seed : seeds the per-leaf colour variation of the states this simulator makes.
     """
 
-    def __init__(self, model: Model, params: ParamSet, effects=None):
+    def __init__(self, model: Model, params: ParamSet, effects=None, seed: int = 0):
         self.model = model
+        self.seed = int(seed)
         self._osmosis = None
         self._shrink = None
         self._dynamics = None
+        self._colour = None
         self._override = None if effects is None else set(effects)
         if self._override is not None:
             bad = self._override - set(EFFECTS)
             if bad:
-                from ..errors import LeafsimError
                 raise LeafsimError(f"unknown effect(s) {', '.join(sorted(bad))}: expected some of {', '.join(EFFECTS)}")
         self.set_params(params)
 
@@ -59,7 +66,18 @@ class Simulator:
         if self.dynamic:
             self._dynamics = self._dynamics or Dynamics(self.model)
             self._dynamics.configure(params, e)
+        if self._colour is not None or e["colour"]:
+            # pigments exist whenever a state exists (the young colour is drawn even when the
+            # aging effect is off), so the stage is configured once made
+            self._colour = self._colour or Colour(self.model)
+            self._colour.configure(params)
         self.dt = params["dynamics.dt"]
+
+    def state(self) -> State:
+        """A fresh leaf: rest positions, full water, summer pigments."""
+        self._colour = self._colour or Colour(self.model)
+        self._colour.configure(self.params)
+        return self._colour.init(self.model.state(), self.seed)
 
     @property
     def iterations(self) -> int:
@@ -84,6 +102,10 @@ class Simulator:
             self._dynamics.apply(state)
             t1 = time.perf_counter()
             ms["dynamics"] = (t1 - t0) * 1e3
+            t0 = t1
         state.scalars[0] += self.dt
         state.scalars[1] += 1
+        if self.effects["colour"] and state.pigments is not None:
+            self._colour.apply(state, self.dt)
+            ms["colour"] = (time.perf_counter() - t0) * 1e3
         return ms
