@@ -171,23 +171,7 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
         if not image.is_file():
             raise _err(path, key, "image", f"photo {image} not found")
 
-    outline_pts, smooth, teeth = None, 0, None
-    if "outline" in e:
-        o = e["outline"]
-        if not isinstance(o, dict) or "points" not in o:
-            raise _err(path, key, "outline", "expected an object with 'points' (leaf-normalised [x, y] pairs)")
-        bad = set(o) - _OUTLINE_KEYS
-        if bad:
-            raise _err(path, key, f"outline.{sorted(bad)[0]}", f"unknown key (expected {', '.join(sorted(_OUTLINE_KEYS))})")
-        outline_pts = _points(path, key, "outline.points", o["points"], 3)
-        smooth = o.get("smooth", 0)
-        if isinstance(smooth, bool) or not isinstance(smooth, int) or not 0 <= smooth <= 6:
-            raise _err(path, key, "outline.smooth", "expected an integer 0–6 (Chaikin smoothing passes)")
-        problem = outline_problem(outline_pts, (0.0, 0.0), (0.0, 1.0))
-        if problem:
-            raise _err(path, key, "outline.points", f"the outline {problem}")
-        if o.get("teeth") is not None:
-            teeth = _teeth(path, key, o["teeth"])
+    outline_pts, smooth, teeth = _outline(path, key, e["outline"]) if "outline" in e else (None, 0, None)
     if image is None and outline_pts is None:
         raise _err(path, key, None, "needs either 'image' (a photo) or 'outline' (drawn points)")
 
@@ -226,6 +210,24 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
         overrides=dict(overrides),
         config=path,
     )
+
+
+def _outline(path: Path, key: str, o: Any) -> tuple[np.ndarray, int, dict | None]:
+    """Validated drawn ``outline``: (points, smoothing passes, teeth or None)."""
+    if not isinstance(o, dict) or "points" not in o:
+        raise _err(path, key, "outline", "expected an object with 'points' (leaf-normalised [x, y] pairs)")
+    bad = set(o) - _OUTLINE_KEYS
+    if bad:
+        raise _err(path, key, f"outline.{sorted(bad)[0]}", f"unknown key (expected {', '.join(sorted(_OUTLINE_KEYS))})")
+    pts = _points(path, key, "outline.points", o["points"], 3)
+    smooth = o.get("smooth", 0)
+    if isinstance(smooth, bool) or not isinstance(smooth, int) or not 0 <= smooth <= 6:
+        raise _err(path, key, "outline.smooth", "expected an integer 0–6 (Chaikin smoothing passes)")
+    problem = outline_problem(pts, (0.0, 0.0), (0.0, 1.0))
+    if problem:
+        raise _err(path, key, "outline.points", f"the outline {problem}")
+    teeth = _teeth(path, key, o["teeth"]) if o.get("teeth") is not None else None
+    return pts, smooth, teeth
 
 
 #: declared ranges of the ``outline.teeth`` keys: (kind, lo, hi, default)
