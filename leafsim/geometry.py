@@ -169,10 +169,12 @@ def distance_to_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return out
 
 
-def crossing_pairs(P: np.ndarray, Q: np.ndarray, first: bool = False) -> np.ndarray:
+def crossing_pairs(P: np.ndarray, Q: np.ndarray, first: bool = False, touching: bool = False) -> np.ndarray:
     """Pairs (i, j), i < j, of segments P[i]Q[i] and P[j]Q[j] that cross properly.
 
-    Touching at end points (shared vertices of a polyline or polygon) does not count.
+    Touching at end points (shared vertices of a polyline or polygon) does not count, unless
+    ``touching``: then every contact counts — crossing, an end point on the other segment,
+    shared end points, collinear overlap.
     ``first``: stop at the first chunk holding a crossing (enough to say "not simple").
     Segments are visited in chunks sorted by x and tested only against those whose bounding
     boxes overlap the chunk's, so a long outline costs far less than all n² pairs.
@@ -196,7 +198,13 @@ def crossing_pairs(P: np.ndarray, Q: np.ndarray, first: bool = False) -> np.ndar
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             t = (qp[..., 0] * s[..., 1] - qp[..., 1] * s[..., 0]) / denom
             u = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
-        hit = (np.abs(denom) > 1e-18) & (t > eps) & (t < 1 - eps) & (u > eps) & (u < 1 - eps)
+        if touching:
+            rr = (r * r).sum(-1)
+            par = np.abs(denom) <= 1e-12 * np.sqrt(rr * (s * s).sum(-1))
+            hit = ~par & (t >= -eps) & (t <= 1 + eps) & (u >= -eps) & (u <= 1 + eps)
+            hit |= par & _collinear_overlap(qp, r, s, rr, eps)
+        else:
+            hit = (np.abs(denom) > 1e-18) & (t > eps) & (t < 1 - eps) & (u > eps) & (u < 1 - eps)
         hit &= cand[None, :] > ch[:, None]
         ii, jj = np.nonzero(hit)
         if len(ii):
@@ -207,6 +215,34 @@ def crossing_pairs(P: np.ndarray, Q: np.ndarray, first: bool = False) -> np.ndar
         return np.zeros((0, 2), np.int64)
     pairs = np.vstack(found).astype(np.int64)
     return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def _collinear_overlap(qp, r, s, rr, eps):
+    """For parallel segment pairs a + [0, 1]·r and (a + qp) + [0, 1]·s: on one line and their
+    parameter ranges along r meet (touching end to end included)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.abs(qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / np.sqrt(rr)
+        t0 = (qp * r).sum(-1) / rr
+        t1 = ((qp + s) * r).sum(-1) / rr
+    on_line = off <= eps * np.sqrt(rr)
+    return on_line & (np.minimum(1.0, np.maximum(t0, t1)) >= np.maximum(0.0, np.minimum(t0, t1)) - eps)
+
+
+def _self_contact(c: np.ndarray):
+    """First pair of edges (i, j) of a closed polygon that touch though they should not:
+    non-adjacent edges meeting anywhere, or neighbours folding back onto each other (a spike)."""
+    n = len(c)
+    d = np.roll(c, -1, axis=0) - c
+    prev = np.roll(d, 1, axis=0)
+    spike = (np.abs(prev[:, 0] * d[:, 1] - prev[:, 1] * d[:, 0]) <= 1e-12 * np.hypot(*prev.T) * np.hypot(*d.T)) \
+        & ((prev * d).sum(1) < 0)
+    if spike.any():
+        k = int(np.flatnonzero(spike)[0])
+        return (k - 1) % n, k
+    pairs = crossing_pairs(c, np.roll(c, -1, axis=0), touching=True)
+    i, j = pairs[:, 0], pairs[:, 1]
+    pairs = pairs[(j - i != 1) & ~((i == 0) & (j == n - 1))]
+    return (int(pairs[0, 0]), int(pairs[0, 1])) if len(pairs) else None
 
 
 #: an outline point may lie at most this many leaf lengths (base→apex) from the base
@@ -252,10 +288,10 @@ def outline_problem(contour: np.ndarray, base, apex) -> str | None:
     dup = _duplicate_vertex(c)
     if dup is not None:
         return f"passes twice through point {dup[0]} = point {dup[1]} (the outline must not touch itself)"
-    cross = crossing_pairs(c, np.roll(c, -1, axis=0), first=True)
-    if len(cross):
-        i, j = (int(x) for x in cross[0])
-        return f"crosses itself: edge {i}→{(i + 1) % len(c)} intersects edge {j}→{(j + 1) % len(c)} (expected a simple polygon)"
+    contact = _self_contact(c)
+    if contact is not None:
+        i, j = contact
+        return f"crosses or touches itself: edge {i}→{(i + 1) % len(c)} meets edge {j}→{(j + 1) % len(c)} (expected a simple polygon)"
     for name, q in (("base", base), ("apex", apex)):
         if points_in_polygon(q[None], c)[0]:
             continue
