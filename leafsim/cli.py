@@ -9,11 +9,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 import time
 from pathlib import Path
 
 from .errors import LeafsimError
+
+#: the checkpoint file of ``leafsim run`` inside --out, and how often it is written by default
+CHECKPOINT = "checkpoint.npz"
+CHECKPOINT_EVERY = 100
 
 
 class _Parser(argparse.ArgumentParser):
@@ -23,13 +28,27 @@ class _Parser(argparse.ArgumentParser):
         raise LeafsimError(f"{self.prog}: {message}")
 
 
+#: seeds are non-negative integers below 2**63 (numpy's generators take them as-is)
+SEED_MAX = 2**63 - 1
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a non-negative integer") from None
+    if not 0 <= v <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"{text}: expected a non-negative integer up to 2**63-1")
+    return v
+
+
 def _common(p: argparse.ArgumentParser, seed=True):
     p.add_argument("--species", default=None, help="species key from the config (see `leafsim species`)")
     p.add_argument("--config", default=None, help="species config JSON (default: configs/leaves.json)")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                    help="override a declared parameter, e.g. --set veins.main.kappa=4 (repeatable)")
     if seed:
-        p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+        p.add_argument("--seed", type=_seed, default=0, help="random seed, a non-negative integer (default 0)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -72,6 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--stats", default=None, help="write per-frame statistics (JSON lines) here")
     r.add_argument("--out", default=None, help="folder for final positions (.npz) and PNG frames")
     r.add_argument("--every", type=int, default=0, help="render a PNG frame every K frames into --out")
+    r.add_argument("--checkpoint-every", type=int, default=None, metavar="K",
+                   help=f"save the whole state to OUT/{CHECKPOINT} every K frames (default {CHECKPOINT_EVERY} with --out; 0 = never)")
+    r.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out (same command otherwise)")
     r.add_argument("--json", action="store_true")
 
     be = sub.add_parser("bench", help="benchmark the simulation kernels")
@@ -80,26 +102,79 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM ended a command: the CLI prints one line and exits with 128 + signal.
+    A BaseException (like KeyboardInterrupt), so no ``except Exception`` swallows it."""
+
+    def __init__(self, signum: int, message: str = ""):
+        super().__init__(signum, message)
+        self.signum, self.message = signum, message
+
+
+def _raise_interrupted(signum, frame):
+    raise Interrupted(signum)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help"):
         argv = ["gui"] + argv
+    # SIGTERM ends a command like Ctrl-C does (one line, no traceback), not silently
+    old_term = signal.signal(signal.SIGTERM, _raise_interrupted) if _main_thread() else None
     try:
         args = build_parser().parse_args(argv)
         return COMMANDS[args.cmd](args) or 0
     except LeafsimError as e:
-        print(f"leafsim: {e}", file=sys.stderr)
+        print(f"leafsim: {one_line(str(e))}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("leafsim: interrupted", file=sys.stderr)
-        return 130
+    except (KeyboardInterrupt, Interrupted) as e:
+        signum = e.signum if isinstance(e, Interrupted) else signal.SIGINT
+        what = e.message if isinstance(e, Interrupted) and e.message else "interrupted"
+        print(f"leafsim: {what} (by {signal.Signals(signum).name})", file=sys.stderr)
+        return 128 + int(signum)
     except BrokenPipeError:
         return 0
     except Exception as e:  # never a traceback for the user
         if os.environ.get("LEAFSIM_DEBUG"):
             raise
-        print(f"leafsim: internal error: {type(e).__name__}: {e} (set LEAFSIM_DEBUG=1 for a traceback)", file=sys.stderr)
+        print(f"leafsim: internal error: {type(e).__name__}: {one_line(str(e))[:300]} (set LEAFSIM_DEBUG=1 for a traceback)", file=sys.stderr)
         return 1
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+class _DeferredSignals:
+    """Inside the frame loop, SIGINT/SIGTERM only set ``signum``: the loop finishes the frame it
+    is in, saves a checkpoint and stops, so the state on disk is always a whole frame.  A
+    second signal ends at once."""
+
+    def __init__(self):
+        self.signum = None
+
+    def _handler(self, signum, frame):
+        if self.signum is not None:
+            raise Interrupted(signum)
+        self.signum = signum
+
+    def __enter__(self):
+        self._old = {s: signal.signal(s, self._handler) for s in (signal.SIGINT, signal.SIGTERM)} if _main_thread() else {}
+        return self
+
+    def __exit__(self, *exc):
+        for s, h in self._old.items():
+            signal.signal(s, h)
+
+
+def one_line(text: str) -> str:
+    """The contract's last line of defence: a message never spans several lines."""
+    return " ".join(text.split("\n")).replace("\r", " ")
 
 
 def _emit(args, obj: dict, text: str) -> None:
@@ -209,61 +284,108 @@ def _effects_overrides(spec: str | None) -> dict:
     return {f"effects.{e}": e in wanted for e in known}
 
 
-def cmd_run(args):
-    import numpy as np
-
-    from .leaf import build_leaf, load_photo_rgba
-    from .params import parse_set_args
-    from .sim.run import run_headless, save_npz, shape_metrics
-    from .sim.simulator import Simulator
-    from .species import get_species
-
+def _check_run_args(args) -> Path | None:
+    """Validate ``leafsim run``'s options before any work; returns the --out folder (or None)."""
     if args.frames < 0:
         raise LeafsimError(f"--frames {args.frames}: expected a non-negative number of frames")
     if args.every < 0:
         raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
     if args.every and not args.out:
         raise LeafsimError("--every needs --out DIR for the PNG frames")
+    if args.checkpoint_every is not None and args.checkpoint_every < 0:
+        raise LeafsimError(f"--checkpoint-every {args.checkpoint_every}: expected a non-negative frame interval")
+    if (args.checkpoint_every or args.resume) and not args.out:
+        raise LeafsimError(f"{'--resume' if args.resume else '--checkpoint-every'} needs --out DIR (the checkpoint lives there)")
     out = Path(args.out) if args.out else None
     if out is not None:
         if out.exists() and not out.is_dir():
             raise LeafsimError(f"--out {out}: exists and is not a folder")
         if not out.parent.exists():
             raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
+        if args.resume and not (out / CHECKPOINT).is_file():
+            raise LeafsimError(f"--resume: no checkpoint at {out / CHECKPOINT} (run first with --out {out})")
     if args.stats and not Path(args.stats).parent.exists():
         raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
+    if args.checkpoint_every is None:
+        args.checkpoint_every = CHECKPOINT_EVERY if out is not None else 0
+    return out
+
+
+def cmd_run(args):
+    from .fileio import remove_stale_temps
+    from .leaf import build_leaf, load_photo_rgba
+    from .params import parse_set_args
+    from .sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
+    from .sim.run import StatsStream, run_headless, save_npz
+    from .sim.simulator import Simulator
+    from .species import DEFAULT_SPECIES, get_species
+
+    out = _check_run_args(args)
     overrides = {**parse_set_args(args.sets), **_effects_overrides(args.effects)}
     t0 = time.perf_counter()
-    sp = get_species(args.species, args.config)
+    sp = get_species(args.species or DEFAULT_SPECIES, args.config)
     params = sp.params.with_overrides(overrides, where="--set")
+    # what a checkpoint must have been made with to be resumed by this command
+    meta = {"species": sp.key, "config": str(Path(args.config).resolve()) if args.config else None,
+            "seed": args.seed, "params": params.to_dict()}
+    ck = out / CHECKPOINT if out is not None else None
+    if args.resume:
+        check_meta(ck, meta)  # before the build: a mismatch costs nothing
     shape, veins, model = build_leaf(sp, params, args.seed)
     build_s = time.perf_counter() - t0
+    sim = Simulator(model, params, seed=args.seed)
+    state = load_checkpoint(ck, model, meta) if args.resume else sim.state()
+    start = state.frame
     snap = None
     if out is not None:
         out.mkdir(exist_ok=True)
+    for target in ([ck, out / "final.npz", out / "frame_*.png"] if out is not None else []) + ([Path(args.stats)] if args.stats else []):
+        remove_stale_temps(target)  # left by a run killed (SIGKILL) while writing
     if args.every:
-        photo = load_photo_rgba(sp.image) if (sp.image is not None and params["render.texture"]) else None
-        snap = _FrameWriter(model, params, photo, out)
-
-    sim = Simulator(model, params, seed=args.seed)
-    state = sim.state()
-    if snap is not None:
-        snap.write(0, state)
+        photo = load_photo_rgba(sp.image, params["limits.image_pixels"]) if (sp.image is not None and params["render.texture"]) else None
+        snap = _FrameWriter(model, params, photo, out, sim.state())
+        if start == 0:
+            snap.write(0, state)
 
     def on_frame(k, state, st):
         if snap is not None and k % args.every == 0:
             snap.write(k, state)
+        if ck is not None and args.checkpoint_every and (stop.signum or k % args.checkpoint_every == 0):
+            save_checkpoint(ck, model, state, meta)
+        return stop.signum is None
 
+    stream = StatsStream(args.stats, keep_until=start if args.resume else None) if args.stats else None
     t1 = time.perf_counter()
-    state, stats = run_headless(model, params, args.frames, stats_path=args.stats, on_frame=on_frame,
-                                state=state, simulator=sim)
+    try:
+        with _DeferredSignals() as stop:
+            state, stats = run_headless(model, params, max(args.frames - start, 0), on_frame=on_frame,
+                                        state=state, simulator=sim, stats_stream=stream)
+    finally:
+        if stream is not None:
+            stream.close()
     sim_s = time.perf_counter() - t1
+    if stop.signum is not None:
+        where = (f"checkpoint {ck}: continue with the same command and --resume" if ck is not None and args.checkpoint_every
+                 else "no checkpoint (give --out DIR and --checkpoint-every K to be able to resume)")
+        raise Interrupted(stop.signum, f"interrupted at frame {state.frame} of {args.frames}"
+                                       + (f", statistics in {args.stats}" if args.stats else "") + f"; {where}")
+    if ck is not None and args.checkpoint_every:
+        save_checkpoint(ck, model, state, meta)  # the final state: --resume --frames M continues it
     if out is not None:
         save_npz(out / "final.npz", model, state)
+    rep = _run_report(sp, params, args, model, state, stats, start, build_s, sim_s, snap)
+    _emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
+
+
+def _run_report(sp, params, args, model, state, stats, start, build_s, sim_s, snap) -> dict:
+    import numpy as np
+
+    from .sim.run import shape_metrics
+
     ms = [sum(s["ms"].values()) for s in stats]
     water = float(state.particle_water.sum() / max(model.particle_water0.sum(), 1e-300))
     rep = {
-        "species": sp.key, "seed": args.seed, "frames": len(stats),
+        "species": sp.key, "seed": args.seed, "frames": len(stats), "frame": state.frame, "resumed_from": start,
         "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
         "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
         "water_fraction": round(water, 6),
@@ -273,19 +395,20 @@ def cmd_run(args):
         **model.to_report(),
     }
     if rep["nan"]:
-        raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {len(stats)} (parameters: {params.changed()})")
-    _emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
+        raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {state.frame} (parameters: {params.changed()})")
+    return rep
 
 
 class _FrameWriter:
     """Offscreen PNG frames of one leaf (photo species: the pigment colour carrying the photo's
     detail, as the GUI shows it); the camera is fixed by the first frame."""
 
-    def __init__(self, model, params, photo, out: Path):
+    def __init__(self, model, params, photo, out: Path, rest_state):
         from .view import LeafView
 
         self.view = LeafView(model, photo, photo_tint=False)
         self.params, self.out = params, out
+        self.rest = rest_state  # the camera frames the rest leaf (the same after --resume)
         self.renderer = self.camera = None
         self.written = 0
 
@@ -297,9 +420,8 @@ class _FrameWriter:
         path = self.out / f"frame_{k:05d}.png"
         if self.renderer is None:
             self.renderer = OffscreenRenderer(960, 720)
-            mesh = self.view.mesh(state, self.params)
-            self.camera = default_camera(mesh.positions)
-            self.renderer.render_png(mesh, path, camera=self.camera, options=opts)
+            self.camera = default_camera(self.view.mesh(self.rest, self.params).positions)
+            self.renderer.render_png(self.view.mesh(state, self.params), path, camera=self.camera, options=opts)
         else:
             self.renderer.render_png(self.view.update(state, self.params), path, camera=self.camera, options=opts)
         self.written += 1

@@ -61,3 +61,18 @@ def write_png_atomic(path: str | os.PathLike, img: np.ndarray, rgb: bool = False
     if not ok:
         raise LeafsimError(f"{path}: cannot encode PNG")
     return atomic_write_bytes(path, buf.tobytes(), "PNG")
+
+
+def remove_stale_temps(path: str | os.PathLike) -> int:
+    """Delete temporaries that :func:`atomic_write_bytes` left for ``path`` (a glob pattern such
+    as ``out/frame_*.png`` works too) when a process was killed (SIGKILL) mid-write; returns how
+    many.  Only names of the form ``.<name>.<random>.tmp`` next to the target are touched."""
+    path = Path(path)
+    n = 0
+    for tmp in path.parent.glob(f".{path.name}.*.tmp"):
+        try:
+            tmp.unlink()
+            n += 1
+        except OSError:
+            pass
+    return n

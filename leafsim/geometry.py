@@ -87,14 +87,21 @@ def resample_polyline(line: np.ndarray, spacing: float) -> np.ndarray:
 
 def points_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Boolean (n,) mask of points strictly inside a closed polygon (even-odd rule)."""
-    pts = np.asarray(pts, float)
-    x, y = pts[:, 0:1], pts[:, 1:2]
+    pts = np.asarray(pts, float).reshape(-1, 2)
+    poly = np.asarray(poly, float)
     x0, y0 = poly[:, 0], poly[:, 1]
     x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
-    cond = (y0 > y) != (y1 > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xi = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
-    return (np.count_nonzero(cond & (x < xi), axis=1) % 2) == 1
+    out = np.zeros(len(pts), bool)
+    # chunks of points keep the (points × edges) temporaries at a few MB (a dense mesh tests
+    # millions of candidate points against the outline)
+    step = max(1, 262144 // max(len(poly), 1))
+    for k in range(0, len(pts), step):
+        x, y = pts[k : k + step, 0:1], pts[k : k + step, 1:2]
+        cond = (y0 > y) != (y1 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xi = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+        out[k : k + step] = (np.count_nonzero(cond & (x < xi), axis=1) % 2) == 1
+    return out
 
 
 def segments_intersect(p1, p2, q1, q2) -> bool:
@@ -160,3 +167,158 @@ def distance_to_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
         proj = P + t[..., None] * d
         out[k : k + 2048] = np.sqrt(((x - proj) ** 2).sum(-1)).min(1)
     return out
+
+
+def crossing_pairs(P: np.ndarray, Q: np.ndarray, first: bool = False, touching: bool = False) -> np.ndarray:
+    """Pairs (i, j), i < j, of segments P[i]Q[i] and P[j]Q[j] that cross properly.
+
+    Touching at end points (shared vertices of a polyline or polygon) does not count, unless
+    ``touching``: then every contact counts — crossing, an end point on the other segment,
+    shared end points, collinear overlap.
+    ``first``: stop at the first chunk holding a crossing (enough to say "not simple").
+    Segments are visited in chunks sorted by x and tested only against those whose bounding
+    boxes overlap the chunk's, so a long outline costs far less than all n² pairs.
+    Returns an (k, 2) int64 array.
+    """
+    P = np.asarray(P, float).reshape(-1, 2)
+    Q = np.asarray(Q, float).reshape(-1, 2)
+    n = len(P)
+    lo, hi = np.minimum(P, Q), np.maximum(P, Q)
+    order = np.argsort(lo[:, 0], kind="stable")
+    found = []
+    eps = 1e-9
+    for k in range(0, n, 256):
+        ch = order[k : k + 256]
+        clo, chi = lo[ch].min(0), hi[ch].max(0)
+        cand = np.flatnonzero((lo[:, 0] <= chi[0]) & (hi[:, 0] >= clo[0]) & (lo[:, 1] <= chi[1]) & (hi[:, 1] >= clo[1]))
+        a, r = P[ch, None, :], (Q - P)[ch, None, :]
+        s = (Q - P)[cand][None]
+        qp = P[cand][None] - a
+        denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            t = (qp[..., 0] * s[..., 1] - qp[..., 1] * s[..., 0]) / denom
+            u = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
+        if touching:
+            rr = (r * r).sum(-1)
+            par = np.abs(denom) <= 1e-12 * np.sqrt(rr * (s * s).sum(-1))
+            hit = ~par & (t >= -eps) & (t <= 1 + eps) & (u >= -eps) & (u <= 1 + eps)
+            hit |= par & _collinear_overlap(qp, r, s, rr, eps)
+        else:
+            hit = (np.abs(denom) > 1e-18) & (t > eps) & (t < 1 - eps) & (u > eps) & (u < 1 - eps)
+        hit &= cand[None, :] > ch[:, None]
+        ii, jj = np.nonzero(hit)
+        if len(ii):
+            found.append(np.column_stack([ch[ii], cand[jj]]))
+            if first:
+                break
+    if not found:
+        return np.zeros((0, 2), np.int64)
+    pairs = np.vstack(found).astype(np.int64)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def _collinear_overlap(qp, r, s, rr, eps):
+    """For parallel segment pairs a + [0, 1]·r and (a + qp) + [0, 1]·s: on one line and their
+    parameter ranges along r meet (touching end to end included)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.abs(qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / np.sqrt(rr)
+        t0 = (qp * r).sum(-1) / rr
+        t1 = ((qp + s) * r).sum(-1) / rr
+    on_line = off <= eps * np.sqrt(rr)
+    return on_line & (np.minimum(1.0, np.maximum(t0, t1)) >= np.maximum(0.0, np.minimum(t0, t1)) - eps)
+
+
+def _self_contact(c: np.ndarray):
+    """First pair of edges (i, j) of a closed polygon that touch though they should not:
+    non-adjacent edges meeting anywhere, or neighbours folding back onto each other (a spike)."""
+    n = len(c)
+    d = np.roll(c, -1, axis=0) - c
+    prev = np.roll(d, 1, axis=0)
+    spike = (np.abs(prev[:, 0] * d[:, 1] - prev[:, 1] * d[:, 0]) <= 1e-12 * np.hypot(*prev.T) * np.hypot(*d.T)) \
+        & ((prev * d).sum(1) < 0)
+    if spike.any():
+        k = int(np.flatnonzero(spike)[0])
+        return (k - 1) % n, k
+    pairs = crossing_pairs(c, np.roll(c, -1, axis=0), touching=True)
+    i, j = pairs[:, 0], pairs[:, 1]
+    pairs = pairs[(j - i != 1) & ~((i == 0) & (j == n - 1))]
+    return (int(pairs[0, 0]), int(pairs[0, 1])) if len(pairs) else None
+
+
+#: an outline point may lie at most this many leaf lengths (base→apex) from the base
+OUTLINE_MAX_REACH = 3.0
+#: base and apex may lie at most this many leaf lengths outside the outline
+OUTLINE_END_TOLERANCE = 0.1
+#: an outline must enclose at least this area, in leaf lengths squared
+OUTLINE_MIN_AREA = 1e-3
+
+
+def outline_problem(contour: np.ndarray, base, apex) -> str | None:
+    """Why a closed polygon cannot be the blade of a leaf with this base and apex, or None.
+
+    A leaf outline has at least 3 distinct, finite points, encloses an area (not collinear),
+    does not cross itself, reaches no farther than ``OUTLINE_MAX_REACH`` leaf lengths from
+    the base, and has the base (petiole junction) and the apex on (or inside) its margin.
+    The text is a sentence fragment for a one-line error ("the outline ...").
+    """
+    c = np.asarray(contour, float).reshape(-1, 2)
+    base = np.asarray(base, float).reshape(2)
+    apex = np.asarray(apex, float).reshape(2)
+    if not (np.isfinite(c).all() and np.isfinite(base).all() and np.isfinite(apex).all()):
+        return "has a non-finite coordinate"
+    keep = np.r_[True, np.any(np.diff(c, axis=0) != 0, axis=1)]
+    c = c[keep]
+    if len(c) > 1 and np.array_equal(c[0], c[-1]):
+        c = c[:-1]
+    if len(np.unique(c, axis=0)) < 3:
+        return f"has {len(np.unique(c, axis=0))} distinct point(s), expected at least 3"
+    L = float(np.linalg.norm(apex - base))
+    if L <= 0:
+        return "has its base and apex at the same point"
+    with np.errstate(over="ignore", invalid="ignore"):
+        reach = np.hypot(*((c - base) / L).T)
+    i = int(np.argmax(reach))
+    if not reach[i] <= OUTLINE_MAX_REACH:
+        return (f"reaches {reach[i]:.3g} leaf lengths from the base at point {i} "
+                f"(expected within {OUTLINE_MAX_REACH:g}; leaf units put the base at (0, 0) and the apex at (0, 1))")
+    area = abs(polygon_area(c)) / L**2
+    if area < OUTLINE_MIN_AREA:
+        return (f"encloses {area:.3g} leaf lengths² (expected at least {OUTLINE_MIN_AREA:g}: "
+                "points collinear, or the outline is not scaled to base (0, 0) → apex (0, 1))")
+    dup = _duplicate_vertex(c)
+    if dup is not None:
+        return f"passes twice through point {dup[0]} = point {dup[1]} (the outline must not touch itself)"
+    contact = _self_contact(c)
+    if contact is not None:
+        i, j = contact
+        return f"crosses or touches itself: edge {i}→{(i + 1) % len(c)} meets edge {j}→{(j + 1) % len(c)} (expected a simple polygon)"
+    for name, q in (("base", base), ("apex", apex)):
+        if points_in_polygon(q[None], c)[0]:
+            continue
+        d = float(distance_to_polygon(q[None], c)[0]) / L
+        if d > OUTLINE_END_TOLERANCE:
+            return f"does not contain the {name}: it lies {d:.3g} leaf lengths outside (expected on the margin or inside)"
+    return None
+
+
+def _duplicate_vertex(c: np.ndarray):
+    """Indices (i, j) of the first two non-consecutive equal vertices, or None."""
+    _, first, inv, cnt = np.unique(c, axis=0, return_index=True, return_inverse=True, return_counts=True)
+    if (cnt > 1).any():
+        k = int(np.flatnonzero(cnt > 1)[0])
+        idx = np.flatnonzero(inv.ravel() == k)
+        return int(idx[0]), int(idx[1])
+    return None
+
+
+def targets_problem(targets: np.ndarray, contour: np.ndarray, length: float) -> str | None:
+    """Why vein targets cannot be used with this outline (one lies outside it), or None."""
+    t = np.asarray(targets, float).reshape(-1, 2)
+    inside = points_in_polygon(t, contour)
+    for k in np.flatnonzero(~inside):
+        d = float(distance_to_polygon(t[k : k + 1], contour)[0]) / length
+        if d > OUTLINE_END_TOLERANCE:
+            x, y = (float(v) / length for v in t[k])
+            return (f"target {k} at ({x:.4g}, {y:.4g}) leaf units lies {d:.3g} leaf lengths outside the outline "
+                    "(expected inside the blade)")
+    return None

@@ -34,6 +34,7 @@ __all__ = [
     "TracedOutline",
     "load_image",
     "segment_leaf",
+    "working_image",
     "trace_outline",
     "to_leaf_shape",
     "outline_report",
@@ -42,6 +43,8 @@ __all__ = [
 
 #: A component smaller than this fraction of the image is not a leaf.
 MIN_LEAF_FRACTION = 0.005
+#: A second region at least this fraction of the leaf's area makes the photo ambiguous.
+SECOND_LEAF_FRACTION = 0.25
 _DEBUG = False
 
 
@@ -65,6 +68,10 @@ class TracedOutline:
     petiole_px : (2, 2) float64 [junction, tip] of the detected petiole, or None.
     base_method : "given", "petiole" or "shape" (how the base was found).
     seconds : wall-clock time of the trace.
+    work_scale : the photo was traced downscaled by this factor (1.0: at full size); ``mask``
+        has the working size, every coordinate is in full-photo pixels.
+    border_fraction : share of the image border the traced leaf covers (> 0: the leaf runs
+        off the photo and the frame's straight edge is part of the outline).
     """
 
     mask: np.ndarray
@@ -79,6 +86,8 @@ class TracedOutline:
     petiole_px: np.ndarray | None = None
     base_method: str = "shape"
     seconds: float = 0.0
+    work_scale: float = 1.0
+    border_fraction: float = 0.0
 
     @property
     def length_px(self) -> float:
@@ -158,55 +167,137 @@ def _alpha_informative(a: np.ndarray) -> bool:
     return 0.01 < transparent < 0.99
 
 
-def _colour_foreground(bgr: np.ndarray) -> tuple[np.ndarray, float]:
-    """Foreground = pixels whose Lab colour is far from the border background (Otsu)."""
+#: Lab distance under which two colours count as the same background
+_SAME_COLOUR = 12.0
+#: a border strip with more than this share of pixels off the background colour is "mixed"
+_MIXED_BORDER = 0.25
+
+
+def _border_strip(a: np.ndarray, b: int) -> np.ndarray:
+    return np.concatenate([a[:b].reshape(-1, 3), a[-b:].reshape(-1, 3),
+                           a[b:-b, :b].reshape(-1, 3), a[b:-b, -b:].reshape(-1, 3)])
+
+
+def _background_lab(lab: np.ndarray, path: str) -> np.ndarray:
+    """Background colour (Lab) of a photo: the median of a border strip.
+
+    When the leaf covers much of the border (it touches the frame), the strip's median can be
+    the leaf's colour; the background is then the colour the four corners agree on.
+    """
+    h, w = lab.shape[:2]
+    b = max(2, int(round(0.03 * min(h, w))))
+    strip = _border_strip(lab, b)
+    bg = np.median(strip, axis=0)
+    if np.mean(np.linalg.norm(strip - bg, axis=1) > _SAME_COLOUR) <= _MIXED_BORDER:
+        return bg
+    corners = [lab[:b, :b], lab[:b, -b:], lab[-b:, :b], lab[-b:, -b:]]
+    med = np.array([np.median(c.reshape(-1, 3), axis=0) for c in corners])
+    agree = np.linalg.norm(med[:, None] - med[None], axis=2) < _SAME_COLOUR
+    k = int(np.argmax(agree.sum(1)))
+    if agree[k].sum() < 2:
+        raise LeafsimError(f"{path}: cannot tell the background from the leaf (neither the image border nor its "
+                           "corners show one background colour; expected a leaf on a plain background)")
+    return np.median(np.concatenate([corners[i].reshape(-1, 3) for i in np.flatnonzero(agree[k])]), axis=0)
+
+
+def _shadow(lab: np.ndarray, bg: np.ndarray) -> np.ndarray:
+    """Pixels that look like the background in shadow: darker, with the background's hue and
+    no more of its saturation (chroma (a, b) on the segment from grey to the background's)."""
+    ab = lab[..., 1:]
+    g = bg[1:]
+    gg = float(g @ g)
+    s = np.clip((ab @ g) / gg, 0.0, 1.15) if gg > 1e-6 else np.zeros(lab.shape[:2], np.float32)
+    off = np.linalg.norm(ab - s[..., None] * g, axis=2)
+    return (lab[..., 0] < bg[0] - 3.0) & (off < 8.0)
+
+
+def _colour_foreground(bgr: np.ndarray, path: str = "image") -> tuple[np.ndarray, float, np.ndarray]:
+    """Foreground = pixels whose Lab colour is far from the background (Otsu), cast shadows
+    (darker, less saturated background) excluded unless they would be most of it.
+    Returns (mask, 99.5th percentile of the colour distance, Lab image)."""
     h, w = bgr.shape[:2]
     lab = cv2.cvtColor(bgr.astype(np.float32) * (1.0 / 255.0), cv2.COLOR_BGR2Lab)
-    b = max(2, int(round(0.03 * min(h, w))))
-    strip = np.concatenate([
-        lab[:b].reshape(-1, 3), lab[-b:].reshape(-1, 3),
-        lab[b:-b, :b].reshape(-1, 3), lab[b:-b, -b:].reshape(-1, 3),
-    ])
-    bg = np.median(strip, axis=0)
+    bg = _background_lab(lab, path)
     dist = np.sqrt(((lab - bg) ** 2).sum(axis=2))
     hi = float(np.percentile(dist, 99.5))
     if hi < 8.0:  # nothing stands out from the background by more than a faint shade
-        return np.zeros((h, w), np.uint8), hi
+        return np.zeros((h, w), np.uint8), hi, lab
     d8 = np.clip(dist * (255.0 / hi), 0, 255).astype(np.uint8)
     t8, _ = cv2.threshold(d8, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     thr = max(t8 * hi / 255.0, 6.0)
-    # between-class sanity: the foreground must differ clearly from the background
-    return np.where(dist > thr, 255, 0).astype(np.uint8), hi
+    fg = dist > thr
+    shade = fg & _shadow(lab, bg)
+    if np.count_nonzero(shade) < 0.5 * np.count_nonzero(fg):  # a grey leaf is not its own shadow
+        fg &= ~shade
+    return np.where(fg, 255, 0).astype(np.uint8), hi, lab
+
+
+def _restore_petiole(raw: np.ndarray, opened: np.ndarray, leaf: np.ndarray, lab: np.ndarray | None) -> np.ndarray:
+    """Give back thin pieces the clean-up opening cut off the leaf (a petiole thinner than the
+    opening disk): a removed piece touching the leaf, away from the image border, at least 3×
+    longer than wide, longer than 5 % of the leaf size and (in a colour photo) of the leaf's
+    colour — a grid line of graph paper touching the margin is not a petiole."""
+    removed = cv2.bitwise_and(raw, cv2.bitwise_not(opened))
+    if not removed.any():
+        return leaf
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(removed, connectivity=8)
+    ring = cv2.dilate(leaf, _disk(5))
+    size = math.sqrt(max(np.count_nonzero(leaf), 1))
+    H, W = leaf.shape
+    out = leaf.copy()
+    leaf_colour = None if lab is None else np.median(lab[leaf > 0][:: max(1, np.count_nonzero(leaf) // 20000)], axis=0)
+    for k in range(1, n):
+        x, y, w, h, area = stats[k]
+        if x == 0 or y == 0 or x + w >= W or y + h >= H or area < 6:
+            continue
+        piece = lab[y : y + h, x : x + w] == k
+        if not np.any(piece & (ring[y : y + h, x : x + w] > 0)):
+            continue
+        (_, _), (a, b), _ = cv2.minAreaRect(np.column_stack(np.nonzero(piece)[::-1]).astype(np.float32))
+        long, short = max(a, b), max(min(a, b), 1.0)
+        if long < 3.0 * short or long < 0.05 * size:
+            continue
+        if leaf_colour is not None and np.linalg.norm(np.median(lab[y : y + h, x : x + w][piece], axis=0) - leaf_colour) > 25.0:
+            continue
+        out[y : y + h, x : x + w][piece] = 255
+    return out
 
 
 def segment_leaf(img: np.ndarray, path: str = "image") -> np.ndarray:
     """Binary mask (uint8 0/255) of the one leaf in ``img`` (BGR or BGRA uint8).
 
     Uses the alpha channel when it is informative, else the Lab colour distance to the
-    background estimated from a border strip, thresholded with Otsu.  Thin clutter (graph
-    paper grid lines, specks) is removed by a small opening, small gaps are closed, the
-    largest component that does not run along the image border wins (a ruler or colour
-    chart lying at the edge loses), and its holes are filled.
+    background (estimated from a border strip, or from the corners when the leaf touches the
+    frame), thresholded with Otsu; cast shadows are background.  Thin clutter (graph paper
+    grid lines, specks) is removed by a small opening (a petiole it cuts off is given back),
+    small gaps are closed, the largest component that does not run along the image border wins
+    (a ruler or colour chart lying at the edge loses), and its holes are filled.
 
-    Raises LeafsimError ``<path>: no leaf found (...)`` when nothing leaf-sized stands out.
+    Raises LeafsimError ``<path>: no leaf found (...)`` when nothing leaf-sized stands out, and
+    ``<path>: ... leaf-sized regions`` when there is more than one leaf.
     """
     if img is None or img.ndim != 3 or img.shape[2] not in (3, 4):
         raise LeafsimError(f"{path}: no leaf found (expected a colour image)")
     h, w = img.shape[:2]
     diag = math.hypot(w, h)
-    fg = None
+    fg = lab = None
     if img.shape[2] == 4 and _alpha_informative(img[..., 3]):
         fg = np.where(img[..., 3] >= 128, 255, 0).astype(np.uint8)
         k_open = max(3, int(round(0.003 * diag)))
     if fg is None:
-        fg, spread = _colour_foreground(np.ascontiguousarray(img[..., :3]))
+        fg, spread, lab = _colour_foreground(np.ascontiguousarray(img[..., :3]), path)
         if not fg.any():
             raise LeafsimError(f"{path}: no leaf found (the image is blank: nothing differs from the background colour)")
         k_open = max(3, int(round(0.005 * diag)))
     k_close = max(3, int(round(0.006 * diag)))
-    fg = cv2.morphologyEx(fg, cv2.MORPH_OPEN, _disk(k_open))
-    fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, _disk(k_close))
+    opened = cv2.morphologyEx(fg, cv2.MORPH_OPEN, _disk(k_open))
+    leaf = _pick_leaf(cv2.morphologyEx(opened, cv2.MORPH_CLOSE, _disk(k_close)), path)
+    return _fill_holes(_restore_petiole(fg, opened, leaf, lab))
 
+
+def _pick_leaf(fg: np.ndarray, path: str) -> np.ndarray:
+    """The leaf component of a cleaned foreground mask (see :func:`segment_leaf`)."""
+    h, w = fg.shape
     n, lab, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
     if n <= 1:
         raise LeafsimError(f"{path}: no leaf found (no region stands out from the background)")
@@ -214,8 +305,7 @@ def segment_leaf(img: np.ndarray, path: str = "image") -> np.ndarray:
     min_area = MIN_LEAF_FRACTION * h * w
     # share of the image border each component covers
     border = np.concatenate([lab[0, :], lab[-1, :], lab[1:-1, 0], lab[1:-1, -1]])
-    border_count = np.bincount(border, minlength=n)[1:].astype(float)
-    border_frac = border_count / border.size
+    border_frac = np.bincount(border, minlength=n)[1:].astype(float) / border.size
     big = areas >= min_area
     if not big.any():
         raise LeafsimError(
@@ -223,9 +313,13 @@ def segment_leaf(img: np.ndarray, path: str = "image") -> np.ndarray:
             f"expected at least {100 * MIN_LEAF_FRACTION:g} %)")
     inner = big & (border_frac < 0.08)
     pool = inner if inner.any() else big
-    k = 1 + int(np.argmax(np.where(pool, areas, -1.0)))
-    mask = np.where(lab == k, 255, 0).astype(np.uint8)
-    return _fill_holes(mask)
+    ranked = np.argsort(np.where(pool, -areas, np.inf), kind="stable")
+    k = 1 + int(ranked[0])
+    if pool.sum() > 1 and areas[ranked[1]] >= SECOND_LEAF_FRACTION * areas[ranked[0]]:
+        raise LeafsimError(
+            f"{path}: found {int(np.count_nonzero(pool & (areas >= SECOND_LEAF_FRACTION * areas[ranked[0]])))} leaf-sized "
+            f"regions ({areas[ranked[0]]:.0f} and {areas[ranked[1]]:.0f} px); expected one leaf per photo (crop it to one leaf)")
+    return np.where(lab == k, 255, 0).astype(np.uint8)
 
 
 # ----------------------------------------------------------------------------- geometry helpers
@@ -327,32 +421,21 @@ def _width_across(P: np.ndarray, b: np.ndarray, a: np.ndarray, frac: float) -> f
 
 # ----------------------------------------------------------------------------- petiole / base
 
-def _find_petiole(mask: np.ndarray, scale: float):
-    """Detect the petiole as the longest thin protrusion that an opening removes.
+def _petiole_candidates(sm: np.ndarray, sscale: float):
+    """Thin protrusions of a leaf mask (scaled to a leaf size ``sscale`` ≈ 320 px) that an
+    opening with a disk of ≈ 6 % of the leaf size removes: attached to the opened blade,
+    sticking out at least one disk diameter, ≥ 2.5× longer than wide.
 
-    The opening (disk ≈ 6 % of the leaf size) runs on a copy of the mask scaled to a leaf size
-    of ~320 px; a removed piece attached to the opened blade that sticks out at least one disk
-    diameter and is ≥ 2.5× longer than wide is a petiole candidate, the longest/thinnest wins.
-    It is then cut at full resolution with a finer opening just wider than the petiole.
-
-    Returns (blade_mask, junction_xy, tip_xy) or None.
+    Returns (labels of the removed pieces, [(score, label, tip_xy, width, bbox), ...]).
     """
-    H, W = mask.shape
-    f = min(1.0, 320.0 / max(scale, 1.0))
-    sm = mask if f >= 1.0 else np.where(
-        cv2.resize(mask, (max(1, round(W * f)), max(1, round(H * f))), interpolation=cv2.INTER_AREA) >= 128, 255, 0
-    ).astype(np.uint8)
-    sscale = scale * f
     d = int(np.clip(0.06 * sscale, 7, 301))
     blade = _largest_component(cv2.morphologyEx(sm, cv2.MORPH_OPEN, _disk(d)))
-    if not blade.any():
-        return None
     removed = cv2.bitwise_and(sm, cv2.bitwise_not(blade))
-    if not removed.any():
-        return None
+    if not blade.any() or not removed.any():
+        return None, []
     dist_out = cv2.distanceTransform(cv2.bitwise_not(blade), cv2.DIST_L2, 5)
     n, lab, stats, _ = cv2.connectedComponentsWithStats(removed, connectivity=8)
-    best = None
+    found = []
     half = 0.5 * d
     for k in range(1, n):
         if stats[k, cv2.CC_STAT_AREA] < 6:
@@ -375,16 +458,41 @@ def _find_petiole(mask: np.ndarray, scale: float):
         width = max(2.0 * float(inner[ys[far] - y0, xs[far] - x0].max()), 1.0)
         elong = prot / width
         if _DEBUG:
-            print("petiole candidate", k, "prot", round(prot / f, 1), "width", round(width / f, 1),
-                  "elong", round(elong, 2), "at", xs[far].mean() / f, ys[far].mean() / f)
+            print("petiole candidate", k, "prot", round(prot, 1), "width", round(width, 1), "elong", round(elong, 2))
         if elong < 2.5:
             continue
         q = int(np.argmax(dv))
-        score = prot * min(elong, 10.0)
-        if best is None or score > best[0]:
-            best = (score, k, (xs[q], ys[q]), width, (x0, y0, x1, y1))
-    if best is None:
+        found.append((prot * min(elong, 10.0), k, (xs[q], ys[q]), width, (x0, y0, x1, y1)))
+    return lab, found
+
+
+def _find_petiole(mask: np.ndarray, scale: float, where: str = "image"):
+    """Detect the petiole as the longest thin protrusion that an opening removes.
+
+    Candidates come from :func:`_petiole_candidates` on a copy of the mask scaled to a leaf
+    size of ~320 px (so detection does not depend on the photo's resolution); the
+    longest/thinnest wins.  Two strong candidates (the second scoring ≥ 30 % of the first) are
+    two petioles: overlapping leaves, refused with a LeafsimError.  The winner is then cut at
+    full resolution with a finer opening just wider than the petiole.
+
+    Returns (blade_mask, junction_xy, tip_xy) or None.
+    """
+    H, W = mask.shape
+    f = min(1.0, 320.0 / max(scale, 1.0))
+    sm = mask if f >= 1.0 else np.where(
+        cv2.resize(mask, (max(1, round(W * f)), max(1, round(H * f))), interpolation=cv2.INTER_AREA) >= 128, 255, 0
+    ).astype(np.uint8)
+    lab, cands = _petiole_candidates(sm, scale * f)
+    if not cands:
         return None
+    cands.sort(key=lambda c: -c[0])
+    best = cands[0]
+    strong = [c for c in cands if c[0] >= 0.3 * best[0]]
+    if len(strong) > 1:
+        h, w = sm.shape
+        at = " and ".join(f"({100 * c[2][0] / w:.0f} %, {100 * c[2][1] / h:.0f} %)" for c in strong[:3])
+        raise LeafsimError(f"{where}: found {len(strong)} petioles, tips at {at} of the image width, height: "
+                           "overlapping leaves? (expected one leaf per photo)")
     _, k, (tx, ty), width, (x0, y0, x1, y1) = best
     tip = (np.array([tx, ty], float) + 0.5) / f - 0.5
     width_full = width / f
@@ -584,22 +692,55 @@ def _iou(poly: np.ndarray, mask: np.ndarray) -> float:
     return inter / union if union else 0.0
 
 
+def working_image(img: np.ndarray, max_pixels: int) -> tuple[np.ndarray, float]:
+    """``img`` downscaled (area averaging) to at most ``max_pixels`` pixels, and the factor f
+    (working = photo × f; 1.0 when it is small enough).  Segmenting a 20000×20000 photo at full
+    size takes minutes and >10 GB; the outline's accuracy needs far fewer pixels."""
+    h, w = img.shape[:2]
+    if h * w <= max_pixels:
+        return img, 1.0
+    f = math.sqrt(max_pixels / float(h * w))
+    size = (max(8, int(w * f)), max(8, int(h * f)))
+    small = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+    return small, size[0] / float(w)
+
+
 def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = None,
                   base_px=None, apex_px=None) -> TracedOutline:
     """Trace the outline of the one leaf in the photo at ``path``.
 
     ``params`` (a ParamSet or a mapping of overrides) supplies ``outline.simplify``
-    (Douglas–Peucker tolerance × image diagonal), ``outline.points`` (resample count) and
-    ``outline.lobe_depth`` (× leaf length).  ``base_px`` / ``apex_px`` (photo pixels, e.g.
-    from the species config) override detection.  A petiole sticking out of the blade is
-    detected; the base is its junction with the blade and it is cut off the outline.
+    (Douglas–Peucker tolerance × image diagonal), ``outline.points`` (resample count),
+    ``outline.lobe_depth`` (× leaf length) and ``limits.image_pixels`` (larger photos are
+    traced on a downscaled copy; every coordinate returned is in photo pixels, the mask is at
+    the working resolution, ``work_scale`` says which).  ``base_px`` / ``apex_px`` (photo
+    pixels, e.g. from the species config) override detection.  A petiole sticking out of the
+    blade is detected; the base is its junction with the blade and it is cut off the outline.
     """
     import time
 
     t0 = time.perf_counter()
     p = _params(params)
     where = str(path)
-    img = load_image(path)
+    full = load_image(path)
+    h, w = full.shape[:2]
+    img, f = working_image(full, int(p["limits.image_pixels"]))
+    del full
+    to_work = lambda q: None if q is None else (np.asarray(q, float).reshape(2) + 0.5) * f - 0.5  # noqa: E731
+    t = _trace(img, p, where, to_work(base_px), to_work(apex_px))
+    if f != 1.0:
+        back = lambda q: None if q is None else (np.asarray(q, float) + 0.5) / f - 0.5  # noqa: E731
+        t.contour_px, t.lobes_px, t.petiole_px = back(t.contour_px), back(t.lobes_px), back(t.petiole_px)
+        t.base_px = np.asarray(base_px, float).reshape(2) if base_px is not None else back(t.base_px)
+        t.apex_px = np.asarray(apex_px, float).reshape(2) if apex_px is not None else back(t.apex_px)
+        t.area_px /= f * f
+    t.image_size, t.work_scale = (int(w), int(h)), f
+    t.seconds = time.perf_counter() - t0
+    return t
+
+
+def _trace(img: np.ndarray, p: ParamSet, where: str, base_px, apex_px) -> TracedOutline:
+    """:func:`trace_outline` on an image in memory (all coordinates in its pixels)."""
     h, w = img.shape[:2]
     diag = math.hypot(w, h)
     mask = segment_leaf(img, where)
@@ -610,7 +751,7 @@ def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = No
     method = "given"
     detected_base = None
     if base_px is None:
-        found = _find_petiole(mask, scale)
+        found = _find_petiole(mask, scale, where)
         if found is not None:
             blade, junction, tip = found
             if np.count_nonzero(blade) > 0.8 * area:
@@ -655,18 +796,10 @@ def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = No
         k = np.argmin(np.linalg.norm(contour[None, :, :] - tips[:, None, :], axis=2), axis=1)
         tips = contour[np.unique(k)]
     return TracedOutline(
-        mask=mask,
-        contour_px=contour,
-        area_px=area,
-        base_px=base,
-        apex_px=apex,
-        lobes_px=np.asarray(tips, float).reshape(-1, 2),
-        iou=_iou(contour, mask),
-        image_size=(int(w), int(h)),
-        path=where,
-        petiole_px=petiole,
-        base_method=method,
-        seconds=time.perf_counter() - t0,
+        mask=mask, contour_px=contour, area_px=area, base_px=base, apex_px=apex,
+        lobes_px=np.asarray(tips, float).reshape(-1, 2), iou=_iou(contour, mask), image_size=(int(w), int(h)),
+        path=where, petiole_px=petiole, base_method=method,
+        border_fraction=float(np.mean(np.concatenate([mask[0], mask[-1], mask[1:-1, 0], mask[1:-1, -1]]) > 0)),
     )
 
 
@@ -735,6 +868,8 @@ def outline_report(traced: TracedOutline) -> dict:
         "base_method": traced.base_method,
         "petiole": None if traced.petiole_px is None else [r2(q) for q in traced.petiole_px],
         "iou": round(float(traced.iou), 5),
+        "work_scale": round(float(traced.work_scale), 6),
+        "border_fraction": round(float(traced.border_fraction), 5),
         "seconds": round(float(traced.seconds), 4),
     }
 

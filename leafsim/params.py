@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 from .errors import LeafsimError
 
@@ -63,26 +63,26 @@ class Param:
                 return value.lower() in ("true", "1", "on", "yes")
             if isinstance(value, (int, float)) and value in (0, 1):
                 return bool(value)
-            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}")
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
         if self.kind == "choice":
             if isinstance(value, str) and value in self.choices:
                 return value
-            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}")
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
         # numbers
         if isinstance(value, bool):
-            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}")
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
         try:
             num = float(value)
-        except (TypeError, ValueError):
-            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}") from None
+        except (TypeError, ValueError, OverflowError):
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}") from None
         if not math.isfinite(num):
-            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected a finite {expect}")
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected a finite {expect}")
         if self.kind == "int":
             if num != int(num):
-                raise LeafsimError(f"{at}parameter '{self.name}' = {value!r}: expected {expect}")
+                raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
             num = int(num)
         if (self.lo is not None and num < self.lo) or (self.hi is not None and num > self.hi):
-            raise LeafsimError(f"{at}parameter '{self.name}' = {value!r} is out of range: expected {expect}")
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)} is out of range: expected {expect}")
         return num
 
     def describe(self) -> str:
@@ -92,6 +92,12 @@ class Param:
             return "one of " + ", ".join(self.choices)
         unit = f" {self.unit}" if self.unit else ""
         return f"{'an integer' if self.kind == 'int' else 'a number'} in [{self.lo:g}, {self.hi:g}]{unit}"
+
+
+def show(value: Any, limit: int = 40) -> str:
+    """repr of a user-given value, shortened so that a message stays one short line."""
+    r = repr(value)
+    return r if len(r) <= limit else r[: limit - 3] + "..."
 
 
 _DECL: list[Param] = []
@@ -255,8 +261,54 @@ _f("render.translucency", 0.35, 0.0, 1.0, "", "Back-lit translucency of the blad
 _f("render.specular", 0.25, 0.0, 1.0, "", "Specular strength of the blade.", G, False)
 _b("render.texture", True, "Use the species photo as the blade's albedo when the species has one.", G, False)
 
+# ---------------------------------------------------------------- resource limits (rebuild)
+# Guards against parameter combinations or inputs that would take minutes or gigabytes; each
+# error names the limit, so a user who means it can raise it deliberately with --set.
+G = "Limits"
+_i("limits.max_particles", 200_000, 1_000, 50_000_000, "", "Largest blade model (both layers) the builder makes; the count is estimated from outline area / spacing² before anything is built.", G, True)
+_i("limits.vein_tests", 100_000_000, 100_000, 1_000_000_000, "", "Budget of segment-against-segment collision tests while growing the venation (about 10 million per second here); growth stops with an error past it.", G, True)
+_i("limits.image_pixels", 4_000_000, 10_000, 1_000_000_000, "px", "Photos with more pixels are traced on a copy downscaled to this many (coordinates stay in photo pixels).", G, True)
+
 PARAMS: dict[str, Param] = {p.name: p for p in _DECL}
 GROUPS: list[str] = list(dict.fromkeys(p.group for p in _DECL))
+
+
+# ---------------------------------------------------------------- joint constraints
+# Constraints between several parameters, declared once here (after the per-parameter
+# declarations).  ParamSet checks every one after coercing the single values; the error
+# names every key with its value and says which values are still the declared defaults.
+
+@dataclass(frozen=True)
+class Joint:
+    """A constraint over several declared parameters.
+
+    keys : the parameters involved, in the order ``holds`` takes their values.
+    holds : predicate over the values.
+    rule : the rule as shown to users, e.g. ``"dynamics.collision_radius < dynamics.collision_skip"``.
+    """
+
+    keys: tuple[str, ...]
+    holds: Callable[..., bool]
+    rule: str
+
+    def violation(self, values: Mapping[str, Any]) -> str | None:
+        """One-line description of a violation by ``values``, or None when it holds."""
+        vals = [values[k] for k in self.keys]
+        if self.holds(*vals):
+            return None
+        parts = []
+        for k, v in zip(self.keys, vals):
+            default = " (default)" if v == PARAMS[k].default else ""
+            parts.append(f"'{k}' = {v:g}{default}" if isinstance(v, (int, float)) and not isinstance(v, bool)
+                         else f"'{k}' = {show(v)}{default}")
+        return f"parameters {' and '.join(parts)} break the rule {self.rule} (set them together)"
+
+
+JOINTS: list[Joint] = [
+    # a pair closer than the contact radius at rest would start in contact and push the sheet apart
+    Joint(("dynamics.collision_radius", "dynamics.collision_skip"), lambda rad, skip: rad < skip,
+          "dynamics.collision_radius < dynamics.collision_skip"),
+]
 
 
 def unknown_key_message(key: str, where: str = "") -> str:
@@ -292,6 +344,10 @@ class ParamSet(Mapping[str, Any]):
             if key not in PARAMS:
                 raise LeafsimError(unknown_key_message(key, where))
             vals[key] = PARAMS[key].coerce(value, where)
+        for joint in JOINTS:
+            bad = joint.violation(vals)
+            if bad:
+                raise LeafsimError(f"{where + ': ' if where else ''}{bad}")
         self._values = vals
 
     def __getitem__(self, key: str) -> Any:
@@ -337,7 +393,7 @@ def parse_set_args(items: Iterable[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for item in items or ():
         if "=" not in item:
-            raise LeafsimError(f"--set {item!r}: expected KEY=VALUE, e.g. --set osmosis.diffusion=1e-3")
+            raise LeafsimError(f"--set {show(item, 60)}: expected KEY=VALUE, e.g. --set osmosis.diffusion=1e-3")
         key, value = item.split("=", 1)
         key = key.strip()
         if key not in PARAMS:
@@ -356,5 +412,9 @@ def markdown_table() -> str:
                 continue
             rng = ", ".join(p.choices) if p.kind == "choice" else ("true/false" if p.kind == "bool" else f"{p.lo:g} … {p.hi:g}")
             lines.append(f"| `{p.name}` | {p.default} | {rng} | {p.unit} | {'yes' if p.rebuild else 'live'} | {p.help} |")
+        lines.append("")
+    if JOINTS:
+        lines += ["## Joint constraints", "", "Checked after the single values (species values and `--set` together):", ""]
+        lines += [f"- {j.rule}" for j in JOINTS]
         lines.append("")
     return "\n".join(lines)

@@ -177,7 +177,7 @@ class Session:
         if sp.image is not None:
             stage(0.97, "photo: loading the species photo")
             try:
-                photo = load_photo_rgba(sp.image)
+                photo = load_photo_rgba(sp.image, params["limits.image_pixels"])
             except LeafsimError as e:
                 photo_error = str(e)
         stage(0.98, "simulator: preparing the stages")

@@ -20,7 +20,9 @@ import numpy as np
 
 from . import ROOT
 from .errors import LeafsimError
+from .geometry import outline_problem, targets_problem
 from .params import ParamSet
+from .params import show as _show
 
 DEFAULT_CONFIG = ROOT / "configs" / "leaves.json"
 DEFAULT_SPECIES = "maple"
@@ -53,6 +55,11 @@ class Species:
     params: ParamSet
     description: str = ""
     overrides: dict = field(default_factory=dict)
+    config: Path | None = None  # the config file the entry came from (for error messages)
+
+    def error(self, key: str | None, msg: str) -> LeafsimError:
+        """A one-line error naming this entry's config file, the species and ``key``."""
+        return _err(self.config or Path("(config)"), self.key, key, msg)
 
     @property
     def has_photo(self) -> bool:
@@ -83,8 +90,8 @@ def _err(path: Path, species: str | None, key: str | None, msg: str) -> LeafsimE
 def _points(path, sp, key, value, min_len=1) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise _err(path, sp, key, "expected a list of [x, y] number pairs") from None
+    except (TypeError, ValueError, OverflowError):
+        raise _err(path, sp, key, "expected a list of [x, y] pairs of finite numbers") from None
     if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < min_len or not np.isfinite(arr).all():
         raise _err(path, sp, key, f"expected a list of at least {min_len} [x, y] number pairs")
     return arr
@@ -100,19 +107,42 @@ def _pair(path, sp, key, value):
 def load_library(path: str | Path | None = None) -> dict[str, Species]:
     """Load and validate every species of a config file."""
     path = Path(path) if path is not None else DEFAULT_CONFIG
+    if path.is_dir():
+        raise LeafsimError(f"{path}: species config is a folder, expected a JSON file")
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise LeafsimError(f"{path}: species config not found") from None
     except OSError as e:
-        raise LeafsimError(f"{path}: cannot read species config ({e.strerror})") from None
+        raise LeafsimError(f"{path}: cannot read species config ({e.strerror or e})") from None
     try:
-        data = json.loads(text)
+        data = json.loads(_utf8_text(path, raw))
     except json.JSONDecodeError as e:
         raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    except RecursionError:
+        raise LeafsimError(f"{path}: malformed JSON: nested too deeply (expected the species object of leafsim)") from None
     if not isinstance(data, dict) or not isinstance(data.get("species"), dict) or not data["species"]:
         raise LeafsimError(f"{path}: expected an object with a non-empty 'species' object")
-    return {k: _parse_entry(path, k, v) for k, v in data["species"].items()}
+    return {_check_key(path, k): _parse_entry(path, k, v) for k, v in data["species"].items()}
+
+
+def _utf8_text(path: Path, raw: bytes) -> str:
+    """The config's text: UTF-8 (a UTF-8 byte-order mark is allowed), else a one-line error."""
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise LeafsimError(f"{path}: species config is UTF-16 text, expected UTF-8 (save it as UTF-8)")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise LeafsimError(f"{path}: species config is not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); "
+                           "expected a UTF-8 JSON file") from None
+
+
+def _check_key(path: Path, key: str) -> str:
+    """Species keys are printable names (they appear in messages and on the command line)."""
+    if not key or not key.isprintable() or key != key.strip():
+        raise LeafsimError(f"{path}: species key {_show(key)}: expected a printable name without control characters "
+                           "or surrounding spaces")
+    return key
 
 
 def _parse_entry(path: Path, key: str, e: Any) -> Species:
@@ -123,7 +153,10 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
         raise _err(path, key, sorted(unknown)[0], f"unknown key (expected one of {', '.join(sorted(_ENTRY_KEYS))})")
     length = e.get("length_m")
     if isinstance(length, bool) or not isinstance(length, (int, float)) or not (0.005 <= length <= 2.0):
-        raise _err(path, key, "length_m", f"expected the real leaf length in metres in [0.005, 2], got {length!r}")
+        raise _err(path, key, "length_m", f"expected the real leaf length in metres in [0.005, 2], got {_show(length)}")
+    for k in ("name", "latin", "description", "photo_note"):
+        if k in e and not isinstance(e[k], str):
+            raise _err(path, key, k, f"expected a text string, got {_show(e[k])}")
 
     image = None
     if e.get("image") is not None:
@@ -133,33 +166,21 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
         if not image.is_absolute():
             base_dir = path.parent.parent if path.parent.name == "configs" else path.parent
             image = (base_dir / image).resolve()
+        if image.is_dir():
+            raise _err(path, key, "image", f"photo {image} is a folder, expected an image file")
         if not image.is_file():
             raise _err(path, key, "image", f"photo {image} not found")
 
-    outline_pts, smooth, teeth = None, 0, None
-    if "outline" in e:
-        o = e["outline"]
-        if not isinstance(o, dict) or "points" not in o:
-            raise _err(path, key, "outline", "expected an object with 'points' (leaf-normalised [x, y] pairs)")
-        bad = set(o) - _OUTLINE_KEYS
-        if bad:
-            raise _err(path, key, f"outline.{sorted(bad)[0]}", f"unknown key (expected {', '.join(sorted(_OUTLINE_KEYS))})")
-        outline_pts = _points(path, key, "outline.points", o["points"], 3)
-        smooth = o.get("smooth", 0)
-        if isinstance(smooth, bool) or not isinstance(smooth, int) or not 0 <= smooth <= 6:
-            raise _err(path, key, "outline.smooth", "expected an integer 0–6 (Chaikin smoothing passes)")
-        if o.get("teeth") is not None:
-            teeth = o["teeth"]
-            if not isinstance(teeth, dict) or set(teeth) - _TEETH_KEYS:
-                raise _err(path, key, "outline.teeth", "expected {count, depth, skip_base}")
-            c, d = teeth.get("count", 0), teeth.get("depth", 0.0)
-            if not isinstance(c, int) or not 0 <= c <= 400 or not isinstance(d, (int, float)) or not 0 <= d <= 0.2:
-                raise _err(path, key, "outline.teeth", "expected count 0–400 and depth 0–0.2")
+    outline_pts, smooth, teeth = _outline(path, key, e["outline"]) if "outline" in e else (None, 0, None)
     if image is None and outline_pts is None:
         raise _err(path, key, None, "needs either 'image' (a photo) or 'outline' (drawn points)")
 
     targets = e.get("targets", "auto")
     targets = None if targets == "auto" else _points(path, key, "targets", targets, 1)
+    if targets is not None and outline_pts is not None:
+        problem = targets_problem(targets, outline_pts, 1.0)
+        if problem:
+            raise _err(path, key, "targets", problem)
     origin = e.get("main_origin", "base")
     if origin not in ("base", "midrib"):
         raise _err(path, key, "main_origin", f"expected 'base' or 'midrib', got {origin!r}")
@@ -187,7 +208,45 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
         params=params,
         description=str(e.get("description", "")),
         overrides=dict(overrides),
+        config=path,
     )
+
+
+def _outline(path: Path, key: str, o: Any) -> tuple[np.ndarray, int, dict | None]:
+    """Validated drawn ``outline``: (points, smoothing passes, teeth or None)."""
+    if not isinstance(o, dict) or "points" not in o:
+        raise _err(path, key, "outline", "expected an object with 'points' (leaf-normalised [x, y] pairs)")
+    bad = set(o) - _OUTLINE_KEYS
+    if bad:
+        raise _err(path, key, f"outline.{sorted(bad)[0]}", f"unknown key (expected {', '.join(sorted(_OUTLINE_KEYS))})")
+    pts = _points(path, key, "outline.points", o["points"], 3)
+    smooth = o.get("smooth", 0)
+    if isinstance(smooth, bool) or not isinstance(smooth, int) or not 0 <= smooth <= 6:
+        raise _err(path, key, "outline.smooth", "expected an integer 0–6 (Chaikin smoothing passes)")
+    problem = outline_problem(pts, (0.0, 0.0), (0.0, 1.0))
+    if problem:
+        raise _err(path, key, "outline.points", f"the outline {problem}")
+    teeth = _teeth(path, key, o["teeth"]) if o.get("teeth") is not None else None
+    return pts, smooth, teeth
+
+
+#: declared ranges of the ``outline.teeth`` keys: (kind, lo, hi, default)
+_TEETH = {"count": (int, 0, 400, 0), "depth": (float, 0.0, 0.2, 0.0), "skip_base": (float, 0.0, 1.0, 0.15)}
+
+
+def _teeth(path: Path, key: str, teeth: Any) -> dict:
+    """Validated ``outline.teeth``: count (integer 0–400), depth and skip_base (leaf units)."""
+    if not isinstance(teeth, dict) or set(teeth) - _TEETH_KEYS:
+        raise _err(path, key, "outline.teeth", "expected an object with count, depth and skip_base")
+    out = {}
+    for name, (kind, lo, hi, default) in _TEETH.items():
+        v = teeth.get(name, default)
+        ok = not isinstance(v, bool) and isinstance(v, int if kind is int else (int, float)) and lo <= v <= hi
+        if not ok:
+            what = "an integer" if kind is int else "a number"
+            raise _err(path, key, f"outline.teeth.{name}", f"expected {what} in [{lo:g}, {hi:g}], got {_show(v)}")
+        out[name] = kind(v)
+    return out
 
 
 def get_species(name: str, path: str | Path | None = None) -> Species:
@@ -225,7 +284,7 @@ def add_teeth(pts: np.ndarray, count: int, depth: float, skip_base: float = 0.15
     """Serrate a closed leaf-normalised polygon: ``count`` teeth of ``depth`` along the margin.
 
     Teeth are saw-shaped (pointing toward the apex); the margin within ``skip_base`` of the
-    base stays entire.
+    base and the tip (within 0.06 of the apex) stay entire.
     """
     from .geometry import resample_closed, polygon_area
 
@@ -244,6 +303,8 @@ def add_teeth(pts: np.ndarray, count: int, depth: float, skip_base: float = 0.15
     saw = np.where(phase < 0.7, phase / 0.7, (1 - phase) / 0.3)  # slow rise, sharp drop
     keep = np.linalg.norm(p, axis=1) > skip_base
     fade = np.clip((np.linalg.norm(p, axis=1) - skip_base) / 0.1, 0, 1) * keep
+    # the tip stays entire too: inward offsets at a sharp apex would make the margin cross itself
+    fade *= np.clip(np.linalg.norm(p - (0.0, 1.0), axis=1) / 0.06, 0, 1)
     return p - nrm * (depth * (1 - saw) * fade)[:, None]
 
 

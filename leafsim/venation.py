@@ -65,10 +65,12 @@ from scipy.spatial import ConvexHull, cKDTree  # noqa: E402
 
 from .geometry import (  # noqa: E402
     LeafShape,
+    crossing_pairs,
     points_in_polygon,
     ray_polygon_hit,
     segment_hits,
 )
+from .errors import LeafsimError  # noqa: E402
 from .params import ParamSet  # noqa: E402
 
 
@@ -178,6 +180,20 @@ class _Grower:
         self.CQ = np.roll(self.C, -1, axis=0)
         self.P = np.empty((0, 2))
         self.Q = np.empty((0, 2))
+        self.budget = int(params["limits.vein_tests"])
+        self.tests = 0
+
+    # -- work budget: growth cost is dominated by segment-against-segment tests
+    def charge(self, n: int) -> None:
+        """Count ``n`` collision tests; past ``limits.vein_tests`` stop with a one-line error."""
+        self.tests += n
+        if self.tests > self.budget:
+            p = self.p
+            raise LeafsimError(
+                f"veins: growing this venation needs more than limits.vein_tests = {self.budget:,} collision tests "
+                f"(veins.main.step = {p['veins.main.step']:g}, veins.lateral.step = {p['veins.lateral.step']:g}, "
+                f"veins.lateral.spacing = {p['veins.lateral.spacing']}, veins.sub.divisions = {p['veins.sub.divisions']} "
+                "are very fine for this outline); coarsen them, or raise limits.vein_tests to wait longer")
 
     # -- obstacle bookkeeping
     def add(self, pts: np.ndarray):
@@ -186,21 +202,23 @@ class _Grower:
             self.Q = np.vstack([self.Q, pts[1:]])
 
     def blocked(self, a: np.ndarray, b: np.ndarray) -> bool:
+        self.charge(2 * len(self.CP) + len(self.P))
         if len(segment_hits(a, b, self.CP, self.CQ)):
             return True
         if len(segment_hits(a, b, self.P, self.Q)):
             return True
         return not points_in_polygon(((a + b) / 2)[None], self.C)[0]
 
-    @staticmethod
-    def _self_hit(pts: list, a: np.ndarray, b: np.ndarray) -> bool:
+    def _self_hit(self, pts: list, a: np.ndarray, b: np.ndarray) -> bool:
         """Would segment ab cross the growing vein's own earlier segments?"""
         if len(pts) < 3:
             return False
+        self.charge(len(pts))
         arr = np.asarray(pts[:-1])
         return len(segment_hits(a, b, arr[:-1], arr[1:])) > 0
 
     def first_hit(self, a: np.ndarray, b: np.ndarray, skip_contour=False) -> float | None:
+        self.charge(len(self.P) + (0 if skip_contour else len(self.CP)))
         t = segment_hits(a, b, self.P, self.Q)
         if not skip_contour:
             t = np.concatenate([t, segment_hits(a, b, self.CP, self.CQ)])
@@ -468,6 +486,7 @@ def grow_veins(
                         length *= th * 0.8
                     if length < 2 * lstep:
                         continue
+                    g.charge(len(lat_lines))
                     if any(_proper(pts[i], tgt, a, b) for a, b in lat_lines):
                         continue  # start–target line test (thesis §3.3)
                     # arching laterals leave the main vein more steeply and bend toward the apex
@@ -547,6 +566,7 @@ def grow_veins(
             graph.veins.append(Vein(NET, nv, _widths(nv, float(allw[j]) * p["veins.net.width"], taper), int(alli[j]), q))
 
     graph.stats = vein_stats(graph, shape, main_targets, auto)
+    graph.stats["collision_tests"] = g.tests
     return graph
 
 
@@ -557,22 +577,7 @@ def _proper(p1, p2, q1, q2) -> bool:
 def count_crossings(graph: VeinGraph) -> int:
     """Number of proper intersections between vein segments (shared end points do not count)."""
     P, Q, _ = graph.segments()
-    n = len(P)
-    total = 0
-    eps = 1e-9
-    for k in range(0, n, 256):
-        a, b = P[k : k + 256, None, :], Q[k : k + 256, None, :]
-        r = b - a
-        s = (Q - P)[None]
-        qp = P[None] - a
-        denom = r[..., 0] * s[..., 1] - r[..., 1] * s[..., 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (qp[..., 0] * s[..., 1] - qp[..., 1] * s[..., 0]) / denom
-            u = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
-        hit = (np.abs(denom) > 1e-18) & (t > eps) & (t < 1 - eps) & (u > eps) & (u < 1 - eps)
-        i = np.arange(k, min(k + 256, n))[:, None]
-        total += int(np.count_nonzero(hit & (np.arange(n)[None] > i)))
-    return total
+    return len(crossing_pairs(P, Q))
 
 
 def outside_length(graph: VeinGraph, contour: np.ndarray, samples: int = 8) -> float:

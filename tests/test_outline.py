@@ -253,3 +253,113 @@ def test_no_leaf(kind, tmp_path):
     with pytest.raises(LeafsimError, match="no leaf found") as e:
         trace_outline(p)
     assert str(p) in str(e.value)
+
+
+# ------------------------------------------------------------------ photos that used to trace wrong (issue 9.4)
+
+from _leafimg import GREEN, PAPER, draw_leaf, iou as mask_iou, mask_of, petiole_line, photo  # noqa: E402
+
+
+def _trace_img(tmp_path, img, name="leaf.png", **params):
+    p = tmp_path / name
+    cv2.imwrite(str(p), img)
+    return trace_outline(p, params or None)
+
+
+@pytest.mark.parametrize("size,pixels", [(800, 10**9), (2400, 10**9), (4200, 4_000_000)])
+def test_petiole_found_at_every_resolution(tmp_path, size, pixels):
+    """An obovate leaf (its shape alone points the wrong way) keeps its base at the petiole at
+    any size, traced at full resolution or downscaled; a thin petiole used to vanish in the
+    clean-up opening from ~2000 px on, and base and apex swapped."""
+    img, _ = photo(size, obovate=True, petiole_width=0.006)
+    t = _trace_img(tmp_path, img, **{"limits.image_pixels": pixels})
+    junction, tip, _ = petiole_line(size)
+    assert t.base_method == "petiole"
+    assert np.linalg.norm(t.base_px - junction) < 0.01 * size
+    assert t.apex_px[1] < 0.2 * size  # the apex is at the top
+    x, y = (np.array([tip[0], tip[1] - 0.02 * size]) * t.work_scale).astype(int)
+    assert t.mask[y, x] == 0  # the petiole is cut off the blade (mask at the working size)
+
+
+def test_large_photo_traced_downscaled_in_photo_pixels(tmp_path):
+    size = 3000
+    img, poly = photo(size)
+    t = _trace_img(tmp_path, img, **{"limits.image_pixels": 1_000_000})
+    assert 0.3 < t.work_scale < 0.34 and t.image_size == (size, size)
+    assert t.mask.shape == (round(size * t.work_scale),) * 2
+    junction = petiole_line(size)[0]
+    assert np.linalg.norm(t.base_px - junction) < 0.005 * size
+    true_area = cv2.contourArea(poly.astype(np.float32))
+    assert abs(t.area_px / true_area - 1) < 0.01
+    assert mask_iou(mask_of(t.contour_px, img.shape), mask_of(poly, img.shape)) > 0.98
+
+
+def test_downscaled_trace_matches_full_resolution_on_a_photo():
+    """Accuracy of the downscale: the oak photo (480×880) traced at 100 k pixels (×0.49)
+    against full resolution."""
+    full = trace_outline(IMG / "quercus_01.png")
+    small = trace_outline(IMG / "quercus_01.png", {"limits.image_pixels": 100_000})
+    assert small.work_scale < 0.5 and full.work_scale == 1.0
+    shape = (880, 480)
+    assert mask_iou(mask_of(full.contour_px, shape), mask_of(small.contour_px, shape)) > 0.99
+    assert np.linalg.norm(full.base_px - small.base_px) < 0.01 * full.length_px
+    assert np.linalg.norm(full.apex_px - small.apex_px) < 0.01 * full.length_px
+
+
+def test_leaf_running_off_all_four_borders(tmp_path):
+    """The border strip is mostly leaf, so its median colour is the leaf's: the background is
+    taken from the corners (the old tracer outlined a background corner)."""
+    size = 800
+    img = np.zeros((size, size, 3), np.uint8)
+    img[:] = PAPER
+    poly = draw_leaf(img, petiole=0, centre=(0.5, 0.5), length=1.3, width=1.3)
+    t = _trace_img(tmp_path, img)
+    assert mask_iou(t.mask, mask_of(poly, img.shape)) > 0.99
+    assert t.border_fraction > 0.5  # reported: the frame cuts the leaf
+    assert outline_report(t)["border_fraction"] == round(t.border_fraction, 5)
+
+
+@pytest.mark.parametrize("bg", [PAPER, (60, 170, 230), (200, 200, 200)])
+def test_cast_shadow_is_background(tmp_path, bg):
+    img, poly = photo(800, bg=bg, shadow=0.05)
+    t = _trace_img(tmp_path, img)
+    true_area = cv2.contourArea(poly.astype(np.float32))
+    assert abs(t.area_px / true_area - 1) < 0.03  # the shadow used to add ≈ 22 %
+    assert mask_iou(t.mask, mask_of(poly, img.shape)) > 0.97
+
+
+def test_dark_grey_leaf_is_not_taken_for_a_shadow(tmp_path):
+    img, poly = photo(600, colour=(70, 70, 70))
+    t = _trace_img(tmp_path, img)
+    assert mask_iou(t.mask, mask_of(poly, img.shape)) > 0.97
+
+
+def test_two_leaves_refused(tmp_path):
+    img = np.zeros((800, 800, 3), np.uint8)
+    img[:] = PAPER
+    draw_leaf(img, centre=(0.28, 0.45), length=0.5, width=0.25)
+    draw_leaf(img, centre=(0.72, 0.45), length=0.45, width=0.22)
+    with pytest.raises(LeafsimError, match="found 2 leaf-sized regions.*expected one leaf per photo") as e:
+        _trace_img(tmp_path, img)
+    assert "\n" not in str(e.value)
+
+
+def test_small_second_object_is_ignored(tmp_path):
+    img, poly = photo(800)
+    cv2.circle(img, (700, 700), 30, GREEN, -1)  # a leaf fragment far smaller than the leaf
+    t = _trace_img(tmp_path, img)
+    assert mask_iou(t.mask, mask_of(poly, img.shape)) > 0.97
+
+
+def test_overlapping_leaves_refused(tmp_path, capsys):
+    img = np.zeros((800, 800, 3), np.uint8)
+    img[:] = PAPER
+    draw_leaf(img, centre=(0.4, 0.45), length=0.5, width=0.3, angle=20)
+    draw_leaf(img, centre=(0.6, 0.5), length=0.5, width=0.3, angle=-25)
+    p = tmp_path / "pair.png"
+    cv2.imwrite(str(p), img)
+    from leafsim.cli import main
+
+    assert main(["outline", str(p)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "found 2 petioles" in err and str(p) in err

@@ -62,3 +62,10 @@ def test_markdown_lists_every_parameter():
     md = markdown_table()
     for name in PARAMS:
         assert f"`{name}`" in md
+
+
+def test_integer_ranges_fit_an_int_slider():
+    """The GUI's integer slider (imgui) takes ranges within ±(2³¹−1)/2 only (it aborts otherwise)."""
+    for p in PARAMS.values():
+        if p.kind == "int":
+            assert -(2**31 - 1) // 2 <= p.lo < p.hi <= (2**31 - 1) // 2, p.name

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -38,13 +39,65 @@ def frame_stats(model: Model, state: State, ms: dict, sim: Simulator | None = No
     return out
 
 
+class StatsStream:
+    """Per-frame statistics as JSON lines, written and flushed frame by frame, so that a run
+    killed at any moment (even SIGKILL) keeps every frame it finished.
+
+    ``keep_until``: continue an earlier file (``--resume``): its lines up to that frame are kept
+    (the rest, computed after the checkpoint, are dropped; they are computed again), then new
+    lines are appended.  Without it the file is started afresh.  Errors name the path.
+    """
+
+    def __init__(self, path, keep_until: int | None = None):
+        self.path = Path(path)
+        try:
+            if keep_until is not None:
+                self._keep(keep_until)
+                self.f = open(self.path, "a", encoding="utf-8")
+            else:
+                self.f = open(self.path, "w", encoding="utf-8")
+        except OSError as e:
+            raise LeafsimError(f"--stats {self.path}: cannot write statistics ({e.strerror or e})") from None
+
+    def _keep(self, frame: int) -> None:
+        kept = []
+        if self.path.exists():
+            for line in self.path.read_text(encoding="utf-8", errors="replace").splitlines():
+                try:
+                    st = json.loads(line)
+                except ValueError:
+                    break  # a line cut by a kill
+                if not isinstance(st, dict) or st.get("frame", frame + 1) > frame:
+                    break
+                kept.append(line + "\n")
+        atomic_write_bytes(self.path, "".join(kept).encode(), "statistics")
+
+    def write(self, st: dict) -> None:
+        self.f.write(json.dumps(st, sort_keys=True) + "\n")
+        self.f.flush()
+
+    def close(self) -> None:
+        if not self.f.closed:
+            self.f.flush()
+            os.fsync(self.f.fileno())
+            self.f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
 def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stats_path=None, on_frame=None,
-                 seed: int = 0, state: State | None = None, simulator: Simulator | None = None):
+                 seed: int = 0, state: State | None = None, simulator: Simulator | None = None, stats_stream=None):
     """Simulate ``frames`` frames with one :class:`Simulator`; returns (state, stats list).
 
     ``effects``: iterable of effect names (default: the ``effects.*`` parameters).
-    ``stats_path``: write the stats as JSON lines (atomically, at the end).
-    ``on_frame(frame, state, stats)``: called after every frame; return False to stop.
+    ``stats_path``: stream the stats there as JSON lines (:class:`StatsStream`, flushed every
+    frame); or ``stats_stream``: an open :class:`StatsStream` to write to (left open).
+    ``on_frame(frame, state, stats)``: called after every frame (after its stats line is
+    written); return False to stop.
     ``seed``: colour variation of the fresh leaf; ``state``: continue from this state instead
     of a fresh leaf; ``simulator``: use this one (made for ``model``/``params``) instead of a new one.
     """
@@ -52,17 +105,23 @@ def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stat
         raise LeafsimError(f"run: frames = {frames} must be ≥ 0")
     sim = simulator if simulator is not None else Simulator(model, params, effects, seed=seed)
     state = sim.state() if state is None else state
+    own = StatsStream(stats_path) if stats_path and stats_stream is None else None
+    stream = stats_stream or own
     stats = []
-    for _ in range(frames):
-        ms = sim.step(state)
-        st = frame_stats(model, state, ms, sim)
-        stats.append(st)
-        if on_frame is not None and on_frame(state.frame, state, st) is False:
-            break
-        if st["nan"]:
-            break
-    if stats_path:
-        atomic_write_bytes(stats_path, "".join(json.dumps(s, sort_keys=True) + "\n" for s in stats).encode(), "statistics")
+    try:
+        for _ in range(frames):
+            ms = sim.step(state)
+            st = frame_stats(model, state, ms, sim)
+            stats.append(st)
+            if stream is not None:
+                stream.write(st)
+            if on_frame is not None and on_frame(state.frame, state, st) is False:
+                break
+            if st["nan"]:
+                break
+    finally:
+        if own is not None:
+            own.close()
     return state, stats
 
 
