@@ -61,3 +61,22 @@ def write_png_atomic(path: str | os.PathLike, img: np.ndarray, rgb: bool = False
     if not ok:
         raise LeafsimError(f"{path}: cannot encode PNG")
     return atomic_write_bytes(path, buf.tobytes(), "PNG")
+
+
+def npz_bytes(arrays: dict) -> bytes:
+    """``arrays`` (name → array) as the bytes of a compressed ``.npz`` that depend only on the
+    data: every member carries the same fixed timestamp (``np.savez`` stamps the clock time),
+    so the same arrays always give the same file (reproducible batch outputs)."""
+    import io
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name in sorted(arrays):
+            member = io.BytesIO()
+            np.lib.format.write_array(member, np.asanyarray(arrays[name]), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, member.getvalue())
+    return buf.getvalue()
