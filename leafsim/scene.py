@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -356,7 +357,7 @@ def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None,
                 results.append(r)
                 bar.update(1)
                 if not r["ok"]:
-                    bar.write(f"leafsim: leaf {r['name']} failed: {r['error']}")
+                    bar.write(f"leafsim: leaf {r['name']} failed: {r['error']}", file=sys.stderr)
     sim_s = time.perf_counter() - t0
     failed = sorted((r for r in results if not r["ok"]), key=lambda r: r["name"])
     report = {"scene": scene.name, "out": str(out), "leaves": len(scene.jobs), "ran": len(todo) - len(failed),

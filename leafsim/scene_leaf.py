@@ -113,7 +113,10 @@ def simulate(model: Model, params, job: LeafJob, stop: dict, keep_every: int = 0
             raise LeafFailure(f"stopping criterion {stop['kind']} = {stop['value']:g} not reached within "
                               f"max_frames = {stop['max_frames']} (water left {_water_left(model, state):.3g}, "
                               f"season {_season(state):.3g})")
-        sim.step(state)
+        try:
+            sim.step(state)
+        except ArithmeticError as e:  # a kernel met NaN/Inf (division by zero, overflow)
+            raise LeafFailure(f"the simulation blew up at frame {state.frame + 1} ({type(e).__name__}: {e})") from None
         if stats:
             st = frame_stats(model, state, {}, sim)
             st.pop("ms")

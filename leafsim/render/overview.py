@@ -38,7 +38,7 @@ def merge_views(views: dict, placed: dict) -> RenderMesh:
 
 
 def render_overview(views: dict, placed: dict, layout: dict, overview: dict, path: Path) -> Path:
-    """Render the placed leaves on the ground (z = 0) with shadows into ``path`` (PNG, atomic)."""
+    """Render the placed leaves on the ground with shadows into ``path`` (PNG, atomic)."""
     from leafsim.render.offscreen import OffscreenRenderer, default_camera
     from leafsim.render.options import RenderOptions
 
@@ -49,6 +49,9 @@ def render_overview(views: dict, placed: dict, layout: dict, overview: dict, pat
         pts = np.vstack([pts, [[lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0]]])
     cam = default_camera(pts, pitch=overview["pitch"], yaw=overview["yaw"])
     cam.frame_bounds(pts, margin=1.02)
-    opts = RenderOptions(albedo="colours", ground_z=0.0, shadow_size=4096, vein_min_px=0.5)
+    # the ground just under the lowest leaf (the renderer's default; z = 0 exactly would
+    # z-fight with leaves lying flat on it), at z = 0 under a canopy
+    ground = 0.0 if layout["kind"] == "canopy" else None
+    opts = RenderOptions(albedo="colours", ground_z=ground, shadow_size=4096, vein_min_px=0.5)
     with OffscreenRenderer(overview["width"], overview["height"]) as r:
         return r.render_png(mesh, path, camera=cam, options=opts)
