@@ -80,3 +80,21 @@ def npz_bytes(arrays: dict) -> bytes:
             info.external_attr = 0o644 << 16
             zf.writestr(info, member.getvalue())
     return buf.getvalue()
+
+
+def read_json(path: str | os.PathLike, what: str = "file"):
+    """Parse the JSON file ``path``; LeafsimError (one line naming the file and, for bad JSON,
+    the line and column) when it is missing, unreadable or malformed."""
+    import json
+
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise LeafsimError(f"{path}: {what} not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise LeafsimError(f"{path}: cannot read {what} ({getattr(e, 'strerror', None) or e})") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None

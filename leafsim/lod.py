@@ -37,8 +37,10 @@ class LevelOfDetail:
     """A coarse simulation mesh and a fine display mesh of one leaf.
 
     shape : LeafShape (shared); coarse, fine : Model; fine_params : ParamSet of the fine mesh;
-    embedding : every fine particle in the coarse rest layer T; fine_rest : a fresh fine State
-    (summer pigments with the fine vein pattern) the shown states are made from.
+    embedding : every fine particle in the coarse rest layer T; offset : (k, 2) rest-plane
+    offset of each fine particle from its embedded point (non-zero only just outside the coarse
+    mesh, whose margin is made of chords); fine_rest : a fresh fine State (summer pigments with
+    the fine vein pattern) the shown states are made from.
     """
 
     shape: object
@@ -47,6 +49,7 @@ class LevelOfDetail:
     coarse_params: ParamSet
     fine_params: ParamSet
     embedding: Embedding
+    offset: np.ndarray
     fine_rest: State
 
     @classmethod
@@ -61,8 +64,25 @@ class LevelOfDetail:
         shape, _, coarse = built if built is not None else build_leaf(sp, cp, seed)
         _, _, fine = build_leaf(sp, fp, seed)
         emb = embed(coarse, fine.particle_rest[:, :2])
+        offset = fine.particle_rest[:, :2] - emb.at(coarse, coarse.particle_rest)[:, :2]
         rest = Simulator(fine, fp, effects=(), seed=seed).state()
-        return cls(shape, coarse, fine, cp, fp, emb, rest)
+        return cls(shape, coarse, fine, cp, fp, emb, offset, rest)
+
+    def _extrapolate(self, q: np.ndarray) -> np.ndarray:
+        """(k, 3) displacement of the fine particles outside the coarse mesh: their rest offset
+        mapped by the deformation gradient of the coarse triangle they are embedded in (affine
+        extrapolation of that triangle, exact for rigid motions)."""
+        out = np.zeros((len(self.offset), 3))
+        far = np.flatnonzero(np.abs(self.offset).max(1) > 0)
+        if not len(far):
+            return out
+        tri = self.coarse.tri_T[self.embedding.tri[far]]
+        X = self.coarse.particle_rest[:, :2]
+        rest = np.stack([X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]]], -1)  # (f, 2, 2)
+        cur = np.stack([q[tri[:, 1]] - q[tri[:, 0]], q[tri[:, 2]] - q[tri[:, 0]]], -1)  # (f, 3, 2)
+        F = cur @ np.linalg.inv(rest)
+        out[far] = np.einsum("fij,fj->fi", F, self.offset[far])
+        return out
 
     def show(self, state: State) -> State:
         """The coarse ``state`` carried over to the fine mesh (a new State of :attr:`fine`)."""
@@ -74,7 +94,7 @@ class LevelOfDetail:
         remap[T] = np.arange(len(T))
         p, _, n, h = blade_frame(c, state, T, remap)
         full = lambda x: _scatter(c.particle_count, T, x)
-        surf = e.at(c, full(p))
+        surf = e.at(c, full(p)) + self._extrapolate(state.particle_q)
         nrm = e.at(c, full(n))
         nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
         top = (f.particle_layer != LAYER_T)[:, None]

@@ -139,8 +139,9 @@ def _floor(layout, seed, views):
         xy = rng.uniform(-0.5, 0.5, 2) * size
         t = np.array([xy[0], xy[1], 0.0]) - R @ np.array([centre[0], centre[1], p[:, 2].min()])
         pts = _samples(p @ R.T + t, v["triangles"], layout["cell"])
-        t[2] += hf.lift(pts, layout["clearance"])
-        pts[:, 2] += t[2]
+        lift = hf.lift(pts, layout["clearance"])
+        t[2] += lift
+        pts[:, 2] += lift
         hf.add(pts, float(v["thickness"]))
         out.append((R, t))
     return out

@@ -28,7 +28,7 @@ import numpy as np
 
 from .errors import LeafsimError
 from .export import FORMATS, LAYERS, TEXTURES
-from .fileio import atomic_write_bytes
+from .fileio import atomic_write_bytes, read_json
 from .scene_leaf import LeafJob, is_done, leaf_dir, run_leaf
 
 _TOP_KEYS = {"name", "description", "seed", "config", "layout", "overview", "groups"}
@@ -114,16 +114,7 @@ class _Where:
 
 
 def _read_json(path: Path) -> dict:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise LeafsimError(f"{path}: scene file not found") from None
-    except OSError as e:
-        raise LeafsimError(f"{path}: cannot read scene file ({e.strerror})") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    data = read_json(path, "scene file")
     if not isinstance(data, dict):
         raise LeafsimError(f"{path}: expected a JSON object with 'groups'")
     return data

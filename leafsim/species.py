@@ -11,7 +11,6 @@ Photo coordinates (``base_px``, ``apex_px``) are pixels of the photo.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +19,7 @@ import numpy as np
 
 from . import ROOT
 from .errors import LeafsimError
+from .fileio import read_json
 from .params import ParamSet
 
 DEFAULT_CONFIG = ROOT / "configs" / "leaves.json"
@@ -100,16 +100,7 @@ def _pair(path, sp, key, value):
 def load_library(path: str | Path | None = None) -> dict[str, Species]:
     """Load and validate every species of a config file."""
     path = Path(path) if path is not None else DEFAULT_CONFIG
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise LeafsimError(f"{path}: species config not found") from None
-    except OSError as e:
-        raise LeafsimError(f"{path}: cannot read species config ({e.strerror})") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    data = read_json(path, "species config")
     if not isinstance(data, dict) or not isinstance(data.get("species"), dict) or not data["species"]:
         raise LeafsimError(f"{path}: expected an object with a non-empty 'species' object")
     return {k: _parse_entry(path, k, v) for k, v in data["species"].items()}
