@@ -28,3 +28,19 @@ for ob in bpy.data.objects:
           f"colour attributes {[a.name for a in me.color_attributes]}, "
           f"action {action.name if action else None} frames {tuple(action.frame_range) if action else None}")
 print("blender", bpy.app.version_string, "fps", bpy.context.scene.render.fps)
+
+# play the animation to its last key: the evaluated mesh must be the last key frame's shape
+scene = bpy.context.scene
+for ob in bpy.data.objects:
+    keys = ob.data.shape_keys if ob.type == "MESH" else None
+    if not keys or not keys.animation_data:
+        continue
+    end = int(round(keys.animation_data.action.frame_range[1]))
+    scene.frame_set(end)
+    ev = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()
+    last = keys.key_blocks[-1].data
+    basis = keys.key_blocks[0].data
+    moved = max((ev.vertices[i].co - basis[i].co).length for i in range(len(basis)))
+    err = max((ev.vertices[i].co - last[i].co).length for i in range(len(basis)))
+    print(f"{ob.name} at frame {end}: max displacement from the first key {moved:.4g} m, from the last key {err:.3g} m")
+    ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh_clear()
