@@ -355,7 +355,8 @@ def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None,
               "skipped": len(scene.jobs) - len(todo), "failed": [{"name": r["name"], "error": r["error"]} for r in failed],
               "workers": None if scheduler else workers, "scheduler": scheduler, "simulate_s": round(sim_s, 3),
               "leaves_per_s": round(len(todo) / sim_s, 4) if todo and sim_s > 0 else None,
-              "leaf_s": {r["name"]: round(r["seconds"], 3) for r in sorted(results, key=lambda r: r["name"])}}
+              "leaf_s": {r["name"]: round(r["seconds"], 3) for r in sorted(results, key=lambda r: r["name"])},
+              "leaf_cpu_s": round(sum(r.get("cpu_s", 0.0) for r in results), 3)}
     t1 = time.perf_counter()
     compose(scene, out, render=render)
     report["compose_s"] = round(time.perf_counter() - t1, 3)

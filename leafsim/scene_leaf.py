@@ -181,12 +181,12 @@ def _summary(model: Model, state: State, shown_model: Model, shown: State, shape
 def run_leaf(job: LeafJob, out: str | Path) -> dict:
     """Simulate one leaf and write its files; never raises (failures come back as
     ``{"name", "ok": False, "error"}``)."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     folder = leaf_dir(Path(out), job.name)
     try:
         _single_thread()
         result = _run(job, folder)
-        result.update(name=job.name, ok=True, seconds=time.perf_counter() - t0)
+        result.update(name=job.name, ok=True, seconds=time.perf_counter() - t0, cpu_s=time.process_time() - c0)
         return result
     except Exception as e:  # every failure is this leaf's only
         shutil.rmtree(folder, ignore_errors=True)
