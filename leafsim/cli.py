@@ -99,6 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     be = sub.add_parser("bench", help="benchmark the simulation kernels")
     be.add_argument("--json", action="store_true")
     be.add_argument("--quick", action="store_true", help="small sizes only")
+    _scene_export_parsers(sub)
     return ap
 
 
@@ -445,10 +446,97 @@ def cmd_gui(args):
                    frames=args.frames, screenshot=args.screenshot, play=args.play)
 
 
+# ------------------------------------------------------------------ scene and export (leafsim/scene.py, leafsim/export.py)
+
+def _scene_export_parsers(sub) -> None:
+    sc = sub.add_parser("scene", help="simulate a scene file of many leaves in parallel")
+    sc.add_argument("scene", help="scene JSON (see configs/scenes/ and docs/scenes.md)")
+    sc.add_argument("--out", default=None, help="output folder (default out/SCENE_NAME)")
+    sc.add_argument("--workers", type=int, default=None, help="local worker processes (default: the CPU count)")
+    sc.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this Dask scheduler, e.g. tcp://host:8786")
+    sc.add_argument("--json", action="store_true")
+
+    ex = sub.add_parser("export", help="simulate one leaf and write it as a mesh (glTF, OBJ, PLY)")
+    _common(ex)
+    ex.add_argument("--frames", type=int, default=0, help="simulate N frames first (default 0: the fresh leaf)")
+    ex.add_argument("--every", type=int, default=0, help="glTF: a morph-target key frame every K frames (the drying animation)")
+    ex.add_argument("--format", default=None, choices=["glb", "gltf", "obj", "ply"], help="default: from the --out suffix")
+    ex.add_argument("--out", required=True, help="output file")
+    ex.add_argument("--layers", default="shell", choices=["shell", "mid"], help="closed thin shell from both layers, or the mid-surface with thickness")
+    ex.add_argument("--veins", action="store_true", help="add the veins as a second mesh")
+    ex.add_argument("--texture", default="colours", choices=["colours", "photo"], help="baked pigment colours or the species photo")
+    ex.add_argument("--effects", default=None, help="comma-separated effects to enable (others off)")
+    ex.add_argument("--json", action="store_true")
+
+
+def cmd_scene(args):
+    from .scene import load_scene, run_scene
+
+    scene = load_scene(args.scene)
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem
+    rep = run_scene(scene, out, workers=workers, scheduler=args.scheduler)
+    bad = rep["failed"]
+    text = (f"{scene.name}: {rep['ran']} leaves simulated, {rep['skipped']} already done, {len(bad)} failed "
+            f"in {rep['total_s']:.1f} s ({rep['leaves_per_s'] or 0:.3g} leaves/s) -> {out}")
+    _emit(args, rep, text)
+    if bad:
+        names = ", ".join(f"{b['name']} ({b['error']})" for b in bad)
+        print(f"leafsim: scene {scene.name}: {len(bad)} of {rep['leaves']} leaves failed: {names}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_export(args):
+    from .export import export_mesh, format_of
+    from .leaf import build_leaf, load_photo_rgba
+    from .params import parse_set_args
+    from .sim.run import run_headless
+    from .sim.simulator import Simulator
+    from .species import get_species
+    from .view import LeafView
+
+    fmt = format_of(args.out, args.format)
+    if args.frames < 0 or args.every < 0:
+        raise LeafsimError(f"--frames {args.frames} / --every {args.every}: expected non-negative frame counts")
+    if args.every and fmt in ("obj", "ply"):
+        raise LeafsimError(f"--every needs --format glb or gltf ({fmt} holds one static shape)")
+    folder = Path(args.out).parent
+    if not folder.is_dir():
+        raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")
+    sp = get_species(args.species, args.config)
+    params = sp.params.with_overrides({**parse_set_args(args.sets), **_effects_overrides(args.effects)}, where="--set")
+    if args.texture == "photo" and sp.image is None:
+        raise LeafsimError(f"--texture photo: species '{sp.key}' has no photo (drawn outline)")
+    shape, veins, model = build_leaf(sp, params, args.seed)
+    sim = Simulator(model, params, seed=args.seed)
+    state = sim.state()
+    keys = [state.copy()]
+
+    def on_frame(k, st, stats):
+        if args.every and k % args.every == 0:
+            keys.append(st.copy())
+
+    state, stats = run_headless(model, params, args.frames, on_frame=on_frame, state=state, simulator=sim)
+    if any(s["nan"] for s in stats):
+        raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {len(stats)}")
+    if not args.every:
+        keys = [state]
+    elif keys[-1].frame != state.frame:
+        keys.append(state.copy())
+    photo = load_photo_rgba(sp.image) if sp.image is not None else None
+    rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=LeafView(model, photo),
+                      layers=args.layers, veins=args.veins, texture=args.texture)
+    rep.update(species=sp.key, seed=args.seed, frames=state.frame)
+    counts = ", ".join(f"{k} {v['vertices']} vertices / {v['triangles']} triangles" for k, v in rep["meshes"].items())
+    _emit(args, rep, f"{sp.key}: {counts}, {rep['targets']} morph targets -> {', '.join(rep['files'])}")
+
+
 COMMANDS = {
     "gui": cmd_gui, "species": cmd_species, "params": cmd_params, "outline": cmd_outline, "veins": cmd_veins,
     "build": cmd_build, "run": cmd_run, "bench": cmd_bench,
 }
+COMMANDS.update(scene=cmd_scene, export=cmd_export)
 
 if __name__ == "__main__":
     sys.exit(main())

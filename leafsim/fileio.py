@@ -76,3 +76,52 @@ def remove_stale_temps(path: str | os.PathLike) -> int:
         except OSError:
             pass
     return n
+
+
+def npz_bytes(arrays: dict) -> bytes:
+    """``arrays`` (name → array) as the bytes of a compressed ``.npz`` that depend only on the
+    data: every member carries the same fixed timestamp (``np.savez`` stamps the clock time),
+    so the same arrays always give the same file (reproducible batch outputs)."""
+    import io
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name in sorted(arrays):
+            member = io.BytesIO()
+            np.lib.format.write_array(member, np.asanyarray(arrays[name]), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, member.getvalue())
+    return buf.getvalue()
+
+
+def read_json(path: str | os.PathLike, what: str = "file"):
+    """Parse the JSON file ``path``; LeafsimError (one line naming the file and, for bad JSON,
+    the line and column) when it is missing, a folder, unreadable, not UTF-8 text (a UTF-8
+    byte-order mark is allowed; UTF-16 is named), malformed or nested too deeply."""
+    import json
+
+    path = Path(path)
+    if path.is_dir():
+        raise LeafsimError(f"{path}: {what} is a folder, expected a JSON file")
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise LeafsimError(f"{path}: {what} not found") from None
+    except OSError as e:
+        raise LeafsimError(f"{path}: cannot read {what} ({e.strerror or e})") from None
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise LeafsimError(f"{path}: {what} is UTF-16 text, expected UTF-8 (save it as UTF-8)")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise LeafsimError(f"{path}: {what} is not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); "
+                           "expected a UTF-8 JSON file") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    except RecursionError:
+        raise LeafsimError(f"{path}: malformed JSON: nested too deeply (expected a leafsim {what})") from None

@@ -11,7 +11,6 @@ Photo coordinates (``base_px``, ``apex_px``) are pixels of the photo.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +19,7 @@ import numpy as np
 
 from . import ROOT
 from .errors import LeafsimError
+from .fileio import read_json
 from .geometry import outline_problem, targets_problem
 from .params import ParamSet
 from .params import show as _show
@@ -107,34 +107,10 @@ def _pair(path, sp, key, value):
 def load_library(path: str | Path | None = None) -> dict[str, Species]:
     """Load and validate every species of a config file."""
     path = Path(path) if path is not None else DEFAULT_CONFIG
-    if path.is_dir():
-        raise LeafsimError(f"{path}: species config is a folder, expected a JSON file")
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise LeafsimError(f"{path}: species config not found") from None
-    except OSError as e:
-        raise LeafsimError(f"{path}: cannot read species config ({e.strerror or e})") from None
-    try:
-        data = json.loads(_utf8_text(path, raw))
-    except json.JSONDecodeError as e:
-        raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
-    except RecursionError:
-        raise LeafsimError(f"{path}: malformed JSON: nested too deeply (expected the species object of leafsim)") from None
+    data = read_json(path, "species config")
     if not isinstance(data, dict) or not isinstance(data.get("species"), dict) or not data["species"]:
         raise LeafsimError(f"{path}: expected an object with a non-empty 'species' object")
     return {_check_key(path, k): _parse_entry(path, k, v) for k, v in data["species"].items()}
-
-
-def _utf8_text(path: Path, raw: bytes) -> str:
-    """The config's text: UTF-8 (a UTF-8 byte-order mark is allowed), else a one-line error."""
-    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
-        raise LeafsimError(f"{path}: species config is UTF-16 text, expected UTF-8 (save it as UTF-8)")
-    try:
-        return raw.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        raise LeafsimError(f"{path}: species config is not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); "
-                           "expected a UTF-8 JSON file") from None
 
 
 def _check_key(path: Path, key: str) -> str:

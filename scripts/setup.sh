@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Set up leafsim on a fresh Debian/Ubuntu machine: the system libraries Debian must provide
-# (Mesa EGL/GL for offscreen rendering, Xvfb for GUI tests) and a virtual environment .venv
-# installed from this project's own pyproject.toml.  Safe to run again: it only installs
-# what is missing.
+# (Mesa EGL/GL for offscreen rendering, Xvfb for GUI tests, Node.js + npm for the glTF
+# validator when no node is on PATH), a virtual environment .venv installed from this
+# project's own pyproject.toml, and the Khronos glTF-Validator (npm) in .tools/ (the export
+# tests run it).  Safe to run again: it only installs what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -11,6 +12,9 @@ missing=""
 for p in $DEB_PKGS; do
   dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"
 done
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  missing="$missing nodejs npm"
+fi
 if [ -n "$missing" ]; then
   SUDO=""
   [ "$(id -u)" = 0 ] || SUDO="sudo"
@@ -30,5 +34,11 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   .venv/bin/python -m pip install -q --upgrade pip
   .venv/bin/python -m pip install -q -e ".[test]"
   touch "$stamp"
+fi
+GLTF_VALIDATOR="gltf-validator@2.0.0-dev.3.10"
+if [ ! -f .tools/node_modules/gltf-validator/package.json ]; then
+  echo "setup: installing the Khronos glTF-Validator ($GLTF_VALIDATOR) into .tools/"
+  mkdir -p .tools
+  npm install --prefix .tools --no-audit --no-fund --silent "$GLTF_VALIDATOR" >/dev/null
 fi
 echo "setup: ready (.venv/bin/leafsim)"
