@@ -26,7 +26,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import Delaunay, cKDTree
 
 from .errors import LeafsimError
-from .geometry import LeafShape, points_in_polygon, polygon_area, resample_closed, resample_polyline
+from .geometry import LeafShape, distance_to_polygon, points_in_polygon, polygon_area, resample_closed, resample_polyline
 from .params import ParamSet
 from .sim.kernels.build import greedy_colour, poisson_accept
 from .sim.model import (
@@ -545,6 +545,7 @@ def _finalize(shape, P, tri, rest, S: _Springs, H: _Hinges, vol_idx, vol_rest0, 
         particle_vein_order=np.concatenate([P.vorders, -np.ones(m, np.int8)]),
         particle_area=M.area, particle_cytosol=M.cytosol, particle_mass0=M.mass0, particle_water0=M.water0,
         particle_tau=M.tau, particle_vein_width=M.vein_width,
+        particle_margin_distance=distance_to_polygon(rest[:, :2], np.asarray(shape.contour, float)),
         particle_texcoord=shape.texcoords(rest[:, :2]),
         particle_pinned=pinned,
         tri_T=tri, tri_V=np.arange(nT, nT + m, dtype=np.int64),

@@ -184,9 +184,11 @@ _f("mass.water_fraction", 0.7, 0.05, 0.95, "", "Fraction of the fresh mass that 
 
 # ---------------------------------------------------------------- osmosis (live)
 G = "Osmosis"
-_f("osmosis.diffusion", 1e-4, 0.0, 1e5, "m²/s", "Osmotic diffusivity D of the water concentration (effective D·τ̄ with Jeong's τ); D·T_dry/L² ≲ 0.1 keeps margin-first drying visible, ≫ 1 dries every layer uniformly.", G, False, log=True)
+_f("osmosis.diffusion", 1e-5, 0.0, 1e5, "m²/s", "Osmotic diffusivity D of the water concentration (effective D·τ̄ with Jeong's τ); D·T_dry/L² ≲ 0.1 keeps margin-first drying visible, ≫ 1 dries every layer uniformly.", G, False, log=True)
 _f("osmosis.evaporation_top", 0.014, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the top surface (layer V) per unit leaf area and simulated second (the simulated clock is compressed: see docs/method.md).", G, False, log=True)
 _f("osmosis.evaporation_bottom", 0.0105, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the bottom surface (layer T) per unit leaf area and simulated second.", G, False, log=True)
+_f("osmosis.edge_evaporation", 2.0, 0.0, 20.0, "", "Margin-enhanced evaporation β: a particle at distance d from the margin evaporates 1 + β √(ℓ/(d + ℓ)) times more (the boundary layer is thin at the edge), normalised so the blade's mean stays the declared rate; 0 = uniform.", G, False)
+_f("osmosis.edge_length", 0.003, 0.0, 0.1, "m", "Length scale ℓ of the margin-enhanced evaporation (a few mm: the boundary layer thickness near the edge).", G, False, log=True)
 _b("osmosis.through_thickness", True, "Water also flows between the two layers through the blade's thickness (D over h/2: they stay in balance within milliseconds); off = Jeong's separate layers, where the faster-drying top curls the leaf transiently.", G, False)
 _c("osmosis.solver", "auto", ("auto", "direct", "cg", "jacobi"), "Linear solver of the implicit osmosis step.", G, False)
 _f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True)
@@ -197,7 +199,7 @@ _f("shrink.sigma_surface_top", 0.165, 0.0, 3.0, "", "σ of surface springs in th
 _f("shrink.sigma_surface_bottom", 0.15, 0.0, 3.0, "", "σ of surface springs in the bottom layer T.", G, False)
 _f("shrink.sigma_vein", 0.05, 0.0, 3.0, "", "σ of vein springs.", G, False)
 _f("shrink.alpha", 1.0, 0.1, 4.0, "", "Exponent α of (1 − v_rel) in the shrink law.", G, False)
-_f("shrink.l_min", 0.5, 0.0, 1.0, "× l⁰", "Rest lengths never go below l_min · l⁰.", G, False)
+_f("shrink.l_min", 0.5, 0.1, 1.0, "× l⁰", "Rest lengths never go below l_min · l⁰ (≥ 0.1: tissue cannot shrink to nothing; at 0 a leaf collapsed to a point and never came to rest).", G, False)
 
 # ---------------------------------------------------------------- dynamics (live)
 G = "Dynamics"
@@ -206,7 +208,7 @@ _f("dynamics.gravity", 9.81, 0.0, 50.0, "m/s²", "Gravity magnitude (acts along 
 _f("dynamics.damping", 25.0, 0.0, 1000.0, "1/s", "Velocity damping rate c (v ← v·e^(−c·Δt); air drag and internal friction of the tissue).", G, False, log=True)
 _i("dynamics.substeps", 5, 1, 200, "", "Dynamics substeps per frame (small steps make stiff constraints converge far better than more iterations).", G, False)
 _i("dynamics.iterations", 2, 1, 200, "", "Maximum constraint-projection iterations per substep.", G, False)
-_f("dynamics.warm_start", 0.0, 0.0, 1.0, "", "Warm start: each substep begins with this fraction of the previous substep's constraint forces (Lagrange multipliers); 0 = XPBD's cold start.", G, False)
+_f("dynamics.relaxation", 1.8, 0.5, 1.95, "", "Over-relaxation ω of the bending projections (successive over-relaxation): > 1 carries a steady load (a blade held up against gravity) across the mesh in far fewer sweeps; 1 = plain Gauss–Seidel.", G, False)
 _f("dynamics.tolerance", 1e-4, 1e-9, 1.0, "", "Stop iterating when the largest position change per iteration falls below this × leaf length.", G, False, log=True)
 _f("dynamics.plasticity", 2.0, 0.0, 100.0, "1/s", "Rate at which drying tissue sets: bending hinges keep the largest bilayer curl they reached (0 = purely elastic, the curl relaxes when both layers are dry).", G, False, log=True)
 

@@ -27,11 +27,12 @@ def test_margins_turn_before_veins(species):
     vein = T & (m.particle_kind == KIND_VEIN) & (m.particle_vein_order <= 1)
     d = np.linalg.norm(rgb - rgb0, axis=1)
     assert margin.sum() > 10 and vein.sum() > 10
-    # the cause: light margin tissue loses relatively more water (per-area evaporation) ...
+    # the cause: light margin tissue loses relatively more water (per-area evaporation; the
+    # veins' rods hold more water per area and feed their neighbours by osmosis) ...
     wrel = s.state.particle_water / m.particle_water0
-    assert wrel[margin].mean() < wrel[vein].mean() - 0.02
+    assert 1 - wrel[margin].mean() > 1.04 * (1 - wrel[vein].mean())
     # ... so the margin's colour has moved farther from the young green than the veins'
-    assert d[margin].mean() > 1.1 * d[vein].mean()
+    assert d[margin].mean() > 1.04 * d[vein].mean()
     # and the positions did not move: dynamics is off in a colour-only scene
     assert np.array_equal(s.state.particle_q, m.particle_rest)
 

@@ -133,7 +133,7 @@ def test_resume_with_other_settings_refused(tmp_path, capsys):
     assert main(BASE + ["--frames", "7", "--out", str(out)]) == 0
     capsys.readouterr()
     for extra, needle in ((["--seed", "3"], "made with seed 0, this run has 3"),
-                          (["--set", "osmosis.loss_top=0.5"], "parameter 'osmosis.loss_top' = 0.2, this run has 0.5"),
+                          (["--set", "osmosis.evaporation_top=0.5"], "parameter 'osmosis.evaporation_top' = 0.014, this run has 0.5"),
                           (["--species", "maple"], "made with species 'oak', this run has 'maple'")):
         assert main(BASE + ["--frames", "20", "--out", str(out), "--resume", *extra]) == 2
         err = capsys.readouterr().err

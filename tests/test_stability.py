@@ -21,7 +21,7 @@ CASES = {
     "water_gone_in_frames": (CHEAP | {"osmosis.evaporation_top": 35, "osmosis.evaporation_bottom": 21}, 200, "ellipse"),
     "near_zero_mass": (CHEAP | {"mass.lma": 0.005, "mass.profile_min": 0.01, "mass.vein_density": 100.0}, 200, "ellipse"),
     "negative_rest_sigma": (CHEAP | {"shrink.sigma_surface_top": 3.0, "shrink.sigma_surface_bottom": 2.5, "shrink.sigma_vein": 3.0,
-                                     "shrink.l_min": 0.0, "osmosis.evaporation_top": 0.35, "osmosis.evaporation_bottom": 0.35}, 300, "ellipse"),
+                                     "shrink.l_min": 0.1, "osmosis.evaporation_top": 0.35, "osmosis.evaporation_bottom": 0.35}, 300, "ellipse"),
     "slivers": (CHEAP, 200, "slivers"),
     "fine_50k": ({"mesh.spacing": 0.004, "dynamics.dt": 0.01, "osmosis.evaporation_top": 1.4, "osmosis.evaporation_bottom": 0.7}, 6, "ellipse"),
     "10k_frames": ({"mesh.spacing": 0.1, "dynamics.dt": 0.004, "dynamics.substeps": 1}, 10000, "ellipse"),

@@ -34,6 +34,21 @@ BILAYER_GAIN = 1.3
 HINGE_MAX_ANGLE = 0.35
 
 
+def edge_factor(model: Model, beta: float, length: float) -> np.ndarray:
+    """(n,) relative evaporation: 1 + β √(ℓ / (d + ℓ)) for a particle at rest distance d from
+    the margin (a laminar boundary layer's transfer coefficient falls like x^(−1/2) from the
+    edge the air first meets; averaged over wind directions every edge is one), normalised so
+    the blade's mean evaporation per area stays the declared E."""
+    d = model.particle_margin_distance
+    f = 1.0 + beta * np.sqrt(length / (d + length)) if length > 0 else np.ones(len(d))
+    A = model.particle_area
+    out = np.empty_like(f)
+    for layer in (LAYER_T, LAYER_V):
+        sel = model.particle_layer == layer
+        out[sel] = f[sel] / (np.dot(A[sel], f[sel]) / max(A[sel].sum(), 1e-300))
+    return out
+
+
 class Osmosis:
     """Implicit conservative osmosis + evaporation (SPEC §6), both layers in one SPD system
     (diag(M) + Δt D K) cⁿ⁺¹ = M cⁿ − loss, c = w / M (water per dry mass).
@@ -87,10 +102,12 @@ class Osmosis:
         lay = self.model.particle_layer
         self.rate = np.where(lay == LAYER_V, params["osmosis.evaporation_top"], params["osmosis.evaporation_bottom"]).astype(float)
         # Evaporation acts per unit of leaf surface: a particle loses E × Δt × the area it
-        # stands for (Jeong: w − w_loss Δt 1).  Light tissue at the margin and between the veins
-        # therefore dries first relative to its content — the pattern that drives
-        # margin-first shrinking and colour; diffusion (osmosis) works against it.
-        self.loss_ref = self.model.particle_area.astype(float)
+        # stands for (Jeong: w − w_loss Δt 1), more near the margin where the air's boundary
+        # layer is thin (edge_factor).  Light tissue and the margin therefore dry first relative
+        # to their content — the pattern that drives margin-first shrinking and colour;
+        # diffusion (osmosis) and the veins' water work against it.
+        self.loss_ref = self.model.particle_area * edge_factor(self.model, params["osmosis.edge_evaporation"],
+                                                               params["osmosis.edge_length"])
         self.dt = dt
         key = (D, dt, solver, through)
         if key != self.key:
@@ -142,8 +159,8 @@ class Shrink:
       d the dual edge), which drying tissue keeps (plasticity); clamped, and 0 on hinges that
       bend a main/lateral vein lengthwise;
     * V springs: the top surface of that bent state, d (1 − h θ0 / d) × the T layer's shrink;
-    * links: the cross-section keeps its shape (V over its triangle's centroid at height h);
-      thickness volumes follow the in-plane shrink.
+    * links and thickness volumes: the tissue shrinks isotropically with its bottom layer, the
+      thickness too (h f), so the cross-section keeps its shape.
 
     So every constraint agrees with one shape whenever the bilayer curvature is developable;
     what remains is the physical frustration of a curvature that is not (cups), resolved by
@@ -155,9 +172,6 @@ class Shrink:
         t = model.spring_type
         self.links = np.flatnonzero(t == SPRING_LINK).astype(np.int64)
         ij = model.spring_ij[self.links]
-        rest = model.particle_rest
-        self.link_r0 = np.linalg.norm(rest[ij[:, 0], :2] - rest[ij[:, 1], :2], axis=1)
-        self.link_h0 = np.abs(rest[ij[:, 0], 2] - rest[ij[:, 1], 2])
         # the triangle of each V particle → that triangle's three T springs
         nT = int((model.particle_layer == LAYER_T).sum())
         self.nT = nT
@@ -191,8 +205,7 @@ class Shrink:
             np.multiply(state.hinge_rest, self.hinge_curl, out=state.hinge_rest)
             ks.dual_targets(m.hinge_spring_V, m.spring_ij, self.tri_springs, self.nT, m.spring_rest0,
                             state.hinge_rest, m.thickness, state.spring_rest)
-        ks.link_targets(self.links, m.spring_ij, self.link_r0, self.link_h0, self.link_tri_springs, m.spring_rest0,
-                        state.spring_rest)
+        ks.link_targets(self.links, self.link_tri_springs, m.spring_rest0, state.spring_rest)
         ks.vol_targets(m.vol_springs, m.spring_rest0, state.spring_rest, m.vol_rest0, state.vol_rest)
 
 
@@ -219,6 +232,7 @@ class Dynamics:
         self.hrod = np.zeros(model.hinge_count)  # vein bending stiffness of the hinges that bend a vein
         T = np.flatnonzero(model.particle_layer == LAYER_T)
         self.T_idx = T.astype(np.int64)
+        self.T_springs = np.flatnonzero(model.spring_layer == 0)
         # power of two ≥ 2 × |T| buckets: the contact hash uses a bit mask, not a 64-bit modulo
         self.table = np.zeros(1 << max(2 * len(T) - 1, 1).bit_length(), np.int64)
         self.out = np.zeros(3, np.int64)
@@ -246,7 +260,7 @@ class Dynamics:
         self.g = -params["dynamics.gravity"] if effects["gravity"] else 0.0
         self.keep = math.exp(-params["dynamics.damping"] * self.h)
         self.iters = params["dynamics.iterations"]
-        self.warm = params["dynamics.warm_start"]
+        self.omega = params["dynamics.relaxation"]
         self.tol = params["dynamics.tolerance"] * m.length
         # membranes: k = E (h/2) ΣA/|e|² per layer (Van Gelder), veins add their rod E_v A_c / l
         E, Ev, h = params["material.modulus"], params["material.vein_modulus"], m.thickness
@@ -284,6 +298,11 @@ class Dynamics:
         if probing:
             self.parallel = k % 2 == 1
             t0 = time.perf_counter()
+        # contacts and the un-inversion keep to the tissue's size: as it shrinks (in the plane and
+        # through the thickness) so do the contact radius and the thickness (fixed values would
+        # hold a strongly shrunken leaf apart against its own springs)
+        shrunk = max(float(np.mean(state.spring_rest[self.T_springs] / m.spring_rest0[self.T_springs])), 0.1)
+        radius = self.radius * shrunk
         # the whole frame (all substeps and iterations) in one numba call
         hcs = m.hinge_colour_start if self.bending else self.empty_cs
         out = self.out
@@ -296,9 +315,9 @@ class Dynamics:
                  m.hinge_idx, state.hinge_rest, self.halpha, self.hlam, hcs,
                  m.vol_idx, state.vol_rest, self.vlam, m.vol_colour_start,
                  self.pbd, self.ground, self.pen, self.change, self.mu,
-                 self.self_coll, m.particle_rest, self.T_idx, 1.5 * self.radius, self.skip2, self.table, self.nxt,
-                 self.pairs, self.radius, self.replace, self.hgt, m.thickness, self.scene != "hanging",
-                 self.qa, self.dint, self.warm, out)
+                 self.self_coll, m.particle_rest, self.T_idx, 1.5 * radius, self.skip2, self.table, self.nxt,
+                 self.pairs, radius, self.replace, self.hgt, m.thickness * shrunk, self.scene != "hanging",
+                 self.qa, self.dint, self.omega, out)
         self.last_iterations = int(out[0])
         self.last_contacts = int(out[1])
         self.last_uninverted = int(out[2])

@@ -67,7 +67,8 @@ class Model:
     particle stands for in its layer (T: a third of its triangles, V: its triangle),
     particle_cytosol (n,) dry mass [kg], particle_mass0 (n,) fresh mass [kg],
     particle_water0 (n,) [kg], particle_tau (n,) Jeong's graph-distance weight,
-    particle_vein_width (n,) [m] (0 off the veins), particle_texcoord (n,2),
+    particle_vein_width (n,) [m] (0 off the veins), particle_margin_distance (n,) [m] rest
+    distance to the outline, particle_texcoord (n,2),
     particle_pinned (n,) bool (petiole, for the hanging scene).  Each layer carries half the
     blade's areal mass; vein particles add their rod.
 
@@ -113,6 +114,7 @@ class Model:
     particle_water0: np.ndarray
     particle_tau: np.ndarray
     particle_vein_width: np.ndarray
+    particle_margin_distance: np.ndarray
     particle_texcoord: np.ndarray
     particle_pinned: np.ndarray
     tri_T: np.ndarray

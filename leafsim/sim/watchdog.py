@@ -7,8 +7,10 @@ internal motion is bounded by what the shrinking can drive.  Two signatures of a
 blow-up that produce no NaN are caught:
 
 * an internal motion faster than a drying leaf can move: the mass-weighted RMS internal speed
-  above :data:`MAX_RMS_SPEED`, or any particle's above :data:`MAX_INTERNAL_SPEED` (a single
-  light margin particle may flutter at a fraction of that while a rolled leaf settles);
+  above :data:`MAX_RMS_SPEED` plus what the shrinking drives (``SHRINK_SPEED_FACTOR`` × L ×
+  the fastest relative rest-length change per second since the last check), or any
+  particle's above :data:`MAX_INTERNAL_SPEED` (a single light margin particle may flutter at a
+  fraction of that while a rolled leaf settles);
 * internal kinetic energy growing exponentially (doubling every ≤ :data:`DOUBLING_FRAMES`
   frames for :data:`GROWTH_WINDOWS` windows in a row) above a floor.
 
@@ -25,6 +27,8 @@ from ..params import PARAMS, ParamSet
 
 #: largest RMS (mass-weighted) internal speed of a drying leaf [m/s]
 MAX_RMS_SPEED = 0.5
+#: the shrinking moves the tissue at up to L × its relative rate; allowed on top of MAX_RMS_SPEED
+SHRINK_SPEED_FACTOR = 3.0
 #: largest internal (non-rigid) speed of any one particle [m/s]
 MAX_INTERNAL_SPEED = 20.0
 #: a growth window: internal kinetic energy compared every this many frames
@@ -37,6 +41,7 @@ ENERGY_FLOOR = 1e-4
 SUSPECTS = ("shrink.sigma_surface_top", "shrink.sigma_surface_bottom", "shrink.sigma_vein", "shrink.l_min",
             "shrink.alpha", "dynamics.dt", "dynamics.substeps", "dynamics.iterations", "dynamics.damping",
             "material.modulus", "material.vein_modulus", "material.dry_stiffening", "dynamics.plasticity",
+            "dynamics.relaxation",
             "dynamics.gravity", "osmosis.evaporation_top", "osmosis.evaporation_bottom", "mesh.thickness")
 
 
@@ -80,6 +85,8 @@ class Watchdog:
         self.floor = ENERGY_FLOOR * float(model.particle_mass0.sum()) * model.length ** 2
         self.history: list[float] = []
         self.last: dict = {}
+        self._rest = None
+        self._time = 0.0
 
     def check(self, state) -> dict | None:
         """Measure ``state``; raise LeafsimError on a blow-up.  Returns the measures (or None
@@ -92,9 +99,10 @@ class Watchdog:
             self._fail(state, "positions or velocities became NaN/Inf")
         mom = momenta(m.particle_cytosol + state.particle_water, q, qd)
         self.last = mom
-        if mom["rms_internal_speed"] > MAX_RMS_SPEED or mom["max_internal_speed"] > MAX_INTERNAL_SPEED:
+        bound = MAX_RMS_SPEED + SHRINK_SPEED_FACTOR * m.length * self._shrink_rate(state)
+        if mom["rms_internal_speed"] > bound or mom["max_internal_speed"] > MAX_INTERNAL_SPEED:
             self._fail(state, f"internal motion at {mom['rms_internal_speed']:.3g} m/s RMS, {mom['max_internal_speed']:.3g} m/s "
-                              f"at most (bounds {MAX_RMS_SPEED:g} and {MAX_INTERNAL_SPEED:g} m/s: drying tissue moves at "
+                              f"at most (bounds {bound:.3g} and {MAX_INTERNAL_SPEED:g} m/s: drying tissue moves at "
                               "millimetres per second)")
         if (state.frame // self.every) % max(DOUBLING_FRAMES // self.every, 1) == 0:
             self.history.append(mom["kinetic_internal"])
@@ -104,6 +112,16 @@ class Watchdog:
                 self._fail(state, f"internal kinetic energy grew {h[-1] / h[0]:.3g}× in {GROWTH_WINDOWS * DOUBLING_FRAMES} "
                                   "frames without a source")
         return mom
+
+    def _shrink_rate(self, state) -> float:
+        """Largest relative rest-length change per second since the previous check [1/s]."""
+        rest = state.spring_rest
+        rate = 0.0
+        if self._rest is not None and state.time > self._time:
+            rate = float(np.max(np.abs(rest - self._rest) / np.maximum(self.model.spring_rest0, 1e-30))) / (state.time - self._time)
+        self._rest = rest.copy()
+        self._time = state.time
+        return rate
 
     def _fail(self, state, what: str):
         changed = [k for k in SUSPECTS if k in self.params and self.params[k] != PARAMS[k].default]

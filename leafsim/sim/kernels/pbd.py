@@ -125,7 +125,7 @@ def _hinge_step_limit(invm, hidx, e, dl, el, u1x, u1y, u1z, u2x, u2y, u2z, u3x, 
 
 
 @njit(inline="always", fastmath=True)
-def _hinge(q, invm, hidx, hrest, halpha, hlam, e):
+def _hinge(q, invm, hidx, hrest, halpha, hlam, e, omega):
     ok, th, el, u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z, k1, k2 = _hinge_geom(q, hidx, e)
     if not ok:
         return 0.0
@@ -139,48 +139,11 @@ def _hinge(q, invm, hidx, hrest, halpha, hlam, e):
          + w3 * (u3x * u3x + u3y * u3y + u3z * u3z) + w4 * (u4x * u4x + u4y * u4y + u4z * u4z) + halpha[e])
     if W <= 0.0:
         return 0.0
-    dl = _hinge_step_limit(invm, hidx, e, (-C - halpha[e] * hlam[e]) / W, el,
+    dl = _hinge_step_limit(invm, hidx, e, omega * (-C - halpha[e] * hlam[e]) / W, el,
                            u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z)
     hlam[e] += dl
     _hinge_move(q, invm, hidx, e, dl, u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z)
     return abs(dl) * max(w1 * k1, w2 * k2)
-
-
-@njit(cache=True, fastmath=True)
-def warm_start(q, invm, ij, slam, hidx, hlam, hcs, keep):
-    """Warm start of a substep: scale the previous substep's Lagrange multipliers by ``keep``
-    and apply them (x += w λ ∇C at the current positions) before iterating, so a constraint
-    that holds a steady load (a blade held up against gravity) starts the substep already
-    pushing, instead of re-deriving the whole force from the sag of every substep (the
-    Gauss–Seidel sweeps of an XPBD substep converge too slowly for that on a fine mesh).
-    The multipliers and the positions stay consistent (x − x_pred = Σ w λ ∇C), so the
-    converged substep is unchanged: only the iteration starts closer to it."""
-    for s in range(ij.shape[0]):
-        lam = slam[s] * keep
-        slam[s] = lam
-        if lam == 0.0:
-            continue
-        a = ij[s, 0]
-        b = ij[s, 1]
-        dx = q[a, 0] - q[b, 0]
-        dy = q[a, 1] - q[b, 1]
-        dz = q[a, 2] - q[b, 2]
-        d = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if d < 1e-12:
-            continue
-        f = lam / d
-        wa = invm[a] * f
-        wb = invm[b] * f
-        q[a, 0] += wa * dx; q[a, 1] += wa * dy; q[a, 2] += wa * dz
-        q[b, 0] -= wb * dx; q[b, 1] -= wb * dy; q[b, 2] -= wb * dz
-    for e in range(hcs[-1]):
-        lam = hlam[e] * keep
-        hlam[e] = lam
-        if lam == 0.0:
-            continue
-        ok, th, el, u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z, k1, k2 = _hinge_geom(q, hidx, e)
-        if ok:
-            _hinge_move(q, invm, hidx, e, lam, u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z)
 
 
 @njit(inline="always", fastmath=True)
@@ -216,7 +179,7 @@ def _volume(q, invm, vidx, vrest, t):
 
 
 def _iteration(q, invm, ij, rest, salpha, slam, scs,
-               hidx, hrest, halpha, hlam, hcs,
+               hidx, hrest, halpha, hlam, hcs, omega,
                vidx, vrest, vlam, vcs, change):
     """One Gauss–Seidel pass over all constraints, colour by colour.  ``salpha``/``halpha`` are
     compliances already divided by Δt².  Writes |Δx| per constraint into ``change`` (size ≥
@@ -232,7 +195,7 @@ def _iteration(q, invm, ij, rest, salpha, slam, scs,
     # ---------------- bending hinges (c, d, a, b): signed dihedral angle, cup (wings up) > 0
     for c in range(hcs.shape[0] - 1):
         for e in prange(hcs[c], hcs[c + 1]):
-            change[e] = _hinge(q, invm, hidx, hrest, halpha, hlam, e)
+            change[e] = _hinge(q, invm, hidx, hrest, halpha, hlam, e, omega)
     for e in range(hcs[-1]):
         if change[e] > big:
             big = change[e]
@@ -251,7 +214,7 @@ iteration_par = njit(cache=True, parallel=True, fastmath=True)(_iteration)
 
 @njit(cache=True, fastmath=True)
 def iteration_ser(q, invm, ij, rest, salpha, slam, scs,
-                  hidx, hrest, halpha, hlam, hcs,
+                  hidx, hrest, halpha, hlam, hcs, omega,
                   vidx, vrest, vlam, vcs, change):
     """Serial twin of :func:`_iteration` (same projection, same order; ``prange`` → ``range``
     and the largest change tracked inline, so ``change`` is not written and not scanned —
@@ -267,7 +230,7 @@ def iteration_ser(q, invm, ij, rest, salpha, slam, scs,
     # ---------------- bending hinges (c, d, a, b): signed dihedral angle, cup (wings up) > 0
     for c in range(hcs.shape[0] - 1):
         for e in range(hcs[c], hcs[c + 1]):
-            ch = _hinge(q, invm, hidx, hrest, halpha, hlam, e)
+            ch = _hinge(q, invm, hidx, hrest, halpha, hlam, e, omega)
             if ch > big:
                 big = ch
     # ---------------- thickness: 6 × volume of (v, a, b, c) = det, keeps V on the top side
@@ -705,13 +668,13 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
           vidx, vrest, vlam, vcs,
           pbd, ground, pen, change, mu,
           self_coll, qrest, T_idx, search, skip2, table, nxt, pairs, radius,
-          replace, hgt, thick, conserve, qa, dint, warm, out):
+          replace, hgt, thick, conserve, qa, dint, omega, out):
     """All ``substeps`` of one dynamics frame in one call (no Python between substeps or
     iterations; SPEC §8 order).  Per substep: predict; iterate (ground clamp — external —
-    then the internal constraints: springs, hinges, volumes, self-contacts); un-invert layers;
-    with ``conserve`` remove the rigid part of the internal displacement (see
-    :func:`remove_rigid`; not with pinned particles); ground contact + friction; velocity
-    update with damping.  ``warm`` > 0 warm-starts every substep (:func:`warm_start`).  ``par`` picks the coloured-parallel projection; ``qa``/``dint``
+    then the internal constraints: springs, hinges, volumes, self-contacts); ground contact +
+    friction; un-invert layers; with ``conserve`` remove the rigid part of the internal
+    displacement (see :func:`remove_rigid`; not with pinned particles); velocity update with
+    damping, inelastic self-contacts.  ``omega`` over-relaxes the hinge projections (SOR).  ``par`` picks the coloured-parallel projection; ``qa``/``dint``
     (n, 3) scratch.  Writes (iterations, contacts, uninverted) to ``out`` (int64[3])."""
     its = 0
     for _ in range(substeps):
@@ -722,11 +685,8 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
         it = 0
         ncont = 0
         if pbd:
-            if warm > 0.0:
-                warm_start(q, invm, ij, slam, hidx, hlam, hcs, warm)
-            else:
-                slam[:] = 0.0
-                hlam[:] = 0.0
+            slam[:] = 0.0
+            hlam[:] = 0.0
             if self_coll:
                 ncont = find_contacts(q, qrest, T_idx, search, skip2, table, nxt, pairs)
             hits = 0
@@ -736,10 +696,10 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
                     ground_clamp(q, invm, pen)
                 qa[:] = q
                 if par:
-                    ch = iteration_par(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs,
+                    ch = iteration_par(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs, omega,
                                        vidx, vrest, vlam, vcs, change)
                 else:
-                    ch = iteration_ser(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs,
+                    ch = iteration_ser(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs, omega,
                                        vidx, vrest, vlam, vcs, change)
                 if ncont:
                     hits = project_contacts(q, invm, pairs, ncont, radius)
@@ -747,6 +707,12 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
                 if ch < tol and hits == 0:
                     break
             out[1] = hits
+        if ground:
+            ground_clamp(q, invm, pen)
+            ground_friction(q, q_old, pen, mu)
+        if pbd:
+            # no layer inversion: momentum-conserving passes (vertices resting on the ground stay),
+            # then a V-only pass for anything neighbours undid
             qa[:] = q
             n_fix = 0
             k = 0
@@ -761,9 +727,10 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
             add_delta(q, qa, dint)
             if conserve:
                 remove_rigid(q, q_old, invm, dint)
-        if ground:
-            ground_clamp(q, invm, pen)
-            ground_friction(q, q_old, pen, mu)
+            if ground:
+                for i in range(q.shape[0]):
+                    if q[i, 2] < 0.0:
+                        q[i, 2] = 0.0
         update_velocity(q, q_old, qd, h, keep)
         if pbd and ncont:
             contact_velocities(q, qd, invm, pairs, ncont, radius)

@@ -50,7 +50,8 @@ def _strain(sigma, alpha, l_min, m, m0):
 
 @njit(cache=True, fastmath=True)
 def hinge_targets(hidx, hV, ij, rest0, sig_top, sig_bot, alpha, l_min, cyt, water, w0, m0, h, gain, setw, plastic, hrest):
-    """Bilayer rest angle per hinge: θ0 = θ_plastic + gain · (ε_top − ε_bottom) / h · d.
+    """Bilayer rest angle per hinge: θ0 = θ_plastic + gain · (ε_top − ε_bottom) / h · d, h the
+    current thickness h⁰ (1 − ε_bottom).
     ε_top: surface shrink strain of the top layer from the two V particles over the hinge,
     ε_bottom: of the bottom layer from the hinge's four T particles (same law as the springs),
     d: rest distance of the two triangle centroids (Timoshenko bimetal curvature × arc).
@@ -76,7 +77,7 @@ def hinge_targets(hidx, hV, ij, rest0, sig_top, sig_bot, alpha, l_min, cyt, wate
             ww0 += w0[j]
         et = _strain(sig_top, alpha, l_min, mt, mt0)
         eb = _strain(sig_bot, alpha, l_min, mb, mb0)
-        tb = gain * (et - eb) / h * rest0[s]
+        tb = gain * (et - eb) / (h * max(1.0 - eb, 0.05)) * rest0[s]  # thickness shrinks with the tissue
         if setw > 0.0:
             p = plastic[e]
             if abs(tb) > abs(p) or tb * p < 0.0:
@@ -89,33 +90,34 @@ def hinge_targets(hidx, hV, ij, rest0, sig_top, sig_bot, alpha, l_min, cyt, wate
 
 @njit(cache=True, fastmath=True)
 def vol_targets(vsp, rest0, rest, vol0, vrest):
-    """Thickness constraint rest value follows the in-plane shrink of its triangle (area ∝ l²)."""
+    """Thickness constraint rest value (6 × prism volume) follows the isotropic shrink of its
+    triangle: area ∝ f², thickness ∝ f."""
     for t in range(vsp.shape[0]):
         f = (rest[vsp[t, 0]] / rest0[vsp[t, 0]] + rest[vsp[t, 1]] / rest0[vsp[t, 1]] + rest[vsp[t, 2]] / rest0[vsp[t, 2]]) / 3.0
-        vrest[t] = vol0[t] * f * f
+        vrest[t] = vol0[t] * f * f * f
 
 
 @njit(cache=True, fastmath=True)
-def link_targets(links, ij, r0, h0, tri_springs, rest0, rest):
-    """Rest length of each link V → T vertex: the V particle sits over its triangle's centroid
-    at the thickness h0, so the link's in-plane offset shrinks with the triangle (the mean
-    ratio of its three T springs, already updated in ``rest``) and its height is kept."""
+def link_targets(links, tri_springs, rest0, rest):
+    """Rest length of each link V → T vertex: the tissue shrinks isotropically with its
+    bottom layer, in the plane and through the thickness, so a link (the triangle's
+    cross-section) scales with the mean ratio f of its triangle's three T springs (already
+    updated in ``rest``): l = l⁰ f."""
     for k in range(links.shape[0]):
         s = links[k]
         f = 0.0
         for j in range(3):
             t = tri_springs[k, j]
             f += rest[t] / rest0[t]
-        f /= 3.0
-        rest[s] = math.sqrt((r0[k] * f) ** 2 + h0[k] * h0[k])
+        rest[s] = rest0[s] * f / 3.0
 
 
 @njit(cache=True, fastmath=True)
 def dual_targets(hV, ij, tri_springs, nT, rest0, hrest, h, rest):
-    """Rest length of each V spring (the top surface across hinge e): the dual edge d0 bent to
-    the hinge's rest angle θ0 at height h, d0 − h θ0 (a strip of curvature θ0/d0 is shorter by
-    that on its upper side), times the in-plane shrink of the T layer under it (the mean ratio
-    of the two triangles' T springs, already updated in ``rest``)."""
+    """Rest length of each V spring (the top surface across hinge e): the dual edge bent to the
+    hinge's rest angle θ0 at the current thickness f h, f (d0 − h θ0) (a strip of curvature
+    θ0/(f d0) is shorter by that on its upper side), f the in-plane shrink of the T layer under
+    it (the mean ratio of the two triangles' T springs, already updated in ``rest``)."""
     for e in range(hV.shape[0]):
         s = hV[e]
         f = 0.0
