@@ -29,11 +29,11 @@ def _shrink_springs(ij, rest0, sigma, alpha, l_min, cyt, water, m0, rest):
         rest[s] = rest0[s] * f
 
 
-shrink_springs = njit(cache=True, parallel=False, fastmath=True)(_shrink_springs)
-shrink_springs_par = njit(cache=True, parallel=True, fastmath=True)(_shrink_springs)
+shrink_springs = njit(cache=True, nogil=True, parallel=False, fastmath=True)(_shrink_springs)
+shrink_springs_par = njit(cache=True, nogil=True, parallel=True, fastmath=True)(_shrink_springs)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def _strain(sigma, alpha, l_min, m, m0):
     d = 1.0 - m / m0
     if d < 0.0:
@@ -46,7 +46,7 @@ def _strain(sigma, alpha, l_min, m, m0):
     return e
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def hinge_targets(hidx, hV, ij, rest0, sig_top, sig_bot, alpha, l_min, cyt, water, w0, m0, h, gain, setw, plastic, hrest):
     """Bilayer rest angle per hinge: θ0 = θ_plastic + gain · (ε_top − ε_bottom) / h · d.
     ε_top: surface shrink strain of the top layer from the two V particles over the hinge,
@@ -85,7 +85,7 @@ def hinge_targets(hidx, hV, ij, rest0, sig_top, sig_bot, alpha, l_min, cyt, wate
             hrest[e] = tb
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def vol_targets(vsp, rest0, rest, vol0, vrest):
     """Thickness constraint rest value follows the in-plane shrink of its triangle (area ∝ l²)."""
     for t in range(vsp.shape[0]):
