@@ -68,6 +68,18 @@ float shadow_pcf(sampler2DShadow sm, mat4 light_mat, vec3 p, float radius_texels
     return s / 20.0;
 }
 
+// Cheap soft shadow for the leaf's self-shadowing: four hardware 2x2 PCF taps on a rotated
+// grid (16 texels) at a fixed pattern -- no per-pixel rotation, no divergent refinement loop,
+// which is what a software rasteriser pays for. 1 = lit, 0 = shadowed.
+float shadow_pcf4(sampler2DShadow sm, mat4 light_mat, vec3 p, float radius_texels) {
+    vec4 lp = light_mat * vec4(p, 1.0);
+    vec3 c = lp.xyz / lp.w * 0.5 + 0.5;
+    if (c.z > 1.0) return 1.0;
+    vec2 r = radius_texels / vec2(textureSize(sm, 0));
+    return 0.25 * (texture(sm, vec3(c.xy + vec2(0.4, 1.0) * r, c.z)) + texture(sm, vec3(c.xy + vec2(-1.0, 0.4) * r, c.z))
+                 + texture(sm, vec3(c.xy + vec2(-0.4, -1.0) * r, c.z)) + texture(sm, vec3(c.xy + vec2(1.0, -0.4) * r, c.z)));
+}
+
 // Thin two-sided leaf lighting. N faces the viewer; light reaching the other side is
 // transmitted (translucency), strongest when looking towards the sun through the blade.
 vec3 shade_leaf(vec3 albedo, vec3 N, vec3 V, vec3 L, vec3 light_col, vec3 sky_col,

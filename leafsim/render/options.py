@@ -64,7 +64,10 @@ class RenderOptions:
     wire_colour : (3,) float
         sRGB colour of the wireframe overlay.
     shadow_size : int
-        Shadow-map resolution.
+        Shadow-map resolution (the leaf's self-shadowing).
+    ground_shadow_size : int
+        Resolution of the ground-shadow mask (the leaf projected onto the ground along the
+        sun direction and blurred), sampled once per ground pixel.
     clear : bool
         Clear the target framebuffer first.
     """
@@ -96,6 +99,7 @@ class RenderOptions:
     scalar_range: tuple | None = None
     wire_colour: tuple = (0.12, 0.2, 0.1)
     shadow_size: int = 1024
+    ground_shadow_size: int = 256
     clear: bool = True
 
     @classmethod
