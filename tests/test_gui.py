@@ -8,6 +8,7 @@ labels; the ``xdisplay`` fixture (conftest) provides an X server.
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -366,3 +367,130 @@ def test_cli_gui_screenshot_bad_folder(tmp_path, xdisplay):
                         "--screenshot", str(tmp_path / "no" / "x.png")], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_loaded_font_has_every_glyph():
+    """The font the window actually draws with is the bundled one and has a glyph for every
+    character of the declared labels, units and help texts."""
+    from leafsim.gui.fonts import ui_strings
+
+    chars = sorted({c for s in ui_strings() for c in s if ord(c) >= 0x20})
+    seen = {}
+
+    def body(ctx, app):
+        from imgui_bundle import imgui
+
+        font = imgui.get_font()
+        seen["name"] = font.get_debug_name()
+        seen["missing"] = [c for c in chars if not font.is_glyph_in_font(ord(c))]
+        seen["cjk"] = font.is_glyph_in_font(0x4E00)
+
+    run_gui(body)
+    assert "DejaVuSans" in seen["name"]
+    assert seen["missing"] == [] and seen["cjk"] is False
+
+
+def test_species_switch_keeps_changes_and_names_the_reset_ones():
+    seen = {}
+
+    def body(ctx, app):
+        s = app.session
+        ctx.item_open("**/###group Osmosis")
+        ctx.item_input_value(ref("osmosis.loss_top"), 0.9)
+        ctx.item_close("**/###group Osmosis")
+        ctx.item_close("**/###group Effects")  # bring the Colour group into view
+        ctx.item_open("**/###group Colour")
+        ctx.scroll_to_bottom("//Controls")
+        ctx.yield_(2)
+        ctx.item_input_value(ref("colour.browning"), 7.5)   # oak sets its own browning
+        ctx.scroll_to_top("//Controls")
+        ctx.yield_(2)
+        app.switch_species("maple")  # what picking maple in the species combo calls
+        ctx.yield_(1)
+        # while maple builds, the overlay names the leaf on screen: still oak
+        seen["building"] = s.building
+        seen["shown"] = s.shown_species.key
+        seen["key"] = s.species_key
+        seen["msg"] = app.status.get("species").text
+        wait_until(ctx, lambda: not s.building, 900)
+        ctx.yield_(2)
+        seen["shown_after"] = s.shown_species.key
+        seen["loss_top"] = s.params["osmosis.loss_top"]
+        seen["browning"] = s.params["colour.browning"]
+        seen["maple_browning"] = s.species.params["colour.browning"]
+        ctx.item_click("//Controls/species defaults")
+        ctx.yield_(2)
+        seen["defaults"] = s.params["osmosis.loss_top"]
+        seen["defaults_msg"] = app.status.get("species").text
+
+    run_gui(body)
+    assert seen["building"] and seen["shown"] == "oak" and seen["key"] == "maple"
+    assert "osmosis.loss_top" in seen["msg"] and "kept" in seen["msg"]
+    assert "colour.browning" in seen["msg"] and "reset" in seen["msg"]
+    assert seen["shown_after"] == "maple"
+    assert seen["loss_top"] == pytest.approx(0.9, rel=1e-5)
+    assert seen["browning"] == seen["maple_browning"] != pytest.approx(7.5)
+    assert seen["defaults"] == PARAMS["osmosis.loss_top"].default and "osmosis.loss_top" in seen["defaults_msg"]
+
+
+def test_random_sliders_rebuilds_and_species_switches_while_playing():
+    """Stress: N random live-parameter changes (every live float/int/bool/choice slider, any
+    value in its range), rebuilds and species switches in the middle of builds, all while
+    playing: no exception, no NaN in what is drawn, the window keeps drawing."""
+    import random
+
+    from leafsim.session import species_keys
+
+    rng = random.Random(1234)
+    live = [p for p in PARAMS.values() if not p.rebuild and p.group not in ("Effects",)
+            and p.name not in ("dynamics.dt", "dynamics.substeps", "dynamics.iterations", "osmosis.solver")]
+    keys = [k for k in species_keys() if k in ("oak", "maple", "aspen", "hornbeam")]
+    seen = {"errors": [], "nan": 0, "nan_unreported": 0, "actions": 0}
+
+    def value(p):
+        if p.kind == "bool":
+            return rng.random() < 0.5
+        if p.kind == "choice":
+            return rng.choice(p.choices)
+        lo, hi = float(p.lo), float(p.hi)
+        if p.log and lo > 0:
+            v = math.exp(rng.uniform(math.log(lo), math.log(hi)))
+        else:
+            v = rng.uniform(lo, hi)
+        return int(round(v)) if p.kind == "int" else v
+
+    def body(ctx, app):
+        s = app.session
+        ctx.item_click(PLAY)
+        for k in range(60):
+            r = rng.random()
+            if r < 0.75:
+                p = rng.choice(live)
+                app.set_params({p.name: value(p)})  # what a slider does, any value in range
+            elif r < 0.85:
+                s.set_params({"mesh.spacing": rng.uniform(0.04, 0.08)})
+                ctx.item_click("**/Rebuild")
+            else:
+                app.switch_species(rng.choice(keys))  # often while a build is running
+            seen["actions"] += 1
+            ctx.yield_(rng.randint(1, 4))
+            if s.ready and s.state is not None and not np.isfinite(s.state.particle_q).all():
+                seen["nan"] += 1  # extreme values may diverge, but never silently
+                seen["nan_unreported"] += s.sim_error is None
+                ctx.item_click("**/Reset")
+            errs = [m.text for m in app.status.messages() if m.level == "error"]
+            seen["errors"] += [e for e in errs if "internal error" in e or "Traceback" in e]
+        wait_until(ctx, lambda: not s.building, 900)
+        f0, g0 = app.gui_frames, s.frame
+        if not s.playing:
+            ctx.item_click(PLAY)
+        wait_until(ctx, lambda: s.frame > g0 + 2, 600)
+        seen["frames"] = app.gui_frames - f0
+        seen["sim_advanced"] = s.frame > g0 or s.sim_error is not None
+        seen["finite"] = bool(np.isfinite(s.state.particle_q).all()) or s.sim_error is not None
+        seen["rendered"] = app.rendered_gen == s.generation
+
+    run_gui(body, species="oak", overrides={"mesh.spacing": 0.06})
+    assert seen["actions"] == 60
+    assert seen["errors"] == [] and seen["nan_unreported"] == 0
+    assert seen["frames"] > 0 and seen["sim_advanced"] and seen["finite"] and seen["rendered"]

@@ -94,6 +94,9 @@ class LeafApp(Panels):
         self.render_scale = float(os.environ.get("LEAFSIM_RENDER_SCALE", "1.0"))
         self.software_gl = False
         self.show_ground = self.shadows = True
+        #: the leaf shading itself (a shadow-map pass + 4 taps per blade pixel, ~12 ms per frame
+        #: under llvmpipe at 1x): on with hardware GL, a checkbox away on a software rasteriser
+        self.self_shadow = True
         self.albedo = "detail"
         self.heat_fit = True         # heat maps over the field's own range (else 0..1 / full)
         self.photo_compare = "off"   # "off", "overlay", "blink" (photo over the 3-D view)
@@ -150,6 +153,8 @@ class LeafApp(Panels):
         self.renderer = Renderer(self.ctx)
         gl = str(self.ctx.info.get("GL_RENDERER", "")).lower()
         self.software_gl = any(k in gl for k in ("llvmpipe", "softpipe", "swrast"))
+        if self.software_gl and "LEAFSIM_SELF_SHADOW" not in os.environ:
+            self.self_shadow = False
 
     def before_exit(self) -> None:
         self.session.close()
@@ -194,7 +199,8 @@ class LeafApp(Panels):
         opts = RenderOptions(view=self.view, translucency=float(p["render.translucency"]) * 1.8,
                              specular=float(p["render.specular"]), veins=p["render.vein_alpha"] > 0.02,
                              background=BACKGROUND, shadow_size=1024, ground=self.show_ground,
-                             shadows=self.shadows)
+                             shadows=self.shadows or self.self_shadow, self_shadow=self.self_shadow)
+        opts.ground_shadow = self.shadows  # "shadows": the soft shadow on the ground
         if not self.heat_fit and self.view != "mass":
             opts.scalar_range = (0.0, 1.0)
         if self.session.use_texture():
@@ -344,11 +350,12 @@ class LeafApp(Panels):
         W, H = int(io.display_size.x * sx), int(io.display_size.y * sy)
         fb.use()
         fb.viewport = (0, 0, W, H)
-        fb.clear(*BACKGROUND, 1.0, depth=1.0)
-        self._clear_panels(fb, W, H, sy, sx)
+        self._clear_panels(fb, W, H, sy, sx)  # the panels, the bar and the view tile the window
+        x0, y0, w, h = self.leaf_rect_px
+        if not self.session.ready or self.renderer is None or self.renderer.mesh is None or self.render_scale < 1.0:
+            fb.clear(*BACKGROUND, 1.0, depth=1.0, viewport=(int(x0 * sx), H - int((y0 + h) * sy), int(w * sx), int(h * sy)))
         if not self.session.ready or self.renderer is None or self.renderer.mesh is None:
             return
-        x0, y0, w, h = self.leaf_rect_px
         opts = self.render_options()
         cam = self.camera
         if self.render_scale >= 1.0:

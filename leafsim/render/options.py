@@ -26,9 +26,9 @@ class RenderOptions:
     texture_cutout : bool
         With the photo as albedo, cut the blade where the photo's alpha (leaf mask) is 0, so
         the photo's own outline shows even on a coarser mesh.
-    veins, ground, shadows, self_shadow, wireframe : bool
-        Draw the vein ribbons / ground plane / ground shadow / leaf self-shadowing / a
-        wireframe overlay in any view.
+    veins, ground, shadows, ground_shadow, self_shadow, wireframe : bool
+        Draw the vein ribbons / ground plane / shadows at all / the soft shadow on the ground /
+        leaf self-shadowing / a wireframe overlay in any view.
     background : (3,) float
         Clear colour, display (sRGB) values 0..1.
     ground_colour : (3,) float
@@ -78,6 +78,7 @@ class RenderOptions:
     veins: bool = True
     ground: bool = True
     shadows: bool = True
+    ground_shadow: bool = True
     self_shadow: bool = True
     wireframe: bool = False
     background: tuple = (0.80, 0.84, 0.88)

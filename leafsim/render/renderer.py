@@ -88,6 +88,8 @@ class Renderer:
         self.ctx = ctx
         self.shader_dir = Path(shader_dir)
         self._variants: dict = {}     # (name, defines) -> program with compile-time switches
+        self._shadow_cache: dict = {}
+        self._geometry = 0
         self.programs = {name: self._program(name) for name in
                          ("shadow", "gshadow", "blur", "points", "lines")}
         quad = np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype=np.float32)
@@ -268,6 +270,7 @@ class Renderer:
                 self.tex_mean = tuple(float(x) for x in lin.mean(axis=0))
         self._dirty_particles = True
         self._dirty_springs = True
+        self._geometry += 1  # the shadow passes depend on it only
         self._bounds()
 
     # --- per frame ------------------------------------------------------------------------
@@ -320,6 +323,7 @@ class Renderer:
             if recolour:
                 self.vbo_vein_base.write(self.veins.base_colours(self.colours, self.tint))
         self._dirty_particles = self._dirty_springs = True
+        self._geometry += 1
 
     def _bounds(self):
         self.lo, self.hi = bounds(self.pos)
@@ -361,6 +365,17 @@ class Renderer:
         (self.texture if cut else self._white).use(location=0)
         self.vao_shadow.render(moderngl.TRIANGLES)
         return light_mat
+
+    def _cached(self, name: str, key: tuple, make):
+        """A shadow pass's result, redone only when the leaf moved (``update``/``populate``)
+        or its settings changed: orbiting the camera over a paused leaf costs no shadow pass."""
+        key = (self._geometry, id(self.mesh), key)
+        hit = self._shadow_cache.get(name)
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        value = make()
+        self._shadow_cache[name] = (key, value)
+        return value
 
     def _mask_targets(self, size: int):
         if self._mask is None or self._mask[0].size != (size, size):
@@ -443,10 +458,12 @@ class Renderer:
 
         ctx.enable_only(moderngl.DEPTH_TEST)
         self_shadow = bool(opts.shadows) and bool(opts.self_shadow)
-        light_mat = self._shadow_pass(opts, L) if self_shadow else np.eye(4)
+        light_mat = self._cached("shadow", (opts.shadow_size, tuple(L), opts.texture_cutout, opts.view, opts.albedo),
+                                 lambda: self._shadow_pass(opts, L)) if self_shadow else np.eye(4)
         gz = float(self.lo[2]) - 0.004 * self.radius if opts.ground_z is None else float(opts.ground_z)
-        ground_shadow = bool(opts.shadows) and bool(opts.ground) and L[2] > 0.05
-        mask_rect = self._ground_shadow_pass(opts, L, gz) if ground_shadow else None
+        ground_shadow = bool(opts.shadows) and bool(opts.ground) and bool(opts.ground_shadow) and L[2] > 0.05
+        mask_rect = self._cached("ground_shadow", (opts.ground_shadow_size, tuple(L), gz, opts.texture_cutout, opts.view,
+                                                   opts.albedo), lambda: self._ground_shadow_pass(opts, L, gz)) if ground_shadow else None
 
         self._target = target
         target.use()
