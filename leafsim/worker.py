@@ -67,6 +67,16 @@ class Snapshot:
         return self.state.time
 
 
+def name_thread(name: str) -> None:
+    """Give the calling thread an OS-level name (Linux; shows in top -H and /proc)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).prctl(15, name.encode()[:15], 0, 0, 0)  # PR_SET_NAME
+    except (OSError, AttributeError):
+        pass
+
+
 def lower_priority(nice: int = WORKER_NICE) -> None:
     """Lower the calling thread's scheduling priority (Linux: nice is per thread); no-op where
     unsupported or not permitted."""
@@ -137,6 +147,7 @@ class SimWorker:
         return self._stop or self._steps > 0 or ((self._playing or self._dry) and self.error is None)
 
     def _run(self) -> None:
+        name_thread("leafsim-sim")
         lower_priority()
         t_next = time.perf_counter()
         while True:

@@ -208,7 +208,7 @@ def test_layout_does_not_move_when_messages_appear(tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
     refs = [f"//Controls/{r}" for r in ("###play", "Step", "seed", "Rebuild", "export folder", "Export frame",
-                                        "preset JSON", "Load params", "render scale", "###group Effects",
+                                        "preset JSON", "Load params", "###render scale", "###group Effects",
                                         "###effects.osmosis", "Reset", "###dry", "every")]
     seen = {}
 

@@ -338,3 +338,29 @@ def test_ground_shadow_falls_away_from_the_sun(off):
         # the shadow only reaches out on the side away from the sun
         other = ((cols[-1] + 1 - W / 2) if side < 0 else (W / 2 - cols[0])) / ppm_ground
         assert other < A
+
+
+def test_heat_range_ignores_outliers_and_the_bar_matches(off):
+    """Fitted heat-map range = 2nd..98th percentile (a few dry margin particles no longer
+    paint the rest of the leaf one colour); pixels at the range's ends take the colour bar's
+    end colours."""
+    from leafsim.render.colormaps import colormap
+
+    leaf = synthetic_leaf()
+    n = len(leaf.positions)
+    water = np.full(n, 0.8, np.float32)
+    water[: n // 2] = 0.6  # one half drier than the other
+    water[:3] = 0.0  # three almost dry outliers
+    leaf.scalars["water"] = water
+    off.render_array(leaf, top_camera(), RenderOptions(view="water", ground=False))
+    lo, hi = off.renderer.scalar_range(RenderOptions(view="water"))
+    assert lo == pytest.approx(0.6) and hi == pytest.approx(0.8)
+    assert off.renderer.scalar_range(RenderOptions(view="water", scalar_range=(0.0, 1.0))) == (0.0, 1.0)
+    img = off.render_array(None, top_camera(), RenderOptions(view="water", ground=False)).astype(float) / 255
+    mask = leaf_mask((img * 255).astype(np.uint8), (img[2, 2] * 255).astype(np.uint8))
+    colours = img[mask]
+    # both ends of the bar appear on the leaf (blue-ish low end, red-ish high end), lit 0.55..1
+    ends = colormap("turbo", np.array([0.0, 1.0]))
+    for end in ends:
+        d = np.abs(colours / np.maximum(colours.max(1, keepdims=True), 1e-6) - end / end.max()).max(1)
+        assert (d < 0.25).mean() > 0.1

@@ -152,7 +152,7 @@ class Panels:
             txt = f"{sp.name}  frame {s.frame}  t = {s.time:.3f} s  water {100 * s.water_fraction():.1f} %"
             dl.add_text((x0 + 12, y0 + h - 24), imgui.get_color_u32((0.1, 0.1, 0.1, 1.0)), txt)
             if self.view in HEAT_UNITS and self.renderer is not None and self.renderer.mesh is not None:
-                self._legend(dl, x0 + w - 86, y0 + 40, h * 0.45)
+                self._legend(dl, x0 + w - 70, y0 + 44, h * 0.33)
 
     def _legend(self, dl, x: float, y: float, height: float) -> None:
         """Colour bar of the heat map with its range, ticks and unit."""
@@ -178,8 +178,12 @@ class Panels:
             ty = y + height * (1.0 - t)
             dl.add_line((x + 18, ty), (x + 23, ty), ink)
             dl.add_text((x + 26, ty - 7), ink, f"{v:.3g}")
-        dl.add_text((x - 50, y - 34), ink, label)
-        dl.add_text((x - 50, y - 18), ink, f"[{unit}]")
+        tw = imgui.calc_text_size(label).x
+        dl.add_text((x + 60 - tw, y - 36), ink, label)
+        dl.add_text((x, y - 20), ink, f"[{unit}]")
+        if not opts.scalar_range:
+            note = "2nd..98th pct"
+            dl.add_text((x + 60 - imgui.calc_text_size(note).x, y + height + 8), ink, note)
 
     def _photo_overlay(self, dl) -> None:
         """The photo projected onto the leaf's rest place (overlay or blink compare)."""
@@ -318,11 +322,12 @@ class Panels:
         imgui.same_line()
         imgui.set_next_item_width(70)
         si = min(range(len(SCALES)), key=lambda k: abs(SCALES[k] - self.render_scale))
-        ch, si = imgui.combo("render scale", si, [f"{v:g}x" for v in SCALES])
+        ch, si = imgui.combo("scale###render scale", si, [f"{v:g}x" for v in SCALES])
+        _tip("Render scale of the 3-D view (a software rasteriser pays per pixel)")
         if ch:
             self.render_scale = SCALES[si]
         _, self.heat_fit = imgui.checkbox("heat map: fit range to the data", self.heat_fit)
-        _tip("Colour the heat maps over the field's own min..max (on) or over 0..100 % (off)")
+        _tip("Colour the heat maps over the field's own 2nd..98th percentile (on) or over 0..100 % (off)")
         ai = ALBEDOS.index(self.albedo)
         ch, ai = imgui.combo("photo albedo", ai, list(ALBEDOS))
         if ch:

@@ -483,11 +483,15 @@ class Renderer:
         tex = self.texture if self.texture is not None else self._white
         tex.use(location=0)
 
-        if opts.ground:
+        blade = view in ("shaded", "wireframe") or heat
+        if opts.ground and not blade:
             self._draw_ground(opts, vp, L, gz, mask_rect)
-
-        if view in ("shaded", "wireframe") or heat:
+        if blade:
+            # the blade first, then the ground: its pixels under the leaf fail the depth test
+            # before they are shaded (under llvmpipe the ground is a per-pixel cost)
             self._draw_blade(opts, vp, light, light_mat, heat, self_shadow)
+            if opts.ground:
+                self._draw_ground(opts, vp, L, gz, mask_rect)
             if opts.veins and self.veins.count and not heat:
                 self._draw_veins(opts, vp, light, width, height, light_mat, self_shadow)
         elif view == "particles":
@@ -514,9 +518,10 @@ class Renderer:
         ctx.disable(moderngl.BLEND)
 
     def _draw_ground(self, opts, vp, L, gz, rect) -> None:
-        """The ground quad (7 leaf radii, fading into the background), then -- with a shadow
-        mask -- only the mask's rectangle again with the shadow (depth test off: nothing but
-        the ground is drawn yet), so the mask fetch is paid on a fraction of the pixels."""
+        """The ground: with a shadow mask, first only the mask's rectangle with the shadow,
+        then the whole ground quad (7 leaf radii, fading into the background) pushed back by a
+        polygon offset, so it fails the depth test where the rectangle was drawn.  Every
+        visible ground pixel is shaded once and the mask is fetched on a fraction of them."""
         gcol = np.asarray(opts.ground_colour, np.float64)
         sky, sun = np.asarray(opts.sky_colour, np.float64), np.asarray(opts.light_colour, np.float64)
         lit = gcol * (sky + sun * max(L[2], 0.0))
@@ -525,7 +530,7 @@ class Renderer:
         ext = 7.0 * self.radius
         quads = [(0, (cx, cy, ext, ext))]
         if rect is not None:
-            quads.append((1, ((rect[0] + rect[2]) / 2, (rect[1] + rect[3]) / 2, (rect[2] - rect[0]) / 2, (rect[3] - rect[1]) / 2)))
+            quads.insert(0, (1, ((rect[0] + rect[2]) / 2, (rect[1] + rect[3]) / 2, (rect[2] - rect[0]) / 2, (rect[3] - rect[1]) / 2)))
         for sh, quad in quads:
             g = self._variant("ground", LS_SHADOW=sh)
             for k, v in dict(u_viewproj=vp, u_center=(cx, cy, gz), u_quad=tuple(float(x) for x in quad), u_ground_z=gz,
@@ -533,10 +538,9 @@ class Renderer:
                              u_bg=tuple(opts.background), u_mask=2,
                              u_rect=tuple(float(v) for v in (rect or (0.0, 0.0, 1.0, 1.0)))).items():
                 _set(g, k, v)
-            if sh:
-                self.ctx.disable(moderngl.DEPTH_TEST)
+            self.ctx.polygon_offset = (2.0, 4.0) if (sh == 0 and rect is not None) else (0.0, 0.0)
             self._ground_vaos[sh].render(moderngl.TRIANGLE_STRIP)
-        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.polygon_offset = (0.0, 0.0)
 
     def _draw_blade(self, opts, vp, light, light_mat, heat, self_shadow):
         if heat:
@@ -562,13 +566,17 @@ class Renderer:
         self._variant_vao("blade", **defs).render(moderngl.TRIANGLES)
 
     def scalar_range(self, opts) -> tuple[float, float]:
-        """The (lo, hi) a heat map of ``opts.view`` is drawn with: ``opts.scalar_range``, or the
-        field's finite min/max (what a colour bar must show)."""
+        """The (lo, hi) a heat map of ``opts.view`` is drawn with (what a colour bar must show):
+        ``opts.scalar_range``, or the field's 2nd..98th percentile, so that a few nearly dry
+        margin particles do not squeeze the rest of the leaf into one colour."""
         if opts.scalar_range is not None:
             return float(opts.scalar_range[0]), float(opts.scalar_range[1])
         f = self.scalars[opts.view]
         f = f[np.isfinite(f)]
-        return (float(f.min()), float(f.max())) if f.size else (0.0, 1.0)
+        if not f.size:
+            return 0.0, 1.0
+        lo, hi = (float(v) for v in np.percentile(f, [2.0, 98.0]))
+        return (lo, hi) if hi > lo else (float(f.min()), float(max(f.max(), f.min() + 1e-12)))
 
     def _albedo_mode(self, opts) -> int:
         if opts.albedo == "colours":
