@@ -57,6 +57,7 @@ class Snapshot:
     records: list = field(default_factory=list)
     sim_rate: float = 0.0
     error: str | None = None
+    epoch: int = 0  # increments at every reset of the stepped state
 
     @property
     def frame(self) -> int:
@@ -119,6 +120,8 @@ class SimWorker:
         self._records: list = []
         self._rate = deque(maxlen=64)  # (wall, sim time) samples
         self._seq = 0
+        self.epoch = 0
+        self._reset_wanted = 0
         self.error: str | None = None
         self.dry_done = False
         self._snap = self._make_snapshot({})
@@ -144,7 +147,8 @@ class SimWorker:
         return self._thread is not None and self._thread.is_alive()
 
     def _wanted(self) -> bool:
-        return self._stop or self._steps > 0 or ((self._playing or self._dry) and self.error is None)
+        return (self._stop or self._steps > 0 or self._reset_wanted > self.epoch
+                or ((self._playing or self._dry) and self.error is None))
 
     def _run(self) -> None:
         name_thread("leafsim-sim")
@@ -157,6 +161,12 @@ class SimWorker:
                     self._apply_params()  # parameters change while paused too
                 if self._stop:
                     return
+                reset = self._reset_wanted > self.epoch
+            if reset:
+                with self._step_lock:
+                    self._reset_locked(self.simulator.state())
+                continue
+            with self._cond:
                 free = (self._playing or self._dry) and self.error is None
                 if not free:
                     self._steps -= 1
@@ -240,7 +250,7 @@ class SimWorker:
         render, key = self._render(st) if self._render is not None else (None, None)
         self._t_pub = time.perf_counter()
         self._seq += 1
-        return Snapshot(self._seq, st, render, key, dict(ms), [rec] if rec else [], 0.0, self.error)
+        return Snapshot(self._seq, st, render, key, dict(ms), [rec] if rec else [], 0.0, self.error, self.epoch)
 
     def _publish(self, ms: dict) -> None:
         snap = self._make_snapshot(ms)
@@ -259,7 +269,8 @@ class SimWorker:
             if not self._snap_taken:
                 self._snap_taken = True
                 return snap
-            return Snapshot(snap.seq, snap.state, snap.render, snap.render_key, snap.ms, [], snap.sim_rate, snap.error)
+            return Snapshot(snap.seq, snap.state, snap.render, snap.render_key, snap.ms, [], snap.sim_rate, snap.error,
+                            snap.epoch)
 
     def set_params(self, params) -> None:
         """Hand new live parameters to the worker: applied before its next step (at once when
@@ -328,15 +339,27 @@ class SimWorker:
             self._after_step(ms, True)
         return ms
 
+    def request_reset(self) -> int:
+        """Ask the worker thread for a fresh leaf (made by its simulator between two steps);
+        returns the epoch whose first snapshot shows it."""
+        with self._cond:
+            self._reset_wanted = max(self._reset_wanted, self.epoch) + 1
+            self._cond.notify_all()
+            return self._reset_wanted
+
     def reset(self, state) -> None:
-        """Replace the stepped state (a fresh leaf) and publish it."""
+        """Replace the stepped state (a fresh leaf) and publish it (caller's thread)."""
         with self._step_lock:
-            self._state = state
-            self.error = None
-            self._dry = False
-            self.dry_done = False
-            self._rate.clear()
-            with self._cond:
-                self._apply_params()
-                self._snap_taken = True
-            self._publish({})
+            self._reset_locked(state)
+
+    def _reset_locked(self, state) -> None:
+        self._state = state
+        self.error = None
+        self._dry = False
+        self.dry_done = False
+        self._rate.clear()
+        with self._cond:
+            self._apply_params()
+            self._snap_taken = True
+            self.epoch = max(self.epoch + 1, self._reset_wanted)
+        self._publish({})

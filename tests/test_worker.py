@@ -146,3 +146,34 @@ def test_reset_and_rebuild_while_playing(s):
     assert s.worker is not old and s.playing
     assert until(lambda: not old.running, 10)  # the old worker thread ended
     assert until(lambda: s.take_snapshot() and s.frame >= 2)
+
+
+def test_reset_without_waiting_while_playing(s):
+    s.play(True)
+    assert until(lambda: s.take_snapshot() and s.frame >= 5)
+    s.reset(wait=False)  # the GUI's Reset: returns at once, the worker makes the fresh leaf
+    assert until(lambda: (s.take_snapshot() or True) and s.history["frame"] and s.history["frame"][0] == 0
+                 and s.frame < 5 and s.worker.epoch >= 1)
+    fr = list(s.history["frame"])
+    assert fr == sorted(fr)  # the old run's records were dropped with the reset
+
+
+def test_simulator_is_made_on_the_build_thread(monkeypatch):
+    import threading
+
+    from leafsim.sim import simulator as simmod
+
+    made = []
+    orig = simmod.Simulator.__init__
+
+    def init(self, *a, **k):
+        made.append(threading.current_thread().name)
+        orig(self, *a, **k)
+
+    monkeypatch.setattr(simmod.Simulator, "__init__", init)
+    s = Session("oak", overrides={"mesh.spacing": 0.06}, build=False)
+    s.start_worker()
+    s.rebuild_async()
+    assert s.wait(120) and s.ready
+    s.close()
+    assert made == ["leafsim-build"]  # installing it on the UI thread constructs none

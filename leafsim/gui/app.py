@@ -30,6 +30,10 @@ from .status import Status
 
 #: resolution factors of the 3-D view (llvmpipe's cost is per pixel)
 SCALES = (0.35, 0.5, 0.75, 1.0)
+#: above this many triangles the view is drawn into a texture kept while nothing changes (a
+#: large mesh costs more to draw than the texture costs to show; a small one is drawn straight
+#: into the window every frame)
+CACHE_TRIANGLES = 20000
 
 
 def _configure_threads() -> None:
@@ -352,13 +356,15 @@ class LeafApp(Panels):
         fb.viewport = (0, 0, W, H)
         self._clear_panels(fb, W, H, sy, sx)  # the panels, the bar and the view tile the window
         x0, y0, w, h = self.leaf_rect_px
-        if not self.session.ready or self.renderer is None or self.renderer.mesh is None or self.render_scale < 1.0:
+        direct = self.renderer is not None and self.renderer.mesh is not None and self.render_scale >= 1.0 \
+            and len(self.renderer.tri) <= CACHE_TRIANGLES
+        if not self.session.ready or not direct:
             fb.clear(*BACKGROUND, 1.0, depth=1.0, viewport=(int(x0 * sx), H - int((y0 + h) * sy), int(w * sx), int(h * sy)))
         if not self.session.ready or self.renderer is None or self.renderer.mesh is None:
             return
         opts = self.render_options()
         cam = self.camera
-        if self.render_scale >= 1.0:
+        if direct:
             self.view_direct = True
             vw, vh = max(int(w * sx), 16), max(int(h * sy), 16)
             self.renderer.render(cam, vw, vh, opts, framebuffer=fb, viewport=(int(x0 * sx), H - int(y0 * sy) - vh, vw, vh))

@@ -27,7 +27,6 @@ ALBEDOS = ("detail", "photo", "colours")
 COMPARES = ("off", "overlay", "blink")
 BACKGROUND = (0.80, 0.84, 0.88)
 PANEL_BG = (0.11, 0.11, 0.12)
-_FIXED = None
 
 
 def _fixed_flags():
@@ -283,7 +282,7 @@ class Panels:
             s.request_steps(1)
         imgui.same_line()
         if imgui.button("Reset"):
-            s.reset()
+            s.reset(wait=False)  # the worker makes the fresh leaf; the next snapshot shows it
             self.dirty = True
         imgui.same_line()
         if imgui.button("Frame view"):

@@ -239,10 +239,17 @@ class Renderer:
                 (self.vbo_vein_dyn, "3f 3f 3f", "in_center", "in_side", "in_nrm"),
                 (self.vbo_vein_static, "1f 1f 2f 1f", "in_hw", "in_v", "in_uv", "in_order"),
                 (self.vbo_vein_base, "3f 3f", "in_base", "in_tint")], self.ibo_vein)
-        # texture
+        self._upload_texture(getattr(mesh, "texture_rgba", None))
+        self._dirty_particles = True
+        self._dirty_springs = True
+        self._geometry += 1  # the shadow passes depend on it only
+        self._bounds()
+
+    def _upload_texture(self, tex) -> None:
+        """The photo (sRGB, mipmapped, dilated past the leaf mask) and its mean leaf colour."""
+        ctx = self.ctx
         self.texture = None
         self.tex_mean = (0.2, 0.3, 0.1)
-        tex = getattr(mesh, "texture_rgba", None)
         if tex is not None:
             rgba = _dilate_texture(tex)
             h, w = rgba.shape[:2]
@@ -268,10 +275,6 @@ class Renderer:
             lin = (tex[:, :, :3][inside].astype(np.float64) / 255.0) ** 2.2
             if lin.size:
                 self.tex_mean = tuple(float(x) for x in lin.mean(axis=0))
-        self._dirty_particles = True
-        self._dirty_springs = True
-        self._geometry += 1  # the shadow passes depend on it only
-        self._bounds()
 
     # --- per frame ------------------------------------------------------------------------
     def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None) -> None:
@@ -494,7 +497,16 @@ class Renderer:
                 self._draw_ground(opts, vp, L, gz, mask_rect)
             if opts.veins and self.veins.count and not heat:
                 self._draw_veins(opts, vp, light, width, height, light_mat, self_shadow)
-        elif view == "particles":
+        else:
+            self._draw_debug(view, vp, eye, opts)
+        if view == "wireframe" or (opts.wireframe and view != "springs"):
+            self._draw_lines(self.vao_wire, vp, eye, opts, lift=0.002 * self.radius, colour=tuple(opts.wire_colour))
+        ctx.disable(moderngl.BLEND)
+
+    def _draw_debug(self, view, vp, eye, opts) -> None:
+        """The particles or springs debug view."""
+        ctx = self.ctx
+        if view == "particles":
             if self._dirty_particles:
                 self.vbo_particles.write(np.ascontiguousarray(self._all_positions(), dtype=np.float32))
                 self._dirty_particles = False
@@ -513,9 +525,6 @@ class Renderer:
                 self._draw_lines(self.vao_springs, vp, eye, opts, lift=0.0)
             else:  # nothing to show: fall back to the mesh edges
                 self._draw_lines(self.vao_wire, vp, eye, opts, lift=0.0, colour=(0.2, 0.4, 0.9))
-        if view == "wireframe" or (opts.wireframe and view != "springs"):
-            self._draw_lines(self.vao_wire, vp, eye, opts, lift=0.002 * self.radius, colour=tuple(opts.wire_colour))
-        ctx.disable(moderngl.BLEND)
 
     def _draw_ground(self, opts, vp, L, gz, rect) -> None:
         """The ground: with a shadow mask, first only the mask's rectangle with the shadow,
