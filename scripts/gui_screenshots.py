@@ -1,10 +1,11 @@
 """Screenshots of the GUI for docs/ (run under a display or xvfb-run):
 
-    python scripts/gui_screenshots.py            # docs/gui.png, docs/gui_error.png, docs/gui_heatmap.png
+    python scripts/gui_screenshots.py   # docs/gui.png, gui_error.png, gui_heatmap.png, gui_photo.png
 
 The real application is driven by the ImGui test engine (as the GUI tests do): the default
-view after drying for a while, the status bar showing an error, and the water heat map with
-its colour bar.
+view after drying for a while, the status bar showing an error, the water heat map with its
+colour bar, and grapevine (whose photo is stored base up) with the photo turned beside the
+model and laid over it.
 """
 
 from __future__ import annotations
@@ -69,6 +70,13 @@ def with_error(ctx, app):
     blocker.unlink()
 
 
+def photo_compare(ctx, app):
+    _dry(ctx, app, 300)
+    app.photo_compare = "overlay"
+    app.photo_alpha = 0.45
+    ctx.yield_(3)
+
+
 def heat_map(ctx, app):
     _dry(ctx, app, 700)
     app.view = "water"
@@ -79,3 +87,4 @@ if __name__ == "__main__":
     shot("gui.png", "maple", default_view)
     shot("gui_error.png", "oak", with_error)
     shot("gui_heatmap.png", "maple", heat_map)
+    shot("gui_photo.png", "grapevine", photo_compare)

@@ -166,7 +166,7 @@ def _median_rows(runs: list[dict]) -> dict:
     out = dict(runs[0])
     for k, v in runs[0].items():
         if isinstance(v, float) and k not in ("scale",):
-            out[k] = round(float(np.median([r.get(k, float("nan")) for r in runs])), 2)
+            out[k] = float(f"{float(np.median([r.get(k, float('nan')) for r in runs])):.3g}")
     out["loads"] = [r["load"] for r in runs]
     out["fps_runs"] = [round(r["fps"], 1) for r in runs]
     return out
