@@ -244,22 +244,24 @@ class SimWorker:
         (w0, s0), (w1, s1) = r[0], r[-1]
         return (s1 - s0) / max(w1 - w0, 1e-9)
 
-    def _make_snapshot(self, ms: dict) -> Snapshot:
+    def _make_snapshot(self, ms: dict, epoch: int | None = None) -> Snapshot:
         st = self._state.copy()
         rec = self._record(st, ms)
         render, key = self._render(st) if self._render is not None else (None, None)
         self._t_pub = time.perf_counter()
         self._seq += 1
-        return Snapshot(self._seq, st, render, key, dict(ms), [rec] if rec else [], 0.0, self.error, self.epoch)
+        return Snapshot(self._seq, st, render, key, dict(ms), [rec] if rec else [], 0.0, self.error,
+                        self.epoch if epoch is None else epoch)
 
-    def _publish(self, ms: dict) -> None:
-        snap = self._make_snapshot(ms)
+    def _publish(self, ms: dict, epoch: int | None = None) -> None:
+        snap = self._make_snapshot(ms, epoch)
         snap.sim_rate = self.sim_rate()
         with self._cond:
             if not self._snap_taken:  # the UI has not seen the previous one: keep its records
                 snap.records = self._snap.records + snap.records
             self._snap = snap
             self._snap_taken = False
+            self.epoch = snap.epoch  # whoever sees the new epoch finds its snapshot published
 
     # ------------------------------------------------------------------ UI side
     def snapshot(self) -> Snapshot:
@@ -361,5 +363,5 @@ class SimWorker:
         with self._cond:
             self._apply_params()
             self._snap_taken = True
-            self.epoch = max(self.epoch + 1, self._reset_wanted)
-        self._publish({})
+            epoch = max(self.epoch + 1, self._reset_wanted)
+        self._publish({}, epoch)
