@@ -8,6 +8,12 @@ that reports progress; the finished model is swapped in atomically on the caller
 :meth:`Session.poll` (called by :meth:`step` and once per GUI frame), so the frame loop never
 waits for a build and never sees half a model.
 
+The simulation is stepped by a :class:`leafsim.worker.SimWorker`.  Scripts and tests call
+:meth:`Session.step` (synchronous, on the caller's thread); the GUI calls
+:meth:`Session.start_worker` once and then only asks (:meth:`play`, :meth:`set_speed`,
+:meth:`request_steps`, :meth:`dry_to_end`) and reads: :meth:`take_snapshot` once per frame makes
+:attr:`state` the worker's latest consistent snapshot and appends its history records.
+
 Example
 -------
 >>> s = Session("oak")                          # doctest: +SKIP  (synchronous first build)
@@ -33,6 +39,7 @@ import numpy as np
 from .errors import LeafsimError
 from .fileio import _public_mode, atomic_write_bytes
 from .params import PARAMS, ParamSet, flatten, unknown_key_message
+from .worker import SimWorker, lower_priority
 
 #: stats history length (frames kept for the live plots)
 HISTORY = 2000
@@ -54,6 +61,7 @@ class BuildResult:
     photo_rgba: np.ndarray | None  # (H, W, 4) uint8 RGB + leaf mask, None for drawn species
     photo_error: str | None
     seconds: float
+    simulator: Any = None  # made on the build thread: at 56 k particles the osmosis factorisation alone is ~1 s
 
 
 public_mode = _public_mode  # file mode a plain open() would give (used for screenshots)
@@ -96,6 +104,15 @@ class Session:
         self.built_seed: int | None = None
         self.built_species: str | None = None
         self.shape = self.veins = self.model = self.state = self.simulator = None
+        self.worker: SimWorker | None = None
+        self.sim_params: ParamSet | None = None  # live values on top of the built ones
+        self._params_version = 0
+        self._threaded = False
+        self._play_wanted = False
+        self._speed_wanted: float | None = None
+        self._snap_seq = -1
+        self._render_cache = None
+        self.sim_rate = 0.0
         self.pigments0 = None
         self.view = None
         self.photo_rgba: np.ndarray | None = None
@@ -181,13 +198,18 @@ class Session:
             except LeafsimError as e:
                 photo_error = str(e)
         stage(0.98, "simulator: preparing the stages")
-        return BuildResult(sp, int(seed), params, shape, veins, model, photo, photo_error, time.perf_counter() - t0)
+        from .sim.simulator import Simulator
+
+        live = {k: v for k, v in self.params.items() if not PARAMS[k].rebuild}
+        sim = Simulator(model, params.with_overrides(live), seed=int(seed))
+        return BuildResult(sp, int(seed), params, shape, veins, model, photo, photo_error, time.perf_counter() - t0, sim)
 
     def _install(self, res: BuildResult) -> None:
         """Swap a finished build in (everything at once)."""
         from .sim.simulator import Simulator
 
-        self.species = res.species
+        self.species = res.species if res.species.key == self.species_key else self.species
+        self._shown_species = res.species
         self.built_species = res.species.key
         self.built_seed = res.seed
         self.built_params = res.params
@@ -195,7 +217,10 @@ class Session:
         self.photo_rgba, self.photo_error = res.photo_rgba, res.photo_error
         self.build_seconds = res.seconds
         # live values may have changed while building: the simulator takes the current ones
-        self.simulator = Simulator(self.model, self._sim_params(), seed=self.built_seed)
+        # (cheap unless Δt or D changed: the factorisation was done on the build thread)
+        self._update_sim_params()
+        self.simulator = res.simulator or Simulator(self.model, self.sim_params, seed=self.built_seed)
+        self.simulator.set_params(self.sim_params)
         self._fresh_state()
         self.generation += 1
         self.build_error = None
@@ -203,10 +228,17 @@ class Session:
 
     def _sim_params(self) -> ParamSet:
         """Current live values on top of the values the model was built with."""
+        if self.sim_params is None:
+            self._update_sim_params()
+        return self.sim_params
+
+    def _update_sim_params(self) -> None:
         if self.built_params is None:
-            return self.params
-        live = {k: v for k, v in self.params.items() if not PARAMS[k].rebuild}
-        return self.built_params.with_overrides(live)
+            self.sim_params = self.params
+        else:
+            live = {k: v for k, v in self.params.items() if not PARAMS[k].rebuild}
+            self.sim_params = self.built_params.with_overrides(live)
+        self._params_version += 1
 
     def rebuild_async(self) -> None:
         """Rebuild outline → veins → blade for the current species, seed and parameters in a
@@ -226,6 +258,7 @@ class Session:
                 self.progress, self.progress_text = float(p), text
 
         def work():
+            lower_priority()  # the window keeps the cores while a leaf builds
             res, err = None, None
             try:
                 res = self._build(sp, seed, params, report, build_id)
@@ -282,8 +315,9 @@ class Session:
         if not isinstance(new, ParamSet):
             new = self.params.with_overrides(new)
         self.params = new
-        if self.simulator is not None:
-            self.simulator.set_params(self._sim_params())
+        self._update_sim_params()
+        if self.worker is not None:
+            self.worker.set_params(self.sim_params)
         return self.pending_rebuild
 
     def set_seed(self, seed: int) -> bool:
@@ -291,18 +325,43 @@ class Session:
         self.seed = int(seed)
         return self.pending_rebuild
 
-    def set_species(self, key: str, rebuild: bool = True) -> None:
-        """Switch species: its own parameter values (plus the session's CLI overrides) replace
-        the current ones; starts a background rebuild unless ``rebuild=False``."""
+    def user_changes(self) -> dict:
+        """Values the user changed from the current species' own values (CLI overrides too)."""
+        base = self.species.params
+        return {k: v for k, v in self.params.items() if v != base[k]}
+
+    def set_species(self, key: str, rebuild: bool = True) -> dict:
+        """Switch species, keeping the user's changes where they apply: a changed value of a
+        parameter that neither species sets itself (osmosis rates, dynamics, mesh, ...) carries
+        over; one that either species sets (its palette, its venation) takes the new
+        species' value.  ``--set`` overrides always carry over.  Starts a background rebuild
+        unless ``rebuild=False``.  Returns ``{"kept": [names], "reset": [names]}``."""
         from .species import get_species
 
         sp = get_species(key, self.config)
-        params = sp.params.with_overrides(self.overrides, where="--set")
-        self.species, self.species_key, self.params = sp, key, params
-        if self.simulator is not None:
-            self.simulator.set_params(self._sim_params())
+        old, new = self.species.params, sp.params
+        own = {k for k, p in PARAMS.items() if old[k] != p.default or new[k] != p.default}
+        changed = self.user_changes()
+        kept = {k: v for k, v in changed.items() if k not in own or k in self.overrides}
+        reset = sorted(k for k in changed if k not in kept)
+        self.species, self.species_key = sp, key
+        self.set_params(new.with_overrides(kept, where="species switch"))
         if rebuild:
             self.rebuild_async()
+        return {"kept": sorted(kept), "reset": reset}
+
+    def species_defaults(self) -> list[str]:
+        """Every parameter back to the current species' own values (``--set`` overrides
+        dropped too); returns the names that changed."""
+        changed = sorted(self.user_changes())
+        self.overrides = {}
+        self.set_params(self.species.params)
+        return changed
+
+    @property
+    def shown_species(self):
+        """The species of the model on screen (the old one while a switch is building)."""
+        return self._shown_species if self.model is not None else self.species
 
     def save_params(self, path) -> Path:
         """Write species, seed and every parameter value as JSON (atomically)."""
@@ -375,78 +434,145 @@ class Session:
         self.last_ms = {}
 
     def _fresh_state(self) -> None:
+        """A fresh leaf for the current simulator, stepped by a new worker (the old one is
+        told to stop; its playing state and speed carry over)."""
+        from functools import partial
+
         from .view import LeafView
 
-        self.state = self.simulator.state()
-        self.pigments0 = self.state.pigments.copy()
+        state = self.simulator.state()
+        self.pigments0 = state.pigments.copy()
         self.view = LeafView(self.model, self.photo_rgba, self.pigments0, self.photo_tint)
         self.sim_error = None
         self._clear_history()
-        self._record({})
+        old = self.worker
+        self.worker = SimWorker(self.simulator, state, partial(_history_entry, self.model, self.simulator),
+                                partial(self._render_arrays, self.view), water0=float(self.model.particle_water0.sum()))
+        self.worker.set_speed(self._speed_wanted)
+        self.worker.play(self._play_wanted if old is None else (old.playing and not old.drying))
+        if old is not None:
+            old.stop()
+        if self._threaded:
+            self.worker.start()
+        self._snap_seq = -1
+        self._epoch = 0
+        self.take_snapshot()
 
     @property
     def pigments(self):
         """Pigments of the current state (None before the first build)."""
         return None if self.state is None else self.state.pigments
 
-    def reset(self) -> None:
-        """Back to the fresh leaf (frame 0, full water, young colour); same model."""
+    def reset(self, wait: bool = True) -> None:
+        """Back to the fresh leaf (frame 0, full water, young colour); same model and
+        simulator.  With the worker thread running the worker makes the fresh state between
+        two steps; ``wait=False`` (the GUI) returns at once and the next snapshot shows it."""
         if self.model is None:
             return
-        from .sim.simulator import Simulator
+        w = self.worker
+        if w is None or not w.running:
+            self._fresh_state()
+            return
+        epoch = w.request_reset()
+        while wait and w.running and w.epoch < epoch:
+            time.sleep(0.002)
+        if wait:
+            self.take_snapshot()
 
-        self.simulator = Simulator(self.model, self._sim_params(), seed=self.built_seed)
-        self._fresh_state()
-
-    def _record(self, ms: dict) -> None:
-        from .sim.kernels.pbd import residual
-        from .sim.model import LAYER_T, LAYER_V
-
-        m, s = self.model, self.state
-        w = s.particle_water
-        lay = m.particle_layer
-        finite = bool(np.isfinite(s.particle_q).all() and np.isfinite(w).all())
-        h = self.history
-        h["frame"].append(s.frame)
-        h["time"].append(s.time)
-        h["water_T"].append(float(w[lay == LAYER_T].sum()))
-        h["water_V"].append(float(w[lay == LAYER_V].sum()))
-        h["water"].append(float(w.sum() / max(m.particle_water0.sum(), 1e-300)))
-        h["residual"].append(float(residual(s.particle_q, m.spring_ij, s.spring_rest)) if finite else float("nan"))
-        mass = m.particle_cytosol + w
-        qd = s.particle_qd
-        h["kinetic"].append(float(0.5 * (mass * (qd * qd).sum(1)).sum()) if finite else float("nan"))
-        h["iterations"].append(self.simulator.iterations if self.simulator is not None else 0)
-        tot = 0.0
-        for k in ("osmosis", "shrink", "dynamics", "colour"):
-            v = float(ms.get(k, 0.0))
-            h["ms_" + k].append(v)
-            tot += v
-        h["ms_total"].append(tot)
-        self.last_ms = dict(ms)
-        if not finite and self.sim_error is None:
-            self.sim_error = f"simulation diverged (NaN/Inf) at frame {s.frame}: press Reset or lower dynamics.dt"
+    def take_snapshot(self) -> bool:
+        """Make :attr:`state` the worker's latest published frame and append its history
+        records; True when it is a new one.  (The GUI calls this once per frame.)"""
+        w = self.worker
+        if w is None:
+            return False
+        snap = w.snapshot()
+        if snap.epoch != self._epoch:  # the worker reset the leaf: a new history
+            self._epoch = snap.epoch
+            self._clear_history()
+            self.sim_error = None
+        for rec in snap.records:
+            for k, v in rec.items():
+                self.history[k].append(v)
+        if snap.ms:
+            self.last_ms = dict(snap.ms)
+        if snap.error and self.sim_error is None:
+            self.sim_error = snap.error
+        self.sim_rate = snap.sim_rate if w.running else 0.0
+        if snap.seq == self._snap_seq:
+            return False
+        self._snap_seq = snap.seq
+        self.state = snap.state
+        self._snap = snap
+        return True
 
     def step(self, n: int = 1) -> dict:
-        """Advance ``n`` frames (enabled effects only; colour when ``effects.colour``).
-        Returns milliseconds per stage of the last frame.  Does nothing before the first build
-        or after the simulation diverged."""
+        """Advance ``n`` frames on the caller's thread (enabled effects only; colour when
+        ``effects.colour``) and take the result.  Returns milliseconds per stage of the last
+        frame.  Does nothing before the first build or after the simulation diverged."""
         self.poll()
-        if self.model is None or self.sim_error is not None:
+        if self.worker is None or self.sim_error is not None:
             return {}
-        ms: dict[str, float] = {}
-        for _ in range(max(int(n), 0)):
-            ms = self.simulator.step(self.state)
-            if not np.isfinite(self.state.particle_q[:1]).all():
-                break
-        if n > 0:
-            self._record(ms)
+        ms = self.worker.step_sync(n)
+        self.take_snapshot()
         return ms
+
+    # --- the worker, driven by the GUI
+    def start_worker(self) -> None:
+        """Step in a background thread from now on (this and every later model)."""
+        self._threaded = True
+        if self.worker is not None:
+            self.worker.start()
+
+    def play(self, on: bool = True) -> None:
+        """Play or pause (before the first build: play once it is there)."""
+        self._play_wanted = bool(on)
+        if self.worker is not None:
+            self.worker.play(on and self.sim_error is None)
+
+    @property
+    def playing(self) -> bool:
+        return self.worker is not None and self.worker.playing
+
+    def set_speed(self, speed: float | None) -> None:
+        """Simulated seconds per wall second (None: as fast as possible)."""
+        self._speed_wanted = speed
+        if self.worker is not None:
+            self.worker.set_speed(speed)
+
+    def request_steps(self, n: int = 1) -> None:
+        """``n`` frames in the background (the Step button)."""
+        if self.worker is not None and self.sim_error is None:
+            self.worker.request_steps(n)
+
+    def dry_to_end(self, on: bool = True) -> None:
+        """Fast-forward until the leaf is dry (see :meth:`leafsim.worker.SimWorker.dry_to_end`)."""
+        if self.worker is not None:
+            self.worker.dry_to_end(on)
+
+    @property
+    def drying(self) -> bool:
+        return self.worker is not None and self.worker.drying
+
+    def dry_progress(self) -> float:
+        return 0.0 if self.worker is None else self.worker.dry_progress()
+
+    def close(self) -> None:
+        """Stop the worker thread (the window closes)."""
+        if self.worker is not None:
+            self.worker.stop(join=2.0)
 
     # ------------------------------------------------------------------ rendering data
     def _view(self):
         self.view.photo_tint = self.photo_tint
         return self.view
+
+    def _render_key(self) -> tuple:
+        return (self._params_version, bool(self.photo_tint))
+
+    def _render_arrays(self, view, state) -> tuple[dict, tuple]:
+        """Renderer arrays of a snapshot (runs on the worker thread)."""
+        key = self._render_key()
+        return view.update(state, self._sim_params()), key
 
     def render_colours(self):
         """(colours, tint) of layer T — see :meth:`leafsim.view.LeafView.colours`."""
@@ -467,8 +593,38 @@ class Session:
         return self._view().mesh(self.state, self._sim_params())
 
     def render_update(self) -> dict:
-        """Keyword arguments for ``Renderer.update`` with the current state."""
+        """Keyword arguments for ``Renderer.update`` with the current state: the worker's
+        precomputed arrays when they were made with the current parameters, else made now."""
+        snap = getattr(self, "_snap", None)
+        self._view()
+        if snap is not None and snap.state is self.state and snap.render is not None and snap.render_key == self._render_key():
+            return snap.render
         return self._view().update(self.state, self._sim_params())
+
+
+def _history_entry(model, simulator, state, ms: dict) -> dict:
+    """One history record of a state (runs on the worker thread)."""
+    from .sim.kernels.pbd import residual
+    from .sim.model import LAYER_T, LAYER_V
+
+    w = state.particle_water
+    lay = model.particle_layer
+    finite = bool(np.isfinite(state.particle_q).all() and np.isfinite(w).all())
+    mass = model.particle_cytosol + w
+    qd = state.particle_qd
+    rec = {"frame": state.frame, "time": state.time, "water_T": float(w[lay == LAYER_T].sum()),
+           "water_V": float(w[lay == LAYER_V].sum()), "water": float(w.sum() / max(model.particle_water0.sum(), 1e-300)),
+           "residual": float(residual(state.particle_q, model.spring_ij, state.spring_rest)) if finite else float("nan"),
+           "kinetic": float(0.5 * (mass * (qd * qd).sum(1)).sum()) if finite else float("nan"),
+           "iterations": simulator.iterations}
+    tot = 0.0
+    for k in ("osmosis", "shrink", "dynamics", "colour"):
+        v = float(ms.get(k, 0.0))
+        rec["ms_" + k] = v
+        tot += v
+    rec["ms_total"] = tot
+    return rec
+
 
 class _Cancelled(Exception):
     pass

@@ -8,12 +8,25 @@ in vec3 v_tint;     // albedo multiplier
 in vec2 v_uv;
 in float v_scalar;
 
-uniform int u_mode;            // 0 colours, 1 texture, 2 detail, 3 heat map
-uniform int u_cmap;            // 0 turbo, 1 viridis
+// Compile-time switches (the renderer builds one program per combination; a software
+// rasteriser runs both sides of a branch on a uniform, so switches must not be uniforms):
+// LS_MODE 0 colours, 1 texture, 2 detail, 3 heat map; LS_CMAP 0 turbo, 1 viridis;
+// LS_SHADOW 1 = self-shadowing from the shadow map; LS_CUTOUT 1 = discard outside the photo mask.
+#ifndef LS_MODE
+#define LS_MODE 0
+#endif
+#ifndef LS_CMAP
+#define LS_CMAP 0
+#endif
+#ifndef LS_SHADOW
+#define LS_SHADOW 0
+#endif
+#ifndef LS_CUTOUT
+#define LS_CUTOUT 0
+#endif
 uniform vec2 u_range;
 uniform sampler2D u_tex;       // sRGB photo (decoded by the sampler)
 uniform vec3 u_tex_mean;       // mean linear colour of the photo's leaf area
-uniform int u_cutout;          // discard where the photo's alpha (leaf mask) < 0.5
 
 uniform vec3 u_eye;
 uniform vec3 u_light_dir;
@@ -25,7 +38,6 @@ uniform float u_shininess;
 
 uniform sampler2DShadow u_shadow;
 uniform mat4 u_light_mat;
-uniform int u_use_shadow;
 uniform float u_shadow_offset;  // world-space offset towards the light (avoids self-acne)
 
 out vec4 f_colour;
@@ -33,30 +45,39 @@ out vec4 f_colour;
 void main() {
     vec3 N = normalize(v_nrm);
     if (!gl_FrontFacing) N = -N;
-    vec3 V = normalize(u_eye - v_pos);
     vec3 L = u_light_dir;
-    if (u_mode == 3) {
-        float t = (v_scalar - u_range.x) / max(u_range.y - u_range.x, 1e-20);
-        vec3 c = srgb_to_linear(u_cmap == 0 ? cmap_turbo(t) : cmap_viridis(t));
-        float lit = 0.55 + 0.45 * abs(dot(N, L));
-        f_colour = vec4(linear_to_srgb(c * lit), 1.0);
-        return;
-    }
+#if LS_MODE == 3
+    float t = (v_scalar - u_range.x) / max(u_range.y - u_range.x, 1e-20);
+#if LS_CMAP == 0
+    vec3 c = srgb_to_linear(cmap_turbo(t));
+#else
+    vec3 c = srgb_to_linear(cmap_viridis(t));
+#endif
+    float lit = 0.55 + 0.45 * abs(dot(N, L));
+    f_colour = vec4(linear_to_srgb(c * lit), 1.0);
+#else
+    vec3 V = normalize(u_eye - v_pos);
+#if LS_MODE == 1
+    vec4 t = texture(u_tex, v_uv);
+#if LS_CUTOUT
+    if (t.a < 0.5) discard;
+#endif
+    vec3 albedo = t.rgb * v_tint;
+#elif LS_MODE == 2
+    vec3 t = texture(u_tex, v_uv).rgb;
+    float lum = dot(t, vec3(0.2126, 0.7152, 0.0722));
+    float mean = max(dot(u_tex_mean, vec3(0.2126, 0.7152, 0.0722)), 1e-4);
+    vec3 albedo = v_col * v_tint * clamp(lum / mean, 0.0, 3.0);
+#else
     vec3 albedo = v_col * v_tint;
-    if (u_mode == 1) {
-        vec4 t = texture(u_tex, v_uv);
-        if (u_cutout != 0 && t.a < 0.5) discard;
-        albedo = t.rgb * v_tint;
-    } else if (u_mode == 2) {
-        vec3 t = texture(u_tex, v_uv).rgb;
-        float lum = dot(t, vec3(0.2126, 0.7152, 0.0722));
-        float mean = max(dot(u_tex_mean, vec3(0.2126, 0.7152, 0.0722)), 1e-4);
-        albedo = v_col * v_tint * clamp(lum / mean, 0.0, 3.0);
-    }
+#endif
+#if LS_SHADOW
+    float sh = shadow_pcf4(u_shadow, u_light_mat, v_pos + L * u_shadow_offset, 1.5);
+#else
     float sh = 1.0;
-    if (u_use_shadow != 0)
-        sh = shadow_pcf(u_shadow, u_light_mat, v_pos + L * u_shadow_offset, 1.5, 0.0);
+#endif
     vec3 c = shade_leaf(albedo, N, V, L, u_light_col, u_sky_col, sh,
                         u_translucency, u_specular, u_shininess);
     f_colour = vec4(linear_to_srgb(c), 1.0);
+#endif
 }

@@ -35,37 +35,16 @@ vec3 cmap_viridis(float t) {
     return clamp(c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * (c5 + t * c6))))), 0.0, 1.0);
 }
 
-const vec2 POISSON16[16] = vec2[](
-    vec2(-0.94201624, -0.39906216), vec2(0.94558609, -0.76890725),
-    vec2(-0.09418410, -0.92938870), vec2(0.34495938, 0.29387760),
-    vec2(-0.91588581, 0.45771432), vec2(-0.81544232, -0.87912464),
-    vec2(-0.38277543, 0.27676845), vec2(0.97484398, 0.75648379),
-    vec2(0.44323325, -0.97511554), vec2(0.53742981, -0.47373420),
-    vec2(-0.26496911, -0.41893023), vec2(0.79197514, 0.19090188),
-    vec2(-0.24188840, 0.99706507), vec2(-0.81409955, 0.91437590),
-    vec2(0.19984126, 0.78641367), vec2(0.14383161, -0.14100790));
-
-// Soft shadow: 16 Poisson taps (rotated per pixel to trade banding for fine noise) of
-// hardware 2x2 PCF. 1 = lit, 0 = shadowed.
-float shadow_pcf(sampler2DShadow sm, mat4 light_mat, vec3 p, float radius_texels, float bias) {
+// Cheap soft shadow for the leaf's self-shadowing: four hardware 2x2 PCF taps on a rotated
+// grid (16 texels) at a fixed pattern -- no per-pixel rotation, no divergent refinement loop,
+// which is what a software rasteriser pays for. 1 = lit, 0 = shadowed.
+float shadow_pcf4(sampler2DShadow sm, mat4 light_mat, vec3 p, float radius_texels) {
     vec4 lp = light_mat * vec4(p, 1.0);
     vec3 c = lp.xyz / lp.w * 0.5 + 0.5;
-    if (c.x < 0.0 || c.y < 0.0 || c.x > 1.0 || c.y > 1.0 || c.z > 1.0) return 1.0;
-    vec2 texel = 1.0 / vec2(textureSize(sm, 0));
-    float ang = 6.2831853 * fract(52.9829189 * fract(dot(gl_FragCoord.xy, vec2(0.06711056, 0.00583715))));
-    mat2 rot = mat2(cos(ang), sin(ang), -sin(ang), cos(ang));
-    // cheap pre-test: 4 taps on the outer ring; if they agree we are fully lit or fully
-    // shadowed (most pixels) and skip the other 12
-    vec2 r = radius_texels * texel;
-    float q = texture(sm, vec3(c.xy + rot * vec2(r.x, 0.0), c.z - bias))
-            + texture(sm, vec3(c.xy - rot * vec2(r.x, 0.0), c.z - bias))
-            + texture(sm, vec3(c.xy + rot * vec2(0.0, r.y), c.z - bias))
-            + texture(sm, vec3(c.xy - rot * vec2(0.0, r.y), c.z - bias));
-    if (q == 0.0 || q == 4.0) return q * 0.25;
-    float s = q;
-    for (int i = 0; i < 16; ++i)
-        s += texture(sm, vec3(c.xy + rot * POISSON16[i] * r, c.z - bias));
-    return s / 20.0;
+    if (c.z > 1.0) return 1.0;
+    vec2 r = radius_texels / vec2(textureSize(sm, 0));
+    return 0.25 * (texture(sm, vec3(c.xy + vec2(0.4, 1.0) * r, c.z)) + texture(sm, vec3(c.xy + vec2(-1.0, 0.4) * r, c.z))
+                 + texture(sm, vec3(c.xy + vec2(-0.4, -1.0) * r, c.z)) + texture(sm, vec3(c.xy + vec2(1.0, -0.4) * r, c.z)));
 }
 
 // Thin two-sided leaf lighting. N faces the viewer; light reaching the other side is

@@ -13,14 +13,22 @@ in vec3 v_tint;
 in vec2 v_uv;
 flat in int v_order;
 
-uniform int u_use_tex;         // albedo from the photo (1) or v_base (0)
+// Compile-time switches (see blade.frag): LS_TEX 1 = albedo from the photo (else v_base),
+// LS_CUTOUT 1 = photo mask cut-out, LS_SHADOW 1 = self-shadowing.
+#ifndef LS_TEX
+#define LS_TEX 0
+#endif
+#ifndef LS_CUTOUT
+#define LS_CUTOUT 0
+#endif
+#ifndef LS_SHADOW
+#define LS_SHADOW 0
+#endif
 uniform int u_absolute;        // vein colours are absolute linear RGB
-uniform int u_cutout;          // photo mask cut-out (as the blade)
 uniform sampler2D u_tex;
 uniform vec3 u_vein_cols[4];
 uniform sampler2DShadow u_shadow;
 uniform mat4 u_light_mat;
-uniform int u_use_shadow;
 uniform float u_shadow_offset;
 
 uniform vec3 u_eye;
@@ -40,18 +48,23 @@ void main() {
     float a = clamp(dist / max(v_target, 1e-3), 0.0, 1.0);
     // rounded cross-section: bend the normal towards the sides
     vec3 N = normalize(normalize(v_nrm) * sqrt(max(1.0 - a * a, 0.0)) * 1.3 + normalize(v_side) * sign(v_v) * a);
+#if LS_TEX
+    vec4 t = texture(u_tex, v_uv);
+#if LS_CUTOUT
+    if (t.a < 0.5) discard;
+#endif
+    vec3 base = t.rgb * v_tint;
+#else
     vec3 base = v_base;
-    if (u_use_tex != 0) {
-        vec4 t = texture(u_tex, v_uv);
-        if (u_cutout != 0 && t.a < 0.5) discard;
-        base = t.rgb * v_tint;
-    }
+#endif
     vec3 vc = u_vein_cols[clamp(v_order, 0, 3)];
     vec3 albedo = u_absolute != 0 ? vc : clamp(base * vc, 0.0, 1.0);
     vec3 V = normalize(u_eye - v_pos);
+#if LS_SHADOW
+    float sh = shadow_pcf4(u_shadow, u_light_mat, v_pos + u_light_dir * u_shadow_offset, 1.5);
+#else
     float sh = 1.0;
-    if (u_use_shadow != 0)
-        sh = shadow_pcf(u_shadow, u_light_mat, v_pos + u_light_dir * u_shadow_offset, 1.5, 0.0);
+#endif
     vec3 c = shade_leaf(albedo, N, V, u_light_dir, u_light_col, u_sky_col, sh,
                         u_translucency * 0.6, u_specular * 1.5, u_shininess);
     f_colour = vec4(linear_to_srgb(c), cover);

@@ -8,6 +8,7 @@ labels; the ``xdisplay`` fixture (conftest) provides an X server.
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -42,6 +43,10 @@ def run_gui(test_fn, species="oak", overrides=None, play=False):
     return app
 
 
+PLAY = "**/###play"
+DISMISS = "**/###dismiss"
+
+
 def wait_until(ctx, cond, frames=900):
     for _ in range(frames):
         if cond():
@@ -63,6 +68,8 @@ def test_live_slider_changes_params_and_keeps_state():
         s = app.session
         ctx.item_click("**/Step")
         ctx.item_click("**/Step")
+        wait_until(ctx, lambda: s.frame == 2, 300)  # steps run in the worker
+        ctx.yield_(3)
         frame, gen = s.frame, s.generation
         water = s.state.particle_water.copy()
         ctx.item_open("**/###group Osmosis")
@@ -114,9 +121,9 @@ def test_play_advances_and_dries():
     def body(ctx, app):
         s = app.session
         w0 = s.total_water()
-        ctx.item_click("**/Play")
+        ctx.item_click(PLAY)
         wait_until(ctx, lambda: s.frame >= 15, 600)
-        ctx.item_click("**/Pause")
+        ctx.item_click(PLAY)  # Pause
         ctx.yield_(2)
         seen.update(frame=s.frame, w0=w0, w1=s.total_water(), playing=app.playing)
         # orbit camera: left-drag over the leaf view (not over a panel) rotates, wheel zooms
@@ -144,37 +151,110 @@ def test_play_advances_and_dries():
     assert seen["yaw_changed"] and seen["zoomed"] and seen["panel_drag_kept"]
 
 
-def test_export_frame_png(tmp_path):
+def test_exports_create_the_folder_and_never_overwrite(tmp_path):
+    """The first Export frame creates the missing folder (and says so); each recorded take is
+    a new numbered folder; the same frame exported twice gives two files; the status bar shows
+    the full path and no stale text after Stop."""
     import cv2
 
-    out = tmp_path / "export"
-    out.mkdir()
+    out = tmp_path / "new" / "frames"
+    seen = {}
 
     def body(ctx, app):
+        s = app.session
         ctx.item_input_value("**/export folder", str(out))
         ctx.yield_(1)
         ctx.item_click("**/Export frame")
         wait_until(ctx, lambda: app.exported, 60)
-        seen["frame_file"] = app.exported[0] if app.exported else None
-        ctx.item_click("**/Record sequence")
-        ctx.item_click("**/Play")
-        wait_until(ctx, lambda: app.recorded >= 3, 300)
-        ctx.item_click("**/Stop recording")
-        ctx.item_click("**/Pause")
+        seen["folder_msg"] = [m.text for m in app.status.messages() if m.topic == "folder"]
+        seen["export_msg"] = app.status.get("export")
+        ctx.item_click("**/Export frame")  # same frame again: a second file, not an overwrite
+        wait_until(ctx, lambda: len(app.exported) >= 2, 60)
+        for take in range(2):
+            ctx.item_click("**/###record")  # Record take
+            ctx.item_click(PLAY)
+            wait_until(ctx, lambda: app.recorded >= 3, 600)
+            ctx.item_click("**/###record")  # Stop recording
+            ctx.item_click(PLAY)
+            ctx.yield_(2)
+            seen[f"after_stop_{take}"] = app.status.get("record").text
+            seen[f"recorded_{take}"] = app.recorded
         ctx.yield_(2)
+        seen["frames_after"] = s.frame
 
-    seen = {}
     app = run_gui(body)
-    assert app.error is None and app.recorded >= 3
-    seq = sorted(out.glob("seq_oak_*.png"))
-    assert len(seq) == app.recorded and seq[0].name == "seq_oak_00000.png"
-    files = [f for f in sorted(out.iterdir()) if not f.name.startswith("seq_")]
-    assert len(files) == 1 and files[0].suffix == ".png" and str(files[0]) == seen["frame_file"]
-    assert not [f for f in out.iterdir() if f.name.startswith(".")]  # no temp files left
-    img = cv2.imread(str(files[0]))[:, :, ::-1].astype(int)
+    assert app.error is None
+    assert seen["folder_msg"] and str(out) in seen["folder_msg"][0] and "created" in seen["folder_msg"][0]
+    assert seen["export_msg"].path and str(out) in seen["export_msg"].path
+    singles = sorted(out.glob("leafsim_oak_*.png"))
+    assert len(singles) == 2 and singles[0].stem + "_2" == singles[1].stem
+    takes = sorted(p.name for p in out.iterdir() if p.is_dir())
+    assert takes == ["take_001", "take_002"]
+    for k, t in enumerate(takes):
+        files = sorted((out / t).iterdir())
+        assert len(files) == seen[f"recorded_{k}"] >= 3
+        assert files[0].name == "frame_00000.png"
+        assert seen[f"after_stop_{k}"].startswith("recorded ") and str(out / t) in seen[f"after_stop_{k}"]
+    assert not [f for f in out.rglob(".*")]  # no temp files left
+    img = cv2.imread(str(singles[0]))[:, :, ::-1].astype(int)
     r, g, b = img[..., 0], img[..., 1], img[..., 2]
     leaf = (g > r + 15) & (g > b + 25)
     assert leaf.mean() > 0.03, f"only {leaf.mean():.3%} leaf-green pixels"
+
+
+def test_layout_does_not_move_when_messages_appear(tmp_path):
+    """Widget rectangles are the same with and without an error, a build in progress, an info
+    message and a recording (everything transient lives in the fixed status bar)."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    refs = [f"//Controls/{r}" for r in ("###play", "Step", "seed", "Rebuild", "export folder", "Export frame",
+                                        "preset JSON", "Load params", "###render scale", "###group Effects",
+                                        "###effects.osmosis", "Reset", "###dry", "every")]
+    seen = {}
+
+    def rects(ctx):
+        out = {}
+        for r in refs:
+            info = ctx.item_info(r)
+            out[r] = (round(info.rect_full.min.x), round(info.rect_full.min.y), round(info.rect_full.max.x),
+                      round(info.rect_full.max.y))
+        return out
+
+    def body(ctx, app):
+        s = app.session
+        ctx.yield_(3)
+        seen["before"] = rects(ctx)
+        ctx.item_input_value("**/export folder", str(blocker))
+        ctx.item_click("**/Export frame")
+        ctx.yield_(3)
+        seen["error"] = app.error
+        seen["with_error"] = rects(ctx)
+        ctx.item_open("**/###group Mesh")
+        ctx.item_input_value(ref("mesh.spacing"), 0.05)
+        ctx.item_close("**/###group Mesh")
+        ctx.item_click("**/Rebuild")
+        ctx.yield_(2)
+        seen["building"] = s.building
+        seen["while_building"] = rects(ctx)
+        wait_until(ctx, lambda: not s.building, 600)
+        ctx.item_input_value("**/export folder", str(tmp_path / "f"))
+        ctx.item_click("**/###record")
+        ctx.item_click(PLAY)
+        ctx.yield_(3)
+        seen["while_recording"] = rects(ctx)  # playing too: "Pause", "Stop recording"
+        ctx.item_click(PLAY)
+        ctx.item_click("**/###record")
+        ctx.item_click(DISMISS)
+        ctx.yield_(2)
+        seen["after"] = rects(ctx)
+        seen["error_after"] = app.error
+
+    run_gui(body)
+    assert seen["error"] and "not a folder" in seen["error"] and seen["building"]
+    for k in ("with_error", "while_building", "while_recording", "after"):
+        moved = {r: (seen["before"][r], seen[k][r]) for r in refs if seen["before"][r] != seen[k][r]}
+        assert not moved, f"{k}: {moved}"
+    assert seen["error_after"] is None
 
 
 def test_every_declared_parameter_has_a_widget():
@@ -221,23 +301,23 @@ def test_errors_are_shown_and_app_keeps_running(tmp_path, monkeypatch):
         ctx.yield_(2)
         seen["err_json"] = app.error
         seen["params_same"] = s.params is params0
-        ctx.item_click("**/Dismiss")
+        ctx.item_click(DISMISS)
         ctx.item_input_value("**/preset JSON", str(unknown))
         ctx.item_click("**/Load params")
         ctx.yield_(2)
         seen["err_unknown"] = app.error
-        ctx.item_click("**/Dismiss")
+        ctx.item_click(DISMISS)
         ctx.item_input_value("**/export folder", str(blocker / "sub"))
         ctx.item_click("**/Export frame")
         ctx.yield_(3)
         seen["err_export"] = app.error
-        ctx.item_click("**/Dismiss")
-        ctx.item_input_value("**/export folder", str(tmp_path / "missing"))
-        ctx.item_click("**/Record sequence")
+        ctx.item_click(DISMISS)
+        ctx.item_input_value("**/export folder", str(blocker))
+        ctx.item_click("**/###record")
         ctx.yield_(2)
         seen["err_record"] = app.error
-        seen["recording"] = app.recording
-        ctx.item_click("**/Dismiss")
+        seen["recording"] = app.take is not None
+        ctx.item_click(DISMISS)
         # an unreadable photo during a rebuild: error shown, the old leaf stays
         import leafsim.leaf as leaf
 
@@ -252,7 +332,7 @@ def test_errors_are_shown_and_app_keeps_running(tmp_path, monkeypatch):
         seen["err_photo"] = app.error
         seen["gen_kept"] = s.generation == gen and s.ready
         f0 = app.gui_frames
-        ctx.item_click("**/Play")
+        ctx.item_click(PLAY)
         wait_until(ctx, lambda: s.frame >= 3, 300)
         seen["frames"] = app.gui_frames - f0
         seen["sim_frame"] = s.frame
@@ -262,7 +342,7 @@ def test_errors_are_shown_and_app_keeps_running(tmp_path, monkeypatch):
     assert seen["params_same"]
     assert "unknown parameter 'osmosis.nope'" in seen["err_unknown"]
     assert seen["err_export"] and "a_file" in seen["err_export"]
-    assert seen["err_record"] and "does not exist" in seen["err_record"] and seen["recording"] is False
+    assert seen["err_record"] and "not a folder" in seen["err_record"] and seen["recording"] is False
     assert "cannot read image" in seen["err_photo"] and seen["gen_kept"]
     assert seen["frames"] > 0 and seen["sim_frame"] >= 3
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "broken.json", "unknown.json"]
@@ -287,3 +367,130 @@ def test_cli_gui_screenshot_bad_folder(tmp_path, xdisplay):
                         "--screenshot", str(tmp_path / "no" / "x.png")], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_loaded_font_has_every_glyph():
+    """The font the window actually draws with is the bundled one and has a glyph for every
+    character of the declared labels, units and help texts."""
+    from leafsim.gui.fonts import ui_strings
+
+    chars = sorted({c for s in ui_strings() for c in s if ord(c) >= 0x20})
+    seen = {}
+
+    def body(ctx, app):
+        from imgui_bundle import imgui
+
+        font = imgui.get_font()
+        seen["name"] = font.get_debug_name()
+        seen["missing"] = [c for c in chars if not font.is_glyph_in_font(ord(c))]
+        seen["cjk"] = font.is_glyph_in_font(0x4E00)
+
+    run_gui(body)
+    assert "DejaVuSans" in seen["name"]
+    assert seen["missing"] == [] and seen["cjk"] is False
+
+
+def test_species_switch_keeps_changes_and_names_the_reset_ones():
+    seen = {}
+
+    def body(ctx, app):
+        s = app.session
+        ctx.item_open("**/###group Osmosis")
+        ctx.item_input_value(ref("osmosis.loss_top"), 0.9)
+        ctx.item_close("**/###group Osmosis")
+        ctx.item_close("**/###group Effects")  # bring the Colour group into view
+        ctx.item_open("**/###group Colour")
+        ctx.scroll_to_bottom("//Controls")
+        ctx.yield_(2)
+        ctx.item_input_value(ref("colour.browning"), 7.5)   # oak sets its own browning
+        ctx.scroll_to_top("//Controls")
+        ctx.yield_(2)
+        app.switch_species("maple")  # what picking maple in the species combo calls
+        ctx.yield_(1)
+        # while maple builds, the overlay names the leaf on screen: still oak
+        seen["building"] = s.building
+        seen["shown"] = s.shown_species.key
+        seen["key"] = s.species_key
+        seen["msg"] = app.status.get("species").text
+        wait_until(ctx, lambda: not s.building, 900)
+        ctx.yield_(2)
+        seen["shown_after"] = s.shown_species.key
+        seen["loss_top"] = s.params["osmosis.loss_top"]
+        seen["browning"] = s.params["colour.browning"]
+        seen["maple_browning"] = s.species.params["colour.browning"]
+        ctx.item_click("//Controls/species defaults")
+        ctx.yield_(2)
+        seen["defaults"] = s.params["osmosis.loss_top"]
+        seen["defaults_msg"] = app.status.get("species").text
+
+    run_gui(body)
+    assert seen["building"] and seen["shown"] == "oak" and seen["key"] == "maple"
+    assert "osmosis.loss_top" in seen["msg"] and "kept" in seen["msg"]
+    assert "colour.browning" in seen["msg"] and "reset" in seen["msg"]
+    assert seen["shown_after"] == "maple"
+    assert seen["loss_top"] == pytest.approx(0.9, rel=1e-5)
+    assert seen["browning"] == seen["maple_browning"] != pytest.approx(7.5)
+    assert seen["defaults"] == PARAMS["osmosis.loss_top"].default and "osmosis.loss_top" in seen["defaults_msg"]
+
+
+def test_random_sliders_rebuilds_and_species_switches_while_playing():
+    """Stress: N random live-parameter changes (every live float/int/bool/choice slider, any
+    value in its range), rebuilds and species switches in the middle of builds, all while
+    playing: no exception, no NaN in what is drawn, the window keeps drawing."""
+    import random
+
+    from leafsim.session import species_keys
+
+    rng = random.Random(1234)
+    live = [p for p in PARAMS.values() if not p.rebuild and p.group not in ("Effects",)
+            and p.name not in ("dynamics.dt", "dynamics.substeps", "dynamics.iterations", "osmosis.solver")]
+    keys = [k for k in species_keys() if k in ("oak", "maple", "aspen", "hornbeam")]
+    seen = {"errors": [], "nan": 0, "nan_unreported": 0, "actions": 0}
+
+    def value(p):
+        if p.kind == "bool":
+            return rng.random() < 0.5
+        if p.kind == "choice":
+            return rng.choice(p.choices)
+        lo, hi = float(p.lo), float(p.hi)
+        if p.log and lo > 0:
+            v = math.exp(rng.uniform(math.log(lo), math.log(hi)))
+        else:
+            v = rng.uniform(lo, hi)
+        return int(round(v)) if p.kind == "int" else v
+
+    def body(ctx, app):
+        s = app.session
+        ctx.item_click(PLAY)
+        for k in range(60):
+            r = rng.random()
+            if r < 0.75:
+                p = rng.choice(live)
+                app.set_params({p.name: value(p)})  # what a slider does, any value in range
+            elif r < 0.85:
+                s.set_params({"mesh.spacing": rng.uniform(0.04, 0.08)})
+                ctx.item_click("**/Rebuild")
+            else:
+                app.switch_species(rng.choice(keys))  # often while a build is running
+            seen["actions"] += 1
+            ctx.yield_(rng.randint(1, 4))
+            if s.ready and s.state is not None and not np.isfinite(s.state.particle_q).all():
+                seen["nan"] += 1  # extreme values may diverge, but never silently
+                seen["nan_unreported"] += s.sim_error is None
+                ctx.item_click("**/Reset")
+            errs = [m.text for m in app.status.messages() if m.level == "error"]
+            seen["errors"] += [e for e in errs if "internal error" in e or "Traceback" in e]
+        wait_until(ctx, lambda: not s.building, 900)
+        f0, g0 = app.gui_frames, s.frame
+        if not s.playing:
+            ctx.item_click(PLAY)
+        wait_until(ctx, lambda: s.frame > g0 + 2, 600)
+        seen["frames"] = app.gui_frames - f0
+        seen["sim_advanced"] = s.frame > g0 or s.sim_error is not None
+        seen["finite"] = bool(np.isfinite(s.state.particle_q).all()) or s.sim_error is not None
+        seen["rendered"] = app.rendered_gen == s.generation
+
+    run_gui(body, species="oak", overrides={"mesh.spacing": 0.06})
+    assert seen["actions"] == 60
+    assert seen["errors"] == [] and seen["nan_unreported"] == 0
+    assert seen["frames"] > 0 and seen["sim_advanced"] and seen["finite"] and seen["rendered"]

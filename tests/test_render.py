@@ -310,3 +310,57 @@ def test_winding_made_consistent_even_for_a_folded_leaf():
     folded[right, 0] = -folded[right, 0]
     o = orient_up(folded, tri)
     assert _consistent(o)
+
+
+def test_ground_shadow_falls_away_from_the_sun(off):
+    """A leaf held h = 2 cm above the ground casts a soft shadow displaced along -L by
+    h · L_x / L_z (the ground-shadow mask projects along the sun direction); none without
+    shadows."""
+    h, lz = 0.02, 0.8
+    lifted = synthetic_leaf()
+    lifted.positions[:, 2] += h
+    lifted.top_positions[:, 2] += h
+    cam = top_camera()  # looks straight down on x = 0 from z = 0.3
+    for lx, side in ((0.6, -1), (-0.6, 1)):
+        opts = dict(veins=False, ground_z=0.0, light_dir=(lx, 0.0, lz), self_shadow=False)
+        lit = off.render_array(lifted, cam, RenderOptions(shadows=False, **opts)).astype(int)
+        shaded = off.render_array(lifted, cam, RenderOptions(shadows=True, **opts)).astype(int)
+        bg = lit[2, 2]
+        leaf_cols = np.flatnonzero(leaf_mask(lit, bg).any(0))
+        ppm_ground = (leaf_cols[-1] - leaf_cols[0] + 1) / (2 * A) * (cam.distance - h) / cam.distance
+        diff = lit.sum(-1) - shaded.sum(-1)
+        dark = diff > 30  # ground pixels the shadow darkens
+        assert dark.mean() > 0.01, f"no visible shadow (light x {lx})"
+        assert (((diff > 4) & ~dark).sum()) > 0.01 * dark.sum()  # a soft edge, not a hard step
+        cols = np.flatnonzero(dark.any(0))
+        reach = ((W / 2 - cols[0]) if side < 0 else (cols[-1] + 1 - W / 2)) / ppm_ground
+        assert reach == pytest.approx(A + h * abs(lx) / lz, rel=0.1), (lx, reach)
+        # the shadow only reaches out on the side away from the sun
+        other = ((cols[-1] + 1 - W / 2) if side < 0 else (W / 2 - cols[0])) / ppm_ground
+        assert other < A
+
+
+def test_heat_range_ignores_outliers_and_the_bar_matches(off):
+    """Fitted heat-map range = 2nd..98th percentile (a few dry margin particles no longer
+    paint the rest of the leaf one colour); pixels at the range's ends take the colour bar's
+    end colours."""
+    from leafsim.render.colormaps import colormap
+
+    leaf = synthetic_leaf()
+    n = len(leaf.positions)
+    water = np.full(n, 0.8, np.float32)
+    water[: n // 2] = 0.6  # one half drier than the other
+    water[:3] = 0.0  # three almost dry outliers
+    leaf.scalars["water"] = water
+    off.render_array(leaf, top_camera(), RenderOptions(view="water", ground=False))
+    lo, hi = off.renderer.scalar_range(RenderOptions(view="water"))
+    assert lo == pytest.approx(0.6) and hi == pytest.approx(0.8)
+    assert off.renderer.scalar_range(RenderOptions(view="water", scalar_range=(0.0, 1.0))) == (0.0, 1.0)
+    img = off.render_array(None, top_camera(), RenderOptions(view="water", ground=False)).astype(float) / 255
+    mask = leaf_mask((img * 255).astype(np.uint8), (img[2, 2] * 255).astype(np.uint8))
+    colours = img[mask]
+    # both ends of the bar appear on the leaf (blue-ish low end, red-ish high end), lit 0.55..1
+    ends = colormap("turbo", np.array([0.0, 1.0]))
+    for end in ends:
+        d = np.abs(colours / np.maximum(colours.max(1, keepdims=True), 1e-6) - end / end.max()).max(1)
+        assert (d < 0.25).mean() > 0.1

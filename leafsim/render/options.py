@@ -26,9 +26,9 @@ class RenderOptions:
     texture_cutout : bool
         With the photo as albedo, cut the blade where the photo's alpha (leaf mask) is 0, so
         the photo's own outline shows even on a coarser mesh.
-    veins, ground, shadows, self_shadow, wireframe : bool
-        Draw the vein ribbons / ground plane / ground shadow / leaf self-shadowing / a
-        wireframe overlay in any view.
+    veins, ground, shadows, ground_shadow, self_shadow, wireframe : bool
+        Draw the vein ribbons / ground plane / shadows at all / the soft shadow on the ground /
+        leaf self-shadowing / a wireframe overlay in any view.
     background : (3,) float
         Clear colour, display (sRGB) values 0..1.
     ground_colour : (3,) float
@@ -64,7 +64,10 @@ class RenderOptions:
     wire_colour : (3,) float
         sRGB colour of the wireframe overlay.
     shadow_size : int
-        Shadow-map resolution.
+        Shadow-map resolution (the leaf's self-shadowing).
+    ground_shadow_size : int
+        Resolution of the ground-shadow mask (the leaf projected onto the ground along the
+        sun direction and blurred), sampled once per ground pixel.
     clear : bool
         Clear the target framebuffer first.
     """
@@ -75,6 +78,7 @@ class RenderOptions:
     veins: bool = True
     ground: bool = True
     shadows: bool = True
+    ground_shadow: bool = True
     self_shadow: bool = True
     wireframe: bool = False
     background: tuple = (0.80, 0.84, 0.88)
@@ -96,6 +100,7 @@ class RenderOptions:
     scalar_range: tuple | None = None
     wire_colour: tuple = (0.12, 0.2, 0.1)
     shadow_size: int = 1024
+    ground_shadow_size: int = 256
     clear: bool = True
 
     @classmethod

@@ -25,14 +25,20 @@ GL_SRGB8_ALPHA8 = 0x8C43
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)
 
 
-def load_shader(shader_dir: Path, name: str) -> str:
-    """Read ``shader_dir/name`` and paste ``#include "file"`` lines (one level deep)."""
+def load_shader(shader_dir: Path, name: str, defines: dict | None = None) -> str:
+    """Read ``shader_dir/name`` and paste ``#include "file"`` lines (one level deep);
+    ``defines`` become ``#define NAME VALUE`` lines right after the ``#version`` line."""
     path = Path(shader_dir) / name
     try:
         src = path.read_text()
     except OSError as exc:
         raise LeafsimError(f"cannot read shader {path}: {exc.strerror or exc}") from None
-    return _INCLUDE.sub(lambda m: load_shader(shader_dir, m.group(1)), src)
+    src = _INCLUDE.sub(lambda m: load_shader(shader_dir, m.group(1)), src)
+    if defines:
+        head, nl, rest = src.partition("\n")
+        lines = "".join(f"#define {k} {int(v)}\n" for k, v in sorted(defines.items()))
+        src = f"{head}{nl}{lines}{rest}" if head.startswith("#version") else lines + src
+    return src
 
 
 def _mat(m: np.ndarray) -> bytes:
@@ -81,51 +87,83 @@ class Renderer:
     def __init__(self, ctx: moderngl.Context, shader_dir: Path | str = ROOT / "shaders"):
         self.ctx = ctx
         self.shader_dir = Path(shader_dir)
+        self._variants: dict = {}     # (name, defines) -> program with compile-time switches
+        self._shadow_cache: dict = {}
+        self._geometry = 0
         self.programs = {name: self._program(name) for name in
-                         ("blade", "vein", "ground", "shadow", "points", "lines")}
+                         ("shadow", "gshadow", "blur", "points", "lines")}
         quad = np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype=np.float32)
         self._ground_vbo = ctx.buffer(quad.tobytes())
-        self._ground_vao = ctx.vertex_array(self.programs["ground"], [(self._ground_vbo, "2f", "in_xy")])
+        self._ground_vaos = {sh: ctx.vertex_array(self._variant("ground", LS_SHADOW=sh), [(self._ground_vbo, "2f", "in_xy")])
+                             for sh in (0, 1)}
+        self._blur_vao = ctx.vertex_array(self.programs["blur"], [(self._ground_vbo, "2f", "in_xy")])
+        self._mask = None  # ground shadow coverage: (texture, fbo) twice (blur ping-pong)
         self._white = ctx.texture((1, 1), 4, b"\xff\xff\xff\xff")
         self._shadow_tex = None
         self._shadow_fbo = None
         self._objects: list = []
+        self._specs: dict = {}        # vertex-array content per program name (this mesh)
+        self._variant_vaos: dict = {}  # (name, defines) -> vertex array of this mesh
         self.mesh = None
         self.n = 0
 
     # --- setup ----------------------------------------------------------------------------
-    def _program(self, name: str) -> moderngl.Program:
-        vs = load_shader(self.shader_dir, f"{name}.vert")
-        fs = load_shader(self.shader_dir, f"{name}.frag")
+    def _program(self, name: str, defines: dict | None = None) -> moderngl.Program:
+        vs = load_shader(self.shader_dir, f"{name}.vert", defines)
+        fs = load_shader(self.shader_dir, f"{name}.frag", defines)
         try:
             return self.ctx.program(vertex_shader=vs, fragment_shader=fs)
         except moderngl.Error as exc:
             raise LeafsimError(f"shader {self.shader_dir / name}.vert/.frag does not compile: "
                                f"{' '.join(str(exc).split())[:400]}") from None
 
+    def _variant(self, name: str, **defines) -> moderngl.Program:
+        """The program ``name`` compiled with ``#define``s (cached): the switches a software
+        rasteriser would otherwise evaluate on both sides of every uniform branch."""
+        key = (name, tuple(sorted(defines.items())))
+        prog = self._variants.get(key)
+        if prog is None:
+            prog = self._variants[key] = self._program(name, defines)
+        return prog
+
+    def _variant_vao(self, name: str, **defines):
+        """This mesh's vertex array for a program variant (made on first use)."""
+        key = (name, tuple(sorted(defines.items())))
+        vao = self._variant_vaos.get(key)
+        if vao is None:
+            content, index = self._specs[name]
+            vao = self._variant_vaos[key] = self._vao_for(self._variant(name, **defines), content, index)
+        return vao
+
     def _buf(self, data: np.ndarray, dynamic=False):
         b = self.ctx.buffer(np.ascontiguousarray(data).tobytes(), dynamic=dynamic)
         self._objects.append(b)
         return b
 
-    def _vao(self, prog_name, content, index=None):
-        vao = self.ctx.vertex_array(self.programs[prog_name], content, index_buffer=index,
-                                    skip_errors=True)
+    def _vao_for(self, prog, content, index=None):
+        vao = self.ctx.vertex_array(prog, content, index_buffer=index, skip_errors=True)
         self._objects.append(vao)
         return vao
+
+    def _vao(self, prog_name, content, index=None):
+        return self._vao_for(self.programs[prog_name], content, index)
 
     def release_mesh(self) -> None:
         for o in self._objects:
             o.release()
         self._objects = []
+        self._specs = {}
+        self._variant_vaos = {}
         self.mesh = None
 
     def release(self) -> None:
         """Free every GL object this renderer made."""
         self.release_mesh()
-        for p in self.programs.values():
+        for p in (*self.programs.values(), *self._variants.values()):
             p.release()
-        for o in (self._ground_vao, self._ground_vbo, self._white, self._shadow_fbo, self._shadow_tex):
+        self._variants = {}
+        for o in (*self._ground_vaos.values(), self._blur_vao, self._ground_vbo, self._white, self._shadow_fbo,
+                  self._shadow_tex, *(self._mask or ())):
             if o is not None:
                 o.release()
 
@@ -162,12 +200,14 @@ class Renderer:
         self.vbo_uv = self._buf(uv)
         self.vbo_scalar = self._buf(np.zeros(n, np.float32), dynamic=True)
         self.ibo_tri = self._buf(self.tri)
-        self.vao_blade = self._vao("blade", [
+        self._specs["blade"] = ([
             (self.vbo_pos, "3f", "in_pos"), (self.vbo_nrm, "3f", "in_nrm"), (self.vbo_col, "3f", "in_col"),
             (self.vbo_tint, "3f", "in_tint"), (self.vbo_uv, "2f", "in_uv"), (self.vbo_scalar, "1f", "in_scalar")],
             self.ibo_tri)
         self.vao_shadow = self._vao("shadow", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_uv, "2f", "in_uv")],
                                     self.ibo_tri)
+        self.vao_gshadow = self._vao("gshadow", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_uv, "2f", "in_uv")],
+                                     self.ibo_tri)
         # wireframe
         self.ibo_edges = self._buf(self.edges)
         self.vbo_minus1 = self._buf(np.full(n, -1.0, np.float32))
@@ -195,14 +235,21 @@ class Renderer:
             self.vbo_vein_base = self._buf(self.veins.base_colours(self.colours, self.tint), dynamic=True)
             self.vbo_vein_static = self._buf(self.veins.static)
             self.ibo_vein = self._buf(self.veins.indices)
-            self.vao_vein = self._vao("vein", [
+            self._specs["vein"] = ([
                 (self.vbo_vein_dyn, "3f 3f 3f", "in_center", "in_side", "in_nrm"),
                 (self.vbo_vein_static, "1f 1f 2f 1f", "in_hw", "in_v", "in_uv", "in_order"),
                 (self.vbo_vein_base, "3f 3f", "in_base", "in_tint")], self.ibo_vein)
-        # texture
+        self._upload_texture(getattr(mesh, "texture_rgba", None))
+        self._dirty_particles = True
+        self._dirty_springs = True
+        self._geometry += 1  # the shadow passes depend on it only
+        self._bounds()
+
+    def _upload_texture(self, tex) -> None:
+        """The photo (sRGB, mipmapped, dilated past the leaf mask) and its mean leaf colour."""
+        ctx = self.ctx
         self.texture = None
         self.tex_mean = (0.2, 0.3, 0.1)
-        tex = getattr(mesh, "texture_rgba", None)
         if tex is not None:
             rgba = _dilate_texture(tex)
             h, w = rgba.shape[:2]
@@ -228,9 +275,6 @@ class Renderer:
             lin = (tex[:, :, :3][inside].astype(np.float64) / 255.0) ** 2.2
             if lin.size:
                 self.tex_mean = tuple(float(x) for x in lin.mean(axis=0))
-        self._dirty_particles = True
-        self._dirty_springs = True
-        self._bounds()
 
     # --- per frame ------------------------------------------------------------------------
     def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None) -> None:
@@ -282,6 +326,7 @@ class Renderer:
             if recolour:
                 self.vbo_vein_base.write(self.veins.base_colours(self.colours, self.tint))
         self._dirty_particles = self._dirty_springs = True
+        self._geometry += 1
 
     def _bounds(self):
         self.lo, self.hi = bounds(self.pos)
@@ -324,6 +369,65 @@ class Renderer:
         self.vao_shadow.render(moderngl.TRIANGLES)
         return light_mat
 
+    def _cached(self, name: str, key: tuple, make):
+        """A shadow pass's result, redone only when the leaf moved (``update``/``populate``)
+        or its settings changed: orbiting the camera over a paused leaf costs no shadow pass."""
+        key = (self._geometry, id(self.mesh), key)
+        hit = self._shadow_cache.get(name)
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        value = make()
+        self._shadow_cache[name] = (key, value)
+        return value
+
+    def _mask_targets(self, size: int):
+        if self._mask is None or self._mask[0].size != (size, size):
+            for o in self._mask or ():
+                o.release()
+            texs = [self.ctx.texture((size, size), 1, dtype="f1") for _ in range(2)]
+            for t in texs:
+                t.filter = (moderngl.LINEAR, moderngl.LINEAR)
+                t.repeat_x = t.repeat_y = False
+            fbos = [self.ctx.framebuffer(color_attachments=[t]) for t in texs]
+            self._mask = (texs[0], fbos[0], texs[1], fbos[1])
+        return self._mask
+
+    def _ground_shadow_pass(self, opts: RenderOptions, L: np.ndarray, gz: float) -> tuple:
+        """The leaf's shadow on the ground plane ``z = gz`` as a small blurred coverage mask:
+        the blade projected along ``L`` (a parallel sun) into a ``ground_shadow_size``² texture,
+        then a 3x3 binomial blur into the second texture (the one the ground samples).
+        Returns the mask's ground rectangle (x0, y0, x1, y1)."""
+        size = int(opts.ground_shadow_size)
+        tex_a, fbo_a, tex_b, fbo_b = self._mask_targets(size)
+        corners = np.array([[x, y, z] for x in (self.lo[0], self.hi[0]) for y in (self.lo[1], self.hi[1])
+                            for z in (self.lo[2], self.hi[2])])
+        lz = max(float(L[2]), 0.05)
+        q = corners[:, :2] - L[None, :2] * ((corners[:, 2:3] - gz) / lz)
+        pad = 0.06 * self.radius + 1e-6  # room for the blur
+        rect = (*(q.min(axis=0) - pad), *(q.max(axis=0) + pad))
+        p = self.programs["gshadow"]
+        _set(p, "u_light_dir", (float(L[0]), float(L[1]), lz))
+        _set(p, "u_ground_z", gz)
+        _set(p, "u_rect", tuple(float(v) for v in rect))
+        cut = bool(opts.texture_cutout) and opts.view in ("shaded", "wireframe") and self._albedo_mode(opts) == 1
+        _set(p, "u_cutout", int(cut))
+        _set(p, "u_tex", 0)
+        (self.texture if cut else self._white).use(location=0)
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        fbo_a.use()
+        fbo_a.viewport = (0, 0, size, size)
+        fbo_a.clear(0.0)
+        self.vao_gshadow.render(moderngl.TRIANGLES)
+        b = self.programs["blur"]
+        _set(b, "u_src", 2)
+        _set(b, "u_texel", (1.0 / size, 1.0 / size))
+        tex_a.use(location=2)
+        fbo_b.use()
+        fbo_b.viewport = (0, 0, size, size)
+        self._blur_vao.render(moderngl.TRIANGLE_STRIP)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        return rect
+
     def render(self, camera, width: int, height: int, options=None, framebuffer=None,
                viewport: tuple | None = None) -> None:
         """Draw the leaf as seen by ``camera`` into ``framebuffer``.
@@ -356,8 +460,13 @@ class Renderer:
         L = L / max(np.linalg.norm(L), 1e-12)
 
         ctx.enable_only(moderngl.DEPTH_TEST)
-        use_shadow = bool(opts.shadows) and (opts.ground or opts.self_shadow)
-        light_mat = self._shadow_pass(opts, L) if use_shadow else np.eye(4)
+        self_shadow = bool(opts.shadows) and bool(opts.self_shadow)
+        light_mat = self._cached("shadow", (opts.shadow_size, tuple(L), opts.texture_cutout, opts.view, opts.albedo),
+                                 lambda: self._shadow_pass(opts, L)) if self_shadow else np.eye(4)
+        gz = float(self.lo[2]) - 0.004 * self.radius if opts.ground_z is None else float(opts.ground_z)
+        ground_shadow = bool(opts.shadows) and bool(opts.ground) and bool(opts.ground_shadow) and L[2] > 0.05
+        mask_rect = self._cached("ground_shadow", (opts.ground_shadow_size, tuple(L), gz, opts.texture_cutout, opts.view,
+                                                   opts.albedo), lambda: self._ground_shadow_pass(opts, L, gz)) if ground_shadow else None
 
         self._target = target
         target.use()
@@ -370,32 +479,34 @@ class Renderer:
         light = dict(u_eye=tuple(eye), u_light_dir=tuple(L), u_light_col=tuple(opts.light_colour),
                      u_sky_col=tuple(opts.sky_colour), u_translucency=float(opts.translucency),
                      u_specular=float(opts.specular), u_shininess=float(opts.shininess))
-        if use_shadow:
+        if self_shadow:
             self._shadow_tex.use(location=1)
+        if ground_shadow:
+            self._mask[2].use(location=2)
         tex = self.texture if self.texture is not None else self._white
         tex.use(location=0)
 
-        # ground
-        if opts.ground:
-            gz = float(self.lo[2]) - 0.004 * self.radius if opts.ground_z is None else float(opts.ground_z)
-            g = self.programs["ground"]
-            gcol = np.asarray(opts.ground_colour, np.float64)
-            sky, sun = np.asarray(opts.sky_colour, np.float64), np.asarray(opts.light_colour, np.float64)
-            lit = gcol * (sky + sun * max(L[2], 0.0))
-            shade = gcol * sky * 0.95  # the leaf also hides a little of the sky
-            for k, v in dict(u_viewproj=vp, u_center=(float(self.center[0]), float(self.center[1]), gz),
-                             u_extent=7.0 * self.radius, u_fade0=2.0 * self.radius, u_fade1=7.0 * self.radius,
-                             u_lit_srgb=_srgb(lit), u_shade_srgb=_srgb(shade), u_bg=tuple(opts.background),
-                             u_shadow=1, u_light_mat=light_mat,
-                             u_use_shadow=int(use_shadow and opts.ground), u_shadow_radius=6.0).items():
-                _set(g, k, v)
-            self._ground_vao.render(moderngl.TRIANGLE_STRIP)
-
-        if view in ("shaded", "wireframe") or heat:
-            self._draw_blade(opts, vp, light, light_mat, heat, use_shadow and opts.self_shadow)
+        blade = view in ("shaded", "wireframe") or heat
+        if opts.ground and not blade:
+            self._draw_ground(opts, vp, L, gz, mask_rect)
+        if blade:
+            # the blade first, then the ground: its pixels under the leaf fail the depth test
+            # before they are shaded (under llvmpipe the ground is a per-pixel cost)
+            self._draw_blade(opts, vp, light, light_mat, heat, self_shadow)
+            if opts.ground:
+                self._draw_ground(opts, vp, L, gz, mask_rect)
             if opts.veins and self.veins.count and not heat:
-                self._draw_veins(opts, vp, light, width, height, light_mat, use_shadow and opts.self_shadow)
-        elif view == "particles":
+                self._draw_veins(opts, vp, light, width, height, light_mat, self_shadow)
+        else:
+            self._draw_debug(view, vp, eye, opts)
+        if view == "wireframe" or (opts.wireframe and view != "springs"):
+            self._draw_lines(self.vao_wire, vp, eye, opts, lift=0.002 * self.radius, colour=tuple(opts.wire_colour))
+        ctx.disable(moderngl.BLEND)
+
+    def _draw_debug(self, view, vp, eye, opts) -> None:
+        """The particles or springs debug view."""
+        ctx = self.ctx
+        if view == "particles":
             if self._dirty_particles:
                 self.vbo_particles.write(np.ascontiguousarray(self._all_positions(), dtype=np.float32))
                 self._dirty_particles = False
@@ -414,35 +525,67 @@ class Renderer:
                 self._draw_lines(self.vao_springs, vp, eye, opts, lift=0.0)
             else:  # nothing to show: fall back to the mesh edges
                 self._draw_lines(self.vao_wire, vp, eye, opts, lift=0.0, colour=(0.2, 0.4, 0.9))
-        if view == "wireframe" or (opts.wireframe and view != "springs"):
-            self._draw_lines(self.vao_wire, vp, eye, opts, lift=0.002 * self.radius, colour=tuple(opts.wire_colour))
-        ctx.disable(moderngl.BLEND)
+
+    def _draw_ground(self, opts, vp, L, gz, rect) -> None:
+        """The ground: with a shadow mask, first only the mask's rectangle with the shadow,
+        then the whole ground quad (7 leaf radii, fading into the background) pushed back by a
+        polygon offset, so it fails the depth test where the rectangle was drawn.  Every
+        visible ground pixel is shaded once and the mask is fetched on a fraction of them."""
+        gcol = np.asarray(opts.ground_colour, np.float64)
+        sky, sun = np.asarray(opts.sky_colour, np.float64), np.asarray(opts.light_colour, np.float64)
+        lit = gcol * (sky + sun * max(L[2], 0.0))
+        shade = gcol * sky * 0.95  # the leaf also hides a little of the sky
+        cx, cy = float(self.center[0]), float(self.center[1])
+        ext = 7.0 * self.radius
+        quads = [(0, (cx, cy, ext, ext))]
+        if rect is not None:
+            quads.insert(0, (1, ((rect[0] + rect[2]) / 2, (rect[1] + rect[3]) / 2, (rect[2] - rect[0]) / 2, (rect[3] - rect[1]) / 2)))
+        for sh, quad in quads:
+            g = self._variant("ground", LS_SHADOW=sh)
+            for k, v in dict(u_viewproj=vp, u_center=(cx, cy, gz), u_quad=tuple(float(x) for x in quad), u_ground_z=gz,
+                             u_fade0=2.0 * self.radius, u_fade1=ext, u_lit_srgb=_srgb(lit), u_shade_srgb=_srgb(shade),
+                             u_bg=tuple(opts.background), u_mask=2,
+                             u_rect=tuple(float(v) for v in (rect or (0.0, 0.0, 1.0, 1.0)))).items():
+                _set(g, k, v)
+            self.ctx.polygon_offset = (2.0, 4.0) if (sh == 0 and rect is not None) else (0.0, 0.0)
+            self._ground_vaos[sh].render(moderngl.TRIANGLE_STRIP)
+        self.ctx.polygon_offset = (0.0, 0.0)
 
     def _draw_blade(self, opts, vp, light, light_mat, heat, self_shadow):
-        b = self.programs["blade"]
         if heat:
-            mode = 3
+            mode, cmap = 3, 0 if opts.colormap == "turbo" else 1
+        else:
+            mode, cmap = self._albedo_mode(opts), 0
+        defs = dict(LS_MODE=mode, LS_CMAP=cmap, LS_SHADOW=int(self_shadow and not heat),
+                    LS_CUTOUT=int(bool(opts.texture_cutout) and mode == 1))
+        b = self._variant("blade", **defs)
+        if heat:
             if self._scalar_name != opts.view:
                 self.vbo_scalar.write(self.scalars[opts.view])
                 self._scalar_name = opts.view
-            f = self.scalars[opts.view]
-            rng = opts.scalar_range or (float(f.min()), float(f.max()))
-            _set(b, "u_range", (float(rng[0]), float(rng[1])))
-            _set(b, "u_cmap", 0 if opts.colormap == "turbo" else 1)
-        else:
-            mode = self._albedo_mode(opts)
-        _set(b, "u_mode", mode)
+            _set(b, "u_range", tuple(float(v) for v in self.scalar_range(opts)))
         _set(b, "u_viewproj", vp)
         _set(b, "u_tex", 0)
         _set(b, "u_tex_mean", self.tex_mean)
-        _set(b, "u_cutout", int(opts.texture_cutout))
         for k, v in light.items():
             _set(b, k, v)
         _set(b, "u_shadow", 1)
         _set(b, "u_light_mat", light_mat)
-        _set(b, "u_use_shadow", int(self_shadow))
         _set(b, "u_shadow_offset", 12.0 * 2.3 * self.radius / opts.shadow_size)
-        self.vao_blade.render(moderngl.TRIANGLES)
+        self._variant_vao("blade", **defs).render(moderngl.TRIANGLES)
+
+    def scalar_range(self, opts) -> tuple[float, float]:
+        """The (lo, hi) a heat map of ``opts.view`` is drawn with (what a colour bar must show):
+        ``opts.scalar_range``, or the field's 2nd..98th percentile, so that a few nearly dry
+        margin particles do not squeeze the rest of the leaf into one colour."""
+        if opts.scalar_range is not None:
+            return float(opts.scalar_range[0]), float(opts.scalar_range[1])
+        f = self.scalars[opts.view]
+        f = f[np.isfinite(f)]
+        if not f.size:
+            return 0.0, 1.0
+        lo, hi = (float(v) for v in np.percentile(f, [2.0, 98.0]))
+        return (lo, hi) if hi > lo else (float(f.min()), float(max(f.max(), f.min() + 1e-12)))
 
     def _albedo_mode(self, opts) -> int:
         if opts.albedo == "colours":
@@ -454,20 +597,19 @@ class Renderer:
         return {"auto": 1, "texture": 1, "detail": 2}[opts.albedo]
 
     def _draw_veins(self, opts, vp, light, width, height, light_mat, self_shadow):
-        v = self.programs["vein"]
+        mode = self._albedo_mode(opts)
+        defs = dict(LS_TEX=int(mode == 1), LS_CUTOUT=int(mode == 1 and bool(opts.texture_cutout)),
+                    LS_SHADOW=int(self_shadow))
+        v = self._variant("vein", **defs)
         _set(v, "u_shadow", 1)
         _set(v, "u_light_mat", light_mat)
-        _set(v, "u_use_shadow", int(self_shadow))
         _set(v, "u_shadow_offset", 12.0 * 2.3 * self.radius / opts.shadow_size)
-        mode = self._albedo_mode(opts)
         _set(v, "u_viewproj", vp)
         _set(v, "u_viewport", (float(width), float(height)))
         _set(v, "u_lift", 3e-4 * self.radius)
         _set(v, "u_min_px", float(opts.vein_min_px))
         _set(v, "u_width_scale", float(opts.vein_width_scale))
-        _set(v, "u_use_tex", int(mode == 1))
         _set(v, "u_absolute", int(opts.vein_absolute))
-        _set(v, "u_cutout", int(opts.texture_cutout))
         _set(v, "u_tex", 0)
         cols = list(opts.vein_colours)[:4]
         cols += [cols[-1]] * (4 - len(cols))
@@ -478,7 +620,7 @@ class Renderer:
         ctx.enable(moderngl.BLEND)
         ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
         self._target.depth_mask = False
-        self.vao_vein.render(moderngl.TRIANGLES)
+        self._variant_vao("vein", **defs).render(moderngl.TRIANGLES)
         self._target.depth_mask = True
         ctx.disable(moderngl.BLEND)
 

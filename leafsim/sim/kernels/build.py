@@ -6,7 +6,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def poisson_accept(cand, fixed, r, lo, hi):
     """Greedy dart throwing: accept candidates (k,2) in order if ≥ r from every fixed and
     previously accepted point.  A background grid of cell r/√2 makes it O(k).  Returns a mask."""
@@ -58,7 +58,7 @@ def poisson_accept(cand, fixed, r, lo, hi):
     return ok
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def greedy_colour(idx, n):
     """Colour constraints (k, p) particle indices so that no two constraints of one colour
     share a particle (negative indices ignored).  Returns colour (k,) int64."""

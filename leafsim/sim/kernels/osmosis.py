@@ -17,7 +17,7 @@ def _loss(w, rate, dt, w_ref):
     return l
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def loss_rhs(M, c, w0, rate, dt, rhs, loss):
     """rhs = M c − loss with loss = min(rate Δt w0, w) so water stays ≥ 0."""
     for i in range(M.shape[0]):
@@ -26,7 +26,7 @@ def loss_rhs(M, c, w0, rate, dt, rhs, loss):
         rhs[i] = w - loss[i]
 
 
-@njit(cache=True, parallel=True, fastmath=True)
+@njit(cache=True, nogil=True, parallel=True, fastmath=True)
 def csr_matvec(indptr, indices, data, x, y):
     for i in prange(indptr.shape[0] - 1):
         s = 0.0
@@ -35,7 +35,7 @@ def csr_matvec(indptr, indices, data, x, y):
         y[i] = s
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False)
 def pcg(indptr, indices, data, diag, b, x, tol, maxit):
     """Jacobi-preconditioned CG on an SPD CSR matrix, warm-started from x (in place).
     Returns the iteration count."""
@@ -89,7 +89,7 @@ def pcg(indptr, indices, data, diag, b, x, tol, maxit):
     return it
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False)
 def jacobi(indptr, indices, data, diag, b, x, tol, maxit):
     """Damped-free Jacobi sweeps (diagonally dominant M-matrix → converges); returns count."""
     n = b.shape[0]
@@ -117,7 +117,7 @@ def jacobi(indptr, indices, data, diag, b, x, tol, maxit):
     return it
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False)
 def direct_step(M, w, w0, rate, dt, Lp, Li, Lx, Up, Ui, Ux, perm_r, perm_c, y, rhs, loss):
     """One implicit osmosis step with a factored matrix, in one call: rhs = M c − loss
     (as :func:`loss_rhs`), solve (Pr A Pc = L U, CSR factors with sorted indices), then

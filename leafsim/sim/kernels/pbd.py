@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit, prange
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def predict(q, qd, q_old, invm, gz, dt):
     for i in range(q.shape[0]):
         for k in range(3):
@@ -209,10 +209,10 @@ def _iteration(q, invm, ij, rest, salpha, slam, scs,
     return big
 
 
-iteration_par = njit(cache=True, parallel=True, fastmath=True)(_iteration)
+iteration_par = njit(cache=True, nogil=True, parallel=True, fastmath=True)(_iteration)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def iteration_ser(q, invm, ij, rest, salpha, slam, scs,
                   hidx, hrest, halpha, hlam, hcs, omega,
                   vidx, vrest, vlam, vcs, change):
@@ -254,11 +254,11 @@ def _springs_only(q, invm, ij, rest, salpha, slam, scs, change):
     return big
 
 
-springs_par = njit(cache=True, parallel=True, fastmath=True)(_springs_only)
-springs_ser = njit(cache=True, parallel=False, fastmath=True)(_springs_only)
+springs_par = njit(cache=True, nogil=True, parallel=True, fastmath=True)(_springs_only)
+springs_ser = njit(cache=True, nogil=True, parallel=False, fastmath=True)(_springs_only)
 
 
-@njit(cache=True, parallel=True, fastmath=True)
+@njit(cache=True, nogil=True, parallel=True, fastmath=True)
 def jacobi_springs(q, invm, ij, rest, salpha, slam, adj_ptr, adj_s, adj_sign, dq):
     """Atomics-free Jacobi pass: per-spring correction, then per-particle gather (CSR)."""
     ns = ij.shape[0]
@@ -292,7 +292,7 @@ def jacobi_springs(q, invm, ij, rest, salpha, slam, adj_ptr, adj_s, adj_sign, dq
         q[i, 0] += f * sx; q[i, 1] += f * sy; q[i, 2] += f * sz
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def ground_friction(q, q_old, pen, mu):
     """Coulomb friction for particles that touched the ground this frame (PBD style)."""
     for i in range(q.shape[0]):
@@ -313,7 +313,7 @@ def ground_friction(q, q_old, pen, mu):
         pen[i] = 0.0
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def update_velocity(q, q_old, qd, dt, keep):
     inv = 1.0 / dt
     for i in range(q.shape[0]):
@@ -321,7 +321,7 @@ def update_velocity(q, q_old, qd, dt, keep):
             qd[i, k] = (q[i, k] - q_old[i, k]) * inv * keep
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def voronoi_heights(q, vidx, hgt):
     """Signed height of each V particle above its triangle's plane (store before projection)."""
     for t in range(vidx.shape[0]):
@@ -333,7 +333,7 @@ def voronoi_heights(q, vidx, hgt):
         hgt[t] = ((q[iv, 0] - q[ia, 0]) * nx + (q[iv, 1] - q[ia, 1]) * ny + (q[iv, 2] - q[ia, 2]) * nz) / nl
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def voronoi_replace(q, vidx, hgt, hmin):
     """Thesis re-placement: x_V = centroid + max(h_i, hmin) n_F (after the velocity update)."""
     for t in range(vidx.shape[0]):
@@ -351,7 +351,7 @@ def voronoi_replace(q, vidx, hgt, hmin):
             q[iv, k] = (q[ia, k] + q[ib, k] + q[ic, k]) / 3.0 + h * nk / nl
 
 
-@njit(cache=True, parallel=True, fastmath=True)
+@njit(cache=True, nogil=True, parallel=True, fastmath=True)
 def residual(q, ij, rest):
     """max |C| / l over springs."""
     out = np.empty(ij.shape[0])
@@ -363,7 +363,7 @@ def residual(q, ij, rest):
     return out.max() if out.shape[0] else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dihedral_angles(q, hidx):
     """Signed dihedral angle per hinge (same convention as the projection)."""
     out = np.empty(hidx.shape[0])
@@ -377,7 +377,7 @@ def dihedral_angles(q, hidx):
     return out
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def uninvert(q, invm, vidx, hmin, vonly, ground):
     """Guard against layer inversion: a V particle closer than ``hmin`` to (or below) its
     triangle's plane is projected to height ``hmin`` (inverse-mass weighted between the V
@@ -412,7 +412,7 @@ def uninvert(q, invm, vidx, hmin, vonly, ground):
     return moved
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     """Candidate self-contact pairs (found once per substep with a spatial hash): layer-T
     particles closer than ``search`` whose rest distance² > ``skip2``.  Cells are 2 × search
@@ -474,7 +474,7 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     return n
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def project_contacts(q, invm, pairs, n, radius):
     """Unilateral distance constraints |xi − xj| ≥ radius for the candidate pairs."""
     hits = 0
@@ -508,7 +508,7 @@ def _springs_multi(q, invm, ij, rest, salpha, slam, scs, change, niter, tol):
     return it
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def springs_multi_ser(q, invm, ij, rest, salpha, slam, scs, niter, tol):
     """Serial fused version of :func:`_springs_multi`: the largest change is tracked inline
     (no ``change`` array, no second scan)."""
@@ -525,7 +525,7 @@ def springs_multi_ser(q, invm, ij, rest, salpha, slam, scs, niter, tol):
     return it
 
 
-@njit(cache=True, parallel=True, fastmath=True)
+@njit(cache=True, nogil=True, parallel=True, fastmath=True)
 def springs_multi_par(q, invm, ij, rest, salpha, slam, scs, change, niter, tol):
     """Coloured parallel passes, all in one call (fork/join per colour remains)."""
     it = 0
@@ -543,7 +543,7 @@ def springs_multi_par(q, invm, ij, rest, salpha, slam, scs, change, niter, tol):
     return it
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha):
     """XPBD compliance / Δt² of every hinge: k = D (1 + k_dry · clip(dry, 0, 1)) · geom + k_rod
     [N·m/rad], D the blade's bending stiffness [N·m], geom = 3|e|²/(A₁+A₂), k_rod the vein's
@@ -559,7 +559,7 @@ def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha):
         halpha[e] = inv_h2 / (kbend * (1.0 + kdry * dry) * hgeom[e] + krod[e])
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def contact_velocities(q, qd, invm, pairs, n, radius):
     """Inelastic self-contact (restitution 0): for the pairs that touch after the substep,
     remove the separating part of their relative normal velocity (mass-weighted, so momentum
@@ -588,7 +588,7 @@ def contact_velocities(q, qd, invm, pairs, n, radius):
         qd[j, 0] += fj * nx; qd[j, 1] += fj * ny; qd[j, 2] += fj * nz
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def ground_clamp(q, invm, pen):
     """Ground plane z ≥ 0: lift penetrating particles and add the lift to ``pen``, the
     substep's total normal correction (∝ the normal impulse): the Coulomb budget of
@@ -600,7 +600,7 @@ def ground_clamp(q, invm, pen):
             q[i, 2] = 0.0
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def add_delta(q, qa, dint):
     """dint += q − qa (the displacement of the internal projections since the snapshot qa)."""
     for i in range(q.shape[0]):
@@ -608,7 +608,7 @@ def add_delta(q, qa, dint):
             dint[i, k] += q[i, k] - qa[i, k]
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def remove_rigid(q, q_old, invm, dint):
     """Internal forces carry no net momentum.  A Gauss–Seidel sweep conserves linear and
     angular momentum only to first order (each projection is exact at the positions it sees,
@@ -661,7 +661,7 @@ def remove_rigid(q, q_old, invm, dint):
         q[i, 2] -= tz + wx * ry - wy * rx
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
           ij, rest, salpha, slam, scs,
           hidx, hrest, halpha, hlam, hcs,
