@@ -22,7 +22,7 @@ def test_every_declared_string_has_glyphs():
     assert len(strings) > 400
     text = "".join(strings)
     # the declaration uses the characters the old default font lacked (l⁰, water₀, ≲, ≫, τ̄)
-    for ch in ("\u2070", "\u2080", "\u2272", "\u226b", "\u0304", "κ", "σ", "Δ", "×", "−", "≈"):
+    for ch in ("\u2070", "\u2080", "\u2272", "\u226b", "\u0304", "κ", "σ", "Δ", "×", "−"):
         assert ch in text, ch
     assert missing_glyphs(strings, covered) == {}
 

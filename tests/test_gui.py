@@ -396,7 +396,7 @@ def test_species_switch_keeps_changes_and_names_the_reset_ones():
     def body(ctx, app):
         s = app.session
         ctx.item_open("**/###group Osmosis")
-        ctx.item_input_value(ref("osmosis.loss_top"), 0.9)
+        ctx.item_input_value(ref("osmosis.evaporation_top"), 0.9)
         ctx.item_close("**/###group Osmosis")
         ctx.item_close("**/###group Effects")  # bring the Colour group into view
         ctx.item_open("**/###group Colour")
@@ -415,22 +415,22 @@ def test_species_switch_keeps_changes_and_names_the_reset_ones():
         wait_until(ctx, lambda: not s.building, 900)
         ctx.yield_(2)
         seen["shown_after"] = s.shown_species.key
-        seen["loss_top"] = s.params["osmosis.loss_top"]
+        seen["evaporation_top"] = s.params["osmosis.evaporation_top"]
         seen["browning"] = s.params["colour.browning"]
         seen["maple_browning"] = s.species.params["colour.browning"]
         ctx.item_click("//Controls/species defaults")
         ctx.yield_(2)
-        seen["defaults"] = s.params["osmosis.loss_top"]
+        seen["defaults"] = s.params["osmosis.evaporation_top"]
         seen["defaults_msg"] = app.status.get("species").text
 
     run_gui(body)
     assert seen["building"] and seen["shown"] == "oak" and seen["key"] == "maple"
-    assert "osmosis.loss_top" in seen["msg"] and "kept" in seen["msg"]
+    assert "osmosis.evaporation_top" in seen["msg"] and "kept" in seen["msg"]
     assert "colour.browning" in seen["msg"] and "reset" in seen["msg"]
     assert seen["shown_after"] == "maple"
-    assert seen["loss_top"] == pytest.approx(0.9, rel=1e-5)
+    assert seen["evaporation_top"] == pytest.approx(0.9, rel=1e-5)
     assert seen["browning"] == seen["maple_browning"] != pytest.approx(7.5)
-    assert seen["defaults"] == PARAMS["osmosis.loss_top"].default and "osmosis.loss_top" in seen["defaults_msg"]
+    assert seen["defaults"] == PARAMS["osmosis.evaporation_top"].default and "osmosis.evaporation_top" in seen["defaults_msg"]
 
 
 def test_random_sliders_rebuilds_and_species_switches_while_playing():

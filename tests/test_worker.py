@@ -75,8 +75,8 @@ def test_live_params_reach_the_worker_while_it_plays(s):
     s.play(True)
     until(lambda: s.take_snapshot() and s.frame >= 2)
     for k in range(20):  # a burst of slider changes while it steps
-        s.set_params({"osmosis.loss_top": 0.5 + 0.1 * k, "colour.age_rate": 0.01 * (k + 1)})
-    assert until(lambda: s.simulator.params["osmosis.loss_top"] == pytest.approx(2.4))
+        s.set_params({"osmosis.evaporation_top": 0.5 + 0.1 * k, "colour.age_rate": 0.01 * (k + 1)})
+    assert until(lambda: s.simulator.params["osmosis.evaporation_top"] == pytest.approx(2.4))
     assert s.simulator.params["colour.age_rate"] == pytest.approx(0.2)
     f = s.frame
     assert until(lambda: s.take_snapshot() and s.frame > f + 2)  # still stepping
@@ -109,7 +109,7 @@ def test_speed_limits_simulated_time(s):
 
 
 def test_dry_to_end(s):
-    s.set_params({"osmosis.loss_top": 50.0, "osmosis.loss_bottom": 50.0})
+    s.set_params({"osmosis.evaporation_top": 50.0, "osmosis.evaporation_bottom": 50.0})
     s.dry_to_end()
     assert s.drying
     assert until(lambda: (s.take_snapshot() or True) and not s.drying, 120)

@@ -21,7 +21,6 @@ THESIS_PRESET = {
     "dynamics.gravity": 9.8,
     "dynamics.voronoi": "replace",
     "dynamics.plasticity": 0.0,
-    "dynamics.damping": 0.0,
     "mass.D": 1,
     "shrink.alpha": 1.0,
 }

@@ -7,8 +7,9 @@ internal motion is bounded by what the shrinking can drive.  Two signatures of a
 blow-up that produce no NaN are caught:
 
 * an internal motion faster than a drying leaf can move: the mass-weighted RMS internal speed
-  above :data:`MAX_RMS_SPEED` plus what the shrinking drives (``SHRINK_SPEED_FACTOR`` × L ×
-  the fastest relative rest-length change per second since the last check), or any
+  above :data:`MAX_RMS_SPEED` plus what the changing rest shape drives
+  (``SHRINK_SPEED_FACTOR`` × (L × the fastest relative rest-length change per second + L²/2 ×
+  the fastest change of the hinges' rest curvature per second) since the last check), or any
   particle's above :data:`MAX_INTERNAL_SPEED` (a single light margin particle may flutter at a
   fraction of that while a rolled leaf settles);
 * internal kinetic energy growing exponentially (doubling every ≤ :data:`DOUBLING_FRAMES`
@@ -26,7 +27,7 @@ from ..errors import LeafsimError
 from ..params import PARAMS, ParamSet
 
 #: largest RMS (mass-weighted) internal speed of a drying leaf [m/s]
-MAX_RMS_SPEED = 0.5
+MAX_RMS_SPEED = 2.0
 #: the shrinking moves the tissue at up to L × its relative rate; allowed on top of MAX_RMS_SPEED
 SHRINK_SPEED_FACTOR = 3.0
 #: largest internal (non-rigid) speed of any one particle [m/s]
@@ -85,7 +86,7 @@ class Watchdog:
         self.floor = ENERGY_FLOOR * float(model.particle_mass0.sum()) * model.length ** 2
         self.history: list[float] = []
         self.last: dict = {}
-        self._rest = None
+        self._rest = self._hrest = None
         self._time = 0.0
 
     def check(self, state) -> dict | None:
@@ -99,7 +100,7 @@ class Watchdog:
             self._fail(state, "positions or velocities became NaN/Inf")
         mom = momenta(m.particle_cytosol + state.particle_water, q, qd)
         self.last = mom
-        bound = MAX_RMS_SPEED + SHRINK_SPEED_FACTOR * m.length * self._shrink_rate(state)
+        bound = MAX_RMS_SPEED + SHRINK_SPEED_FACTOR * self._shape_speed(state)
         if mom["rms_internal_speed"] > bound or mom["max_internal_speed"] > MAX_INTERNAL_SPEED:
             self._fail(state, f"internal motion at {mom['rms_internal_speed']:.3g} m/s RMS, {mom['max_internal_speed']:.3g} m/s "
                               f"at most (bounds {bound:.3g} and {MAX_INTERNAL_SPEED:g} m/s: drying tissue moves at "
@@ -113,15 +114,21 @@ class Watchdog:
                                   "frames without a source")
         return mom
 
-    def _shrink_rate(self, state) -> float:
-        """Largest relative rest-length change per second since the previous check [1/s]."""
-        rest = state.spring_rest
-        rate = 0.0
+    def _shape_speed(self, state) -> float:
+        """Speed [m/s] the rest shape's change since the previous check can drive: L × the
+        largest relative rest-length rate + L²/2 × the largest rest-curvature rate."""
+        m = self.model
+        rest, hrest = state.spring_rest, state.hinge_rest
+        speed = 0.0
         if self._rest is not None and state.time > self._time:
-            rate = float(np.max(np.abs(rest - self._rest) / np.maximum(self.model.spring_rest0, 1e-30))) / (state.time - self._time)
-        self._rest = rest.copy()
+            dt = state.time - self._time
+            strain = float(np.max(np.abs(rest - self._rest) / np.maximum(m.spring_rest0, 1e-30))) if len(rest) else 0.0
+            curv = (float(np.max(np.abs(hrest - self._hrest) / np.maximum(m.spring_rest0[m.hinge_spring_V], 1e-30)))
+                    if len(hrest) else 0.0)
+            speed = (m.length * strain + 0.5 * m.length ** 2 * curv) / dt
+        self._rest, self._hrest = rest.copy(), hrest.copy()
         self._time = state.time
-        return rate
+        return speed
 
     def _fail(self, state, what: str):
         changed = [k for k in SUSPECTS if k in self.params and self.params[k] != PARAMS[k].default]
