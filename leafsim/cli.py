@@ -99,6 +99,13 @@ def build_parser() -> argparse.ArgumentParser:
     be = sub.add_parser("bench", help="benchmark the simulation kernels")
     be.add_argument("--json", action="store_true")
     be.add_argument("--quick", action="store_true", help="small sizes only")
+    ac = sub.add_parser("accuracy", help="accuracy against cost: every solver setting against a converged reference")
+    ac.add_argument("--species", default="maple", help="species to dry (default maple)")
+    ac.add_argument("--config", default=None)
+    ac.add_argument("--seed", type=int, default=0)
+    ac.add_argument("--out", default=None, help="folder for accuracy.json, accuracy.md and accuracy_pareto.png")
+    ac.add_argument("--quick", action="store_true", help="a coarse, fast-drying leaf and few settings (for tests)")
+    ac.add_argument("--json", action="store_true")
     _scene_export_parsers(sub)
     return ap
 
@@ -428,6 +435,20 @@ class _FrameWriter:
         self.written += 1
 
 
+def cmd_accuracy(args):
+    from .accuracy import markdown, study, write_report
+
+    out = Path(args.out) if args.out else None
+    if out is not None and out.exists() and not out.is_dir():
+        raise LeafsimError(f"--out {out}: exists and is not a folder")
+    if out is not None and not out.parent.exists():
+        raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
+    report = study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json)
+    if out is not None:
+        report["files"] = write_report(report, out)
+    _emit(args, report, markdown(report))
+
+
 def cmd_bench(args):
     from .bench import main as bench_main
 
@@ -536,7 +557,7 @@ COMMANDS = {
     "gui": cmd_gui, "species": cmd_species, "params": cmd_params, "outline": cmd_outline, "veins": cmd_veins,
     "build": cmd_build, "run": cmd_run, "bench": cmd_bench,
 }
-COMMANDS.update(scene=cmd_scene, export=cmd_export)
+COMMANDS.update(scene=cmd_scene, export=cmd_export, accuracy=cmd_accuracy)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -34,6 +34,20 @@ BILAYER_GAIN = 1.3
 HINGE_MAX_ANGLE = 0.35
 
 
+def effective_substeps(params) -> int:
+    """Substeps per frame: ``dynamics.substeps`` at the default mesh spacing r₀, scaled by
+    (r₀ / r)² with ``dynamics.substep_scaling``.  A bending hinge's XPBD stiffness relative to
+    its particles' inertia per substep, k h² / (m ℓ²), falls like h² / r⁴; Gauss–Seidel carries
+    a steady load (the blade's weight) across the mesh only while that number is not small,
+    so h ∝ r² keeps a refined mesh converging (measured in docs/accuracy.md)."""
+    from ..params import PARAMS
+
+    n = int(params["dynamics.substeps"])
+    if params["dynamics.substep_scaling"]:
+        n = round(n * (PARAMS["mesh.spacing"].default / params["mesh.spacing"]) ** 2)
+    return int(min(max(n, 1), 1000))
+
+
 def edge_factor(model: Model, beta: float, length: float) -> np.ndarray:
     """(n,) relative evaporation: 1 + β √(ℓ / (d + ℓ)) for a particle at rest distance d from
     the margin (a laminar boundary layer's transfer coefficient falls like x^(−1/2) from the
@@ -90,10 +104,11 @@ class Osmosis:
         K.sum_duplicates()
         return K
 
-    def configure(self, params):
+    def configure(self, params, dt: float | None = None):
+        """``dt``: the time one solve covers (default Δt; k Δt when solved every k-th frame)."""
         D = params["osmosis.diffusion"]
         through = params["osmosis.through_thickness"]
-        dt = params["dynamics.dt"]
+        dt = params["dynamics.dt"] if dt is None else dt
         solver = params["osmosis.solver"]
         if solver == "auto":
             solver = "direct" if self.model.particle_count <= DIRECT_MAX_UNKNOWNS else "cg"
@@ -255,7 +270,7 @@ class Dynamics:
         m = self.model
         dt = params["dynamics.dt"]
         self.dt = dt
-        self.substeps = params["dynamics.substeps"]
+        self.substeps = effective_substeps(params)
         self.h = dt / self.substeps
         self.g = -params["dynamics.gravity"] if effects["gravity"] else 0.0
         self.keep = math.exp(-params["dynamics.damping"] * self.h)
