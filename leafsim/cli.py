@@ -49,6 +49,17 @@ def _common(p: argparse.ArgumentParser, seed=True):
                    help="override a declared parameter, e.g. --set veins.main.kappa=4 (repeatable)")
     if seed:
         p.add_argument("--seed", type=_seed, default=0, help="random seed, a non-negative integer (default 0)")
+    p.add_argument("--quality", default=None, choices=("draft", "balanced", "reference"),
+                   help="mesh and solver settings from the accuracy study's front (see `leafsim params`); --set wins")
+
+
+def _overrides(args) -> dict:
+    """The quality level's settings (if any), then the --set values (validated)."""
+    from .params import parse_set_args
+    from .sim.presets import quality_overrides
+
+    q = getattr(args, "quality", None)
+    return {**(quality_overrides(q) if q else {}), **parse_set_args(args.sets)}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -194,12 +205,10 @@ def _emit(args, obj: dict, text: str) -> None:
 
 def _load(args):
     """Species + validated parameters (species values, then --set overrides)."""
-    from .params import parse_set_args
     from .species import DEFAULT_SPECIES, get_species
 
-    overrides = parse_set_args(args.sets)
     sp = get_species(args.species or DEFAULT_SPECIES, args.config)
-    params = sp.params.with_overrides(overrides, where="--set")
+    params = sp.params.with_overrides(_overrides(args), where="--set")
     return sp, params
 
 
@@ -222,10 +231,21 @@ def cmd_params(args):
     if args.markdown:
         print(markdown_table())
         return
+    from .sim.presets import quality_table
+
     rows = [{"name": p.name, "kind": p.kind, "default": p.default, "lo": p.lo, "hi": p.hi, "unit": p.unit,
              "group": p.group, "rebuild": p.rebuild, "choices": list(p.choices), "help": p.help} for p in PARAMS.values()]
     text = "\n".join(f"{r['name']:36s} {str(r['default']):>10s} {r['unit']:10s} {'rebuild' if r['rebuild'] else 'live':7s} {r['help']}" for r in rows)
-    _emit(args, {"params": rows}, text)
+    quality = quality_table()
+    text += "\n\n--quality (measured by the accuracy study, docs/accuracy.md):\n" + "\n".join(
+        f"  {k:10s} {json.dumps(v['settings']):60s} " + (_quality_measured(v["measured"]) if v["measured"] else "not measured")
+        for k, v in quality.items())
+    _emit(args, {"params": rows, "quality": quality}, text)
+
+
+def _quality_measured(m: dict) -> str:
+    return (f"worst error {100 * m['worst_rel']:.0f} % of the reference, {m['ms_per_sim_s']:.0f} ms per simulated second "
+            f"({m['particles']} particles, maple)")
 
 
 def cmd_outline(args):
@@ -322,14 +342,13 @@ def _check_run_args(args) -> Path | None:
 def cmd_run(args):
     from .fileio import remove_stale_temps
     from .leaf import build_leaf, load_photo_rgba
-    from .params import parse_set_args
     from .sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
     from .sim.run import StatsStream, run_headless, save_npz
     from .sim.simulator import Simulator
     from .species import DEFAULT_SPECIES, get_species
 
     out = _check_run_args(args)
-    overrides = {**parse_set_args(args.sets), **_effects_overrides(args.effects)}
+    overrides = {**_overrides(args), **_effects_overrides(args.effects)}
     t0 = time.perf_counter()
     sp = get_species(args.species or DEFAULT_SPECIES, args.config)
     params = sp.params.with_overrides(overrides, where="--set")
@@ -456,11 +475,10 @@ def cmd_bench(args):
 
 
 def cmd_gui(args):
-    from .params import parse_set_args
 
     if args.screenshot and args.frames is None:
         raise LeafsimError("--screenshot needs --frames N")
-    overrides = parse_set_args(args.sets)
+    overrides = _overrides(args)
     from .gui.app import run_app
 
     return run_app(species=args.species, config=args.config, seed=args.seed, overrides=overrides,
@@ -511,7 +529,6 @@ def cmd_scene(args):
 def cmd_export(args):
     from .export import export_mesh, format_of
     from .leaf import build_leaf, load_photo_rgba
-    from .params import parse_set_args
     from .sim.run import run_headless
     from .sim.simulator import Simulator
     from .species import get_species
@@ -526,7 +543,7 @@ def cmd_export(args):
     if not folder.is_dir():
         raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")
     sp = get_species(args.species, args.config)
-    params = sp.params.with_overrides({**parse_set_args(args.sets), **_effects_overrides(args.effects)}, where="--set")
+    params = sp.params.with_overrides({**_overrides(args), **_effects_overrides(args.effects)}, where="--set")
     if args.texture == "photo" and sp.image is None:
         raise LeafsimError(f"--texture photo: species '{sp.key}' has no photo (drawn outline)")
     shape, veins, model = build_leaf(sp, params, args.seed)

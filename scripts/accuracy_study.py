@@ -7,7 +7,6 @@ mesh / iteration convergence of grapevine and oak; writes docs/accuracy/ and pri
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path

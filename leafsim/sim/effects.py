@@ -15,7 +15,7 @@ from .kernels import osmosis as ko
 from .kernels import pbd as kp
 from .kernels import shrink as ks
 from .model import (
-    LAYER_T, LAYER_V, SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN, Model, State,
+    LAYER_T, LAYER_V, SPRING_LINK, SPRING_SURFACE, SPRING_VEIN, Model, State,
 )
 
 #: below this many particles the serial Gauss–Seidel kernel beats the coloured parallel one
@@ -146,7 +146,6 @@ class Osmosis:
             self.key = key
 
     def apply(self, state: State):
-        m = self.model
         w = state.particle_water
         M = self.M
         if self.solver == "direct":  # rhs, triangular solves and w = max(c, 0) M in one numba call
