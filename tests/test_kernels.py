@@ -98,7 +98,7 @@ def test_projection_passes_match_reference(tiny, kind):
     d.configure(p, EFFECTS)
     st = _folded(m)
     st.particle_q[:] += np.random.default_rng(2).normal(0, 0.05 * m.spacing, st.particle_q.shape)
-    hidx, hrest, halpha, hlam = d._gather(st)
+    hidx, hrest, halpha, hlam = d.gather(st)
     q_new, q_ref = st.particle_q.copy(), st.particle_q.copy()
     empty = np.zeros(1, np.int64)
     cs = {"springs": (m.spring_colour_start, empty, empty), "hinges": (empty, m.hinge_colour_start, empty),

@@ -309,7 +309,7 @@ class Dynamics:
         self.ground = effects["ground"] and self.scene == "ground"
         self.self_coll = effects["self_collision"]
 
-    def _gather(self, state):
+    def gather(self, state):
         """This frame's inverse masses, spring records, hinge compliances and rest values in
         projection order."""
         m = self.model
@@ -327,7 +327,7 @@ class Dynamics:
 
     def apply(self, state: State):
         m = self.model
-        hidx, hrest, halpha, hlam = self._gather(state)
+        hidx, hrest, halpha, hlam = self.gather(state)
         # contacts and the un-inversion keep to the tissue's size: as it shrinks (in the plane and
         # through the thickness) so do the contact radius and the thickness (fixed values would
         # hold a strongly shrunken leaf apart against its own springs)
