@@ -20,7 +20,9 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def predict(q, qd, q_old, invm, gz, dt):
+def predict(q, qd, q_old, qa, dint, invm, gz, dt):
+    """Start of a substep: q_old ← q, gravity, x ← x + v Δt; ``qa`` ← the prediction and
+    ``dint`` ← 0 (the internal displacement is counted from here), all in one pass."""
     for i in range(q.shape[0]):
         for k in range(3):
             q_old[i, k] = q[i, k]
@@ -28,6 +30,9 @@ def predict(q, qd, q_old, invm, gz, dt):
             qd[i, 2] += gz * dt
             for k in range(3):
                 q[i, k] += qd[i, k] * dt
+        for k in range(3):
+            qa[i, k] = q[i, k]
+            dint[i, k] = 0.0
 
 
 # ---------------------------------------------------------------- projection passes
@@ -229,9 +234,13 @@ def springs_passes(q, ij, rec, lam, niter, tol):
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def ground_friction(q, q_old, pen, mu):
-    """Coulomb friction for particles that touched the ground this frame (PBD style)."""
+def ground_contact(q, q_old, invm, pen, mu):
+    """The substep's last ground clamp (:func:`ground_clamp`) and Coulomb friction for the
+    particles that touched the ground in it (PBD style), in one pass."""
     for i in range(q.shape[0]):
+        if q[i, 2] < 0.0 and invm[i] > 0.0:
+            pen[i] -= q[i, 2]
+            q[i, 2] = 0.0
         p = pen[i]
         if p <= 0.0:
             continue
@@ -250,9 +259,12 @@ def ground_friction(q, q_old, pen, mu):
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def update_velocity(q, q_old, qd, dt, keep):
+def update_velocity(q, q_old, qd, dt, keep, ground):
+    """v ← (x − x_old)/Δt × ``keep`` (damping), after lifting anything below the ground."""
     inv = 1.0 / dt
     for i in range(q.shape[0]):
+        if ground and q[i, 2] < 0.0:
+            q[i, 2] = 0.0
         for k in range(3):
             qd[i, k] = (q[i, k] - q_old[i, k]) * inv * keep
 
@@ -316,11 +328,12 @@ def dihedral_angles(q, hidx):
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def uninvert(q, invm, vidx, hmin, vonly, ground):
+def uninvert(q, invm, vidx, hmin, vonly, ground, dint):
     """Guard against layer inversion: a V particle closer than ``hmin`` to (or below) its
     triangle's plane is projected to height ``hmin`` (inverse-mass weighted between the V
     particle and the triangle, so momentum is conserved; with ``ground`` a vertex resting on
-    the ground is not pushed into it).  Returns how many were corrected."""
+    the ground is not pushed into it).  Every move is added to ``dint`` (internal
+    displacement).  Returns how many were corrected."""
     moved = 0
     for t in range(vidx.shape[0]):
         iv, ia, ib, ic = vidx[t, 0], vidx[t, 1], vidx[t, 2], vidx[t, 3]
@@ -343,9 +356,11 @@ def uninvert(q, invm, vidx, hmin, vonly, ground):
             dl = (hmin - h) / W
             f = invm[iv] * dl
             q[iv, 0] += f * nx; q[iv, 1] += f * ny; q[iv, 2] += f * nz
+            dint[iv, 0] += f * nx; dint[iv, 1] += f * ny; dint[iv, 2] += f * nz
             for j, wj in ((ia, wa), (ib, wb), (ic, wc)):
                 g = -wj * dl / 3.0
                 q[j, 0] += g * nx; q[j, 1] += g * ny; q[j, 2] += g * nz
+                dint[j, 0] += g * nx; dint[j, 1] += g * ny; dint[j, 2] += g * nz
             moved += 1
     return moved
 
@@ -483,20 +498,12 @@ def contact_velocities(q, qd, invm, pairs, n, radius):
 def ground_clamp(q, invm, pen):
     """Ground plane z ≥ 0: lift penetrating particles and add the lift to ``pen``, the
     substep's total normal correction (∝ the normal impulse): the Coulomb budget of
-    :func:`ground_friction` — the sum, not the deepest, so that it does not depend on how many
+    :func:`ground_contact` — the sum, not the deepest, so that it does not depend on how many
     iterations the same impulse is spread over."""
     for i in range(q.shape[0]):
         if q[i, 2] < 0.0 and invm[i] > 0.0:
             pen[i] -= q[i, 2]
             q[i, 2] = 0.0
-
-
-@njit(cache=True, fastmath=True, nogil=True)
-def add_delta(q, qa, dint):
-    """dint += q − qa (the displacement of the internal projections since the snapshot qa)."""
-    for i in range(q.shape[0]):
-        for k in range(3):
-            dint[i, k] += q[i, k] - qa[i, k]
 
 
 @njit(cache=True, fastmath=True, nogil=True)
@@ -632,18 +639,18 @@ def project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius,
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def settle(q, invm, vidx, thick, ground, out):
+def settle(q, invm, vidx, thick, ground, dint, out):
     """No layer inversion after the substep's projections: momentum-conserving passes (vertices
     resting on the ground stay), then a V-only pass for anything neighbours undid."""
     n_fix = 0
     k = 0
     for _r in range(3):
-        k = uninvert(q, invm, vidx, 0.25 * thick, False, ground)
+        k = uninvert(q, invm, vidx, 0.25 * thick, False, ground, dint)
         n_fix += k
         if k == 0:
             break
     if k:
-        uninvert(q, invm, vidx, 0.2 * thick, True, ground)
+        uninvert(q, invm, vidx, 0.2 * thick, True, ground, dint)
     out[2] = n_fix
 
 
@@ -662,29 +669,22 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
     qrest, T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate = contact
     its = 0
     for _ in range(substeps):
-        predict(q, qd, q_old, invm, gz, h)
+        predict(q, qd, q_old, qa, dint, invm, gz, h)
         if replace:
             voronoi_heights(q_old, vidx, hgt)
         ncont = 0
         if pbd:
             if self_coll:
                 ncont = update_contacts(q, qrest, T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate)
-            qa[:] = q
-            dint[:] = 0.0
             its += project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius, out)
             internal_delta(q, qa, pen, dint)
         if ground:
-            ground_clamp(q, invm, pen)
-            ground_friction(q, q_old, pen, mu)
+            ground_contact(q, q_old, invm, pen, mu)
         if pbd:
-            qa[:] = q
-            settle(q, invm, vidx, thick, ground, out)
-            add_delta(q, qa, dint)
+            settle(q, invm, vidx, thick, ground, dint, out)
             if conserve:
                 remove_rigid(q, q_old, invm, dint)
-            if ground:
-                clamp_ground(q)
-        update_velocity(q, q_old, qd, h, keep)
+        update_velocity(q, q_old, qd, h, keep, ground and pbd)
         if pbd and ncont:
             contact_velocities(q, qd, invm, pairs, ncont, radius)
         if replace:
