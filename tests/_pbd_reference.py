@@ -407,6 +407,9 @@ def uninvert(q, invm, vidx, hmin, vonly, ground):
     return moved
 
 
+from leafsim.sim.kernels.pbd import canonical_pairs as _canonical  # noqa: E402
+
+
 @njit(cache=True, nogil=True, fastmath=True)
 def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     """Candidate self-contact pairs (found once per substep with a spatial hash): layer-T
@@ -431,6 +434,7 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     cap = pairs.shape[0]
     for k in range(idx.shape[0]):
         i = idx[k]
+        g0 = n
         gx = q[i, 0] * inv
         gy = q[i, 1] * inv
         gz = q[i, 2] * inv
@@ -466,6 +470,7 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
                                         pairs[n, 1] = j
                                         n += 1
                         m = nxt[m]
+        n = _canonical(pairs, g0, n)  # (the one change: the rewrite's canonical pair order)
     return n
 
 

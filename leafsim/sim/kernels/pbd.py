@@ -18,8 +18,10 @@ import math
 import numpy as np
 from numba import njit
 
+from . import FASTMATH
 
-@njit(cache=True, nogil=True, fastmath=True)
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def predict(q, qd, q_old, qa, dint, invm, gz, dt):
     """Start of a substep: q_old ← q, gravity, x ← x + v Δt; ``qa`` ← the prediction and
     ``dint`` ← 0 (the internal displacement is counted from here), all in one pass."""
@@ -43,7 +45,7 @@ def predict(q, qd, q_old, qa, dint, invm, gz, dt):
 # in the generated code, and returned 17-tuples through the stack.  Indices are stored as
 # uint32, so no negative-index wrap-around code is emitted either.
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def pack_springs(perm, ij, invm, rest, salpha, rec):
     """The per-spring record of one frame, in projection order: rec[s] = (rest length,
     compliance / Δt², 1 / (w_a + w_b + compliance), w_a, w_b), for spring perm[s] of the model
@@ -60,7 +62,7 @@ def pack_springs(perm, ij, invm, rest, salpha, rec):
         rec[s, 4] = wb
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def spring_pass(q, ij, rec, lam, lo, hi):
     """XPBD distance constraints lo…hi (records of :func:`pack_springs`): one sqrt and one
     division each."""
@@ -87,7 +89,7 @@ def spring_pass(q, ij, rec, lam, lo, hi):
     return big
 
 
-@njit(inline="always", fastmath=True)
+@njit(inline="always", fastmath=FASTMATH)
 def atan2_(y, x):
     """atan2 without the libm call: Cephes' atan (rational P4/Q5 after reducing to
     |t| ≤ tan π/8; relative error 1.9e-16) with atan2's quadrants.  Agrees with ``math.atan2``
@@ -108,7 +110,7 @@ def atan2_(y, x):
     return a if y >= 0.0 else -a
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def hinge_pass(q, invm, hidx, hrest, halpha, hlam, omega, lo, hi):
     """Bending hinges lo…hi, hidx = (x1, x2; x3–x4): signed dihedral angle θ (cup, wings up,
     > 0) and its gradients u1…u4 (Bridson et al. 2003), XPBD step over-relaxed by ``omega``,
@@ -172,7 +174,7 @@ def hinge_pass(q, invm, hidx, hrest, halpha, hlam, omega, lo, hi):
     return math.sqrt(big2)
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def volume_pass(q, invm, vidx, vrest, lo, hi):
     """Thickness constraints lo…hi: 6 × the volume of tetrahedron (v, a, b, c) = det, which
     keeps V on the top side; the step is limited to half the triangle's edge scale (compared
@@ -212,7 +214,7 @@ def volume_pass(q, invm, vidx, vrest, lo, hi):
     return math.sqrt(big2)
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, vrest):
     """One Gauss–Seidel pass over all constraints: springs, hinges, thickness (each kind in
     colour order).  Returns the largest |Δx| of the pass."""
@@ -221,7 +223,7 @@ def iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, v
     return max(big, volume_pass(q, invm, vidx, vrest, 0, vidx.shape[0]))
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def springs_passes(q, ij, rec, lam, niter, tol):
     """``niter`` spring passes in one call (the bench's job); stops early when the largest
     change falls below ``tol``.  Returns the passes run."""
@@ -233,7 +235,7 @@ def springs_passes(q, ij, rec, lam, niter, tol):
     return it
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def ground_contact(q, q_old, invm, pen, mu):
     """The substep's last ground clamp (:func:`ground_clamp`) and Coulomb friction for the
     particles that touched the ground in it (PBD style), in one pass."""
@@ -258,7 +260,7 @@ def ground_contact(q, q_old, invm, pen, mu):
         pen[i] = 0.0
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def update_velocity(q, q_old, qd, dt, keep, ground):
     """v ← (x − x_old)/Δt × ``keep`` (damping), after lifting anything below the ground."""
     inv = 1.0 / dt
@@ -269,7 +271,7 @@ def update_velocity(q, q_old, qd, dt, keep, ground):
             qd[i, k] = (q[i, k] - q_old[i, k]) * inv * keep
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def voronoi_heights(q, vidx, hgt):
     """Signed height of each V particle above its triangle's plane (store before projection)."""
     for t in range(vidx.shape[0]):
@@ -281,7 +283,7 @@ def voronoi_heights(q, vidx, hgt):
         hgt[t] = ((q[iv, 0] - q[ia, 0]) * nx + (q[iv, 1] - q[ia, 1]) * ny + (q[iv, 2] - q[ia, 2]) * nz) / nl
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def voronoi_replace(q, vidx, hgt, hmin):
     """Thesis re-placement: x_V = centroid + max(h_i, hmin) n_F (after the velocity update)."""
     for t in range(vidx.shape[0]):
@@ -299,7 +301,7 @@ def voronoi_replace(q, vidx, hgt, hmin):
             q[iv, k] = (q[ia, k] + q[ib, k] + q[ic, k]) / 3.0 + h * nk / nl
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def residual(q, ij, rest):
     """max |C| / l over springs."""
     big = 0.0
@@ -327,7 +329,7 @@ def dihedral_angles(q, hidx):
     return out
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def uninvert(q, invm, vidx, hmin, vonly, ground, dint):
     """Guard against layer inversion: a V particle closer than ``hmin`` to (or below) its
     triangle's plane is projected to height ``hmin`` (inverse-mass weighted between the V
@@ -365,7 +367,27 @@ def uninvert(q, invm, vidx, hmin, vonly, ground, dint):
     return moved
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True)
+def canonical_pairs(pairs, g0, n):
+    """Sort the pairs [g0, n) of one particle i by j and drop repeats (hash collisions can
+    meet a pair twice); returns the new end."""
+    for a in range(g0 + 1, n):
+        jv = pairs[a, 1]
+        b = a - 1
+        while b >= g0 and pairs[b, 1] > jv:
+            pairs[b + 1, 1] = pairs[b, 1]
+            b -= 1
+        pairs[b + 1, 1] = jv
+    w = g0
+    for a in range(g0, n):
+        if a == g0 or pairs[a, 1] != pairs[w - 1, 1]:
+            pairs[w, 0] = pairs[a, 0]
+            pairs[w, 1] = pairs[a, 1]
+            w += 1
+    return w
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     """Candidate self-contact pairs (found once per substep with a spatial hash): layer-T
     particles closer than ``search`` whose rest distance² > ``skip2``.  Cells are 2 × search
@@ -389,6 +411,7 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     cap = pairs.shape[0]
     for k in range(idx.shape[0]):
         i = idx[k]
+        g0 = n
         gx = q[i, 0] * inv
         gy = q[i, 1] * inv
         gz = q[i, 2] * inv
@@ -424,10 +447,14 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
                                         pairs[n, 1] = j
                                         n += 1
                         m = nxt[m]
+        # canonical order (by i, then j): the projections then do not depend on the cell walk,
+        # so a list searched at another moment (a resumed run, another skin) projects the pairs
+        # that touch in the same order and gives bit-identical results
+        n = canonical_pairs(pairs, g0, n)
     return n
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def project_contacts(q, invm, pairs, n, radius):
     """Unilateral distance constraints |xi − xj| ≥ radius for the candidate pairs."""
     hits = 0
@@ -449,7 +476,7 @@ def project_contacts(q, invm, pairs, n, radius):
     return hits
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha):
     """XPBD compliance / Δt² of every hinge: k = D (1 + k_dry · clip(dry, 0, 1)) · geom + k_rod
     [N·m/rad], D the blade's bending stiffness [N·m], geom = 3|e|²/(A₁+A₂), k_rod the vein's
@@ -465,7 +492,7 @@ def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha):
         halpha[e] = inv_h2 / (kbend * (1.0 + kdry * dry) * hgeom[e] + krod[e])
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def contact_velocities(q, qd, invm, pairs, n, radius):
     """Inelastic self-contact (restitution 0): for the pairs that touch after the substep,
     remove the separating part of their relative normal velocity (mass-weighted, so momentum
@@ -494,7 +521,7 @@ def contact_velocities(q, qd, invm, pairs, n, radius):
         qd[j, 0] += fj * nx; qd[j, 1] += fj * ny; qd[j, 2] += fj * nz
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def ground_clamp(q, invm, pen):
     """Ground plane z ≥ 0: lift penetrating particles and add the lift to ``pen``, the
     substep's total normal correction (∝ the normal impulse): the Coulomb budget of
@@ -506,7 +533,7 @@ def ground_clamp(q, invm, pen):
             q[i, 2] = 0.0
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def remove_rigid(q, q_old, invm, dint):
     """Internal forces carry no net momentum.  A Gauss–Seidel sweep conserves linear and
     angular momentum only to first order (each projection is exact at the positions it sees,
@@ -559,7 +586,7 @@ def remove_rigid(q, q_old, invm, dint):
         q[i, 2] -= tz + wx * ry - wy * rx
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def contacts_stale(q, idx, qc, limit):
     """True when a particle of ``idx`` moved more than ``limit`` from ``qc`` (its position at
     the last contact search), or ``limit`` ≤ 0."""
@@ -576,7 +603,7 @@ def contacts_stale(q, idx, qc, limit):
     return False
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def update_contacts(q, qrest, idx, radius, skin, skip2, table, nxt, pairs, qc, cstate):
     """Self-contact candidates with a Verlet skin: the spatial hash is searched at radius +
     ``skin`` and kept until some particle has moved more than half of what is left of the skin
@@ -597,7 +624,7 @@ def update_contacts(q, qrest, idx, radius, skin, skip2, table, nxt, pairs, qc, c
     return n
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def internal_delta(q, qa, pen, dint):
     """dint += q − qa less the ground's lift recorded in ``pen`` since the snapshot (the
     ground is external: only the constraints' own displacement counts as internal)."""
@@ -607,14 +634,14 @@ def internal_delta(q, qa, pen, dint):
         dint[i, 2] += q[i, 2] - qa[i, 2] - pen[i]
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def clamp_ground(q):
     for i in range(q.shape[0]):
         if q[i, 2] < 0.0:
             q[i, 2] = 0.0
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius, out):
     """The substep's Gauss–Seidel iterations: (ground clamp, springs, hinges, volumes,
     self-contacts) until the largest change < ``tol`` with no contact hit, at most ``iters``.
@@ -638,7 +665,7 @@ def project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius,
     return it
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def settle(q, invm, vidx, thick, ground, dint, out):
     """No layer inversion after the substep's projections: momentum-conserving passes (vertices
     resting on the ground stay), then a V-only pass for anything neighbours undid."""
@@ -654,7 +681,7 @@ def settle(q, invm, vidx, thick, ground, dint, out):
     out[2] = n_fix
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
           pbd, ground, pen, mu, self_coll, contact, replace, hgt, thick, conserve, qa, dint, omega, out):
     """All ``substeps`` of one dynamics frame in one call (no Python between substeps or
