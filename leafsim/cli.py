@@ -314,7 +314,7 @@ def _check_run_args(args) -> Path | None:
 
 def cmd_run(args):
     from .fileio import remove_stale_temps
-    from .leaf import build_leaf, load_photo_rgba
+    from .leaf import build_leaf, species_photo_rgba
     from .params import parse_set_args
     from .sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
     from .sim.run import StatsStream, run_headless, save_npz
@@ -343,7 +343,7 @@ def cmd_run(args):
     for target in ([ck, out / "final.npz", out / "frame_*.png"] if out is not None else []) + ([Path(args.stats)] if args.stats else []):
         remove_stale_temps(target)  # left by a run killed (SIGKILL) while writing
     if args.every:
-        photo = load_photo_rgba(sp.image, params["limits.image_pixels"]) if (sp.image is not None and params["render.texture"]) else None
+        photo = species_photo_rgba(sp, params) if (sp.image is not None and params["render.texture"]) else None
         snap = _FrameWriter(model, params, photo, out, sim.state())
         if start == 0:
             snap.write(0, state)
@@ -489,7 +489,7 @@ def cmd_scene(args):
 
 def cmd_export(args):
     from .export import export_mesh, format_of
-    from .leaf import build_leaf, load_photo_rgba
+    from .leaf import build_leaf, species_photo_rgba
     from .params import parse_set_args
     from .sim.run import run_headless
     from .sim.simulator import Simulator
@@ -524,7 +524,7 @@ def cmd_export(args):
         keys = [state]
     elif keys[-1].frame != state.frame:
         keys.append(state.copy())
-    photo = load_photo_rgba(sp.image) if sp.image is not None else None
+    photo = species_photo_rgba(sp, params) if sp.image is not None else None
     rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=LeafView(model, photo),
                       layers=args.layers, veins=args.veins, texture=args.texture)
     rep.update(species=sp.key, seed=args.seed, frames=state.frame)

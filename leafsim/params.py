@@ -121,8 +121,8 @@ def _c(name, default, choices, help="", group="", rebuild=False):
 
 # ---------------------------------------------------------------- outline (rebuild)
 G = "Outline"
-_f("outline.simplify", 0.0015, 0.0, 0.02, "× diagonal", "Douglas–Peucker tolerance as a fraction of the image diagonal.", G, True)
-_i("outline.points", 400, 40, 4000, "", "Number of points the traced contour is resampled to (equal arc length).", G, True)
+_f("outline.simplify", 0.0005, 0.0, 0.02, "× diagonal", "Douglas–Peucker tolerance as a fraction of the image diagonal (≈ 1 px: keeps the margin's teeth).", G, True)
+_i("outline.points", 2000, 40, 8000, "", "Number of points the traced contour is resampled to (equal arc length); enough to carry a doubly serrate margin.", G, True)
 _f("outline.lobe_depth", 0.06, 0.0, 0.5, "× length", "Minimum sinus depth (relative to leaf length) that separates two lobes.", G, True)
 
 # ---------------------------------------------------------------- veins (rebuild)
@@ -167,6 +167,7 @@ G = "Mesh"
 _f("mesh.spacing", 0.028, 0.002, 0.1, "× length", "Poisson-disk spacing r of surface particles, relative to the leaf length.", G, True, log=True)
 _f("mesh.vein_spacing", 0.75, 0.3, 2.0, "× r", "Spacing of vein particles along veins relative to r.", G, True)
 _f("mesh.contour_spacing", 0.8, 0.3, 2.0, "× r", "Spacing of contour particles along the outline relative to r.", G, True)
+_f("mesh.contour_detail", 0.05, 0.0, 1.0, "× r", "Contour particles also sit on the margin's corners (tooth tips and notches) that stand out more than this × r from a straight edge; 0 = evenly spaced only (teeth smaller than the spacing are cut).", G, True)
 _f("mesh.thickness", 0.0004, 0.00005, 0.005, "m", "Blade thickness h: distance of layer V above layer T.", G, True, log=True)
 _c("mesh.veins_included", "sublateral", ("main", "lateral", "sublateral", "net"), "Highest vein order that gets vein particles.", G, True)
 

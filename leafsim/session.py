@@ -66,7 +66,7 @@ class BuildResult:
 
 public_mode = _public_mode  # file mode a plain open() would give (used for screenshots)
 
-from .leaf import load_photo_rgba  # noqa: E402  (re-exported: the GUI's photo panel)
+from .leaf import load_photo_rgba, species_photo_rgba  # noqa: E402  (re-exported: the GUI's photo panel)
 from .view import PIGMENT_VIEWS  # noqa: E402,F401
 
 
@@ -194,7 +194,7 @@ class Session:
         if sp.image is not None:
             stage(0.97, "photo: loading the species photo")
             try:
-                photo = load_photo_rgba(sp.image, params["limits.image_pixels"])
+                photo = species_photo_rgba(sp, params)
             except LeafsimError as e:
                 photo_error = str(e)
         stage(0.98, "simulator: preparing the stages")
