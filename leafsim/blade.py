@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -165,7 +165,31 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     vol_rest0 = 2.0 * tri_area * h  # 6 × tetra volume = det = h × 2A
     base = int(np.argmin(np.linalg.norm(P.pts - np.asarray(shape.base, float), axis=1)))
     M = _masses(P, tri, tri_area, S, E.n_T_springs, base, vp, vw, params)
-    return _finalize(shape, P, tri, rest, S, H, vol_idx, vol_rest0, E.tri_edge, M, base, vp, vw, vo, remap, L, h, r, E.share)
+    model = _finalize(shape, P, tri, rest, S, H, vol_idx, vol_rest0, E.tri_edge, M, base, vp, vw, vo, remap, L, h, r, E.share)
+    return replace(model, particle_patch=patch_field(model.particle_rest[:, :2], model.particle_area,
+                                                     model.particle_layer == LAYER_T, L, seed))
+
+
+#: correlation length of the hydraulic patch field, × leaf length (patches a few mm to cm)
+PATCH_LENGTH = 0.12
+
+
+def patch_field(xy: np.ndarray, area: np.ndarray, ref: np.ndarray, length: float, seed: int) -> np.ndarray:
+    """(n,) smooth seeded random field over the blade, zero mean and unit spread (area-weighted
+    over the particles ``ref``): patchy hydraulic failure — some patches of the blade lose
+    water faster than others (a drying leaf's xylem fails in patches; Brodribb & Holbrook
+    2003, Plant Physiol. 132:2166).  A Gaussian-correlated field with correlation length
+    ``PATCH_LENGTH`` × length from 64 random Fourier features; a function of position only, so
+    the same seed gives the same patches at any mesh spacing."""
+    rng = np.random.default_rng([int(seed), 0x9A7C4])
+    k = 64
+    omega = rng.standard_normal((k, 2)) / (PATCH_LENGTH * float(length))
+    phase = rng.uniform(0.0, 2.0 * np.pi, k)
+    f = np.cos(np.asarray(xy, float) @ omega.T + phase).sum(1) * math.sqrt(2.0 / k)
+    w = np.asarray(area, float) * ref
+    mean = float(np.dot(w, f) / max(w.sum(), 1e-300))
+    sd = math.sqrt(float(np.dot(w, (f - mean) ** 2) / max(w.sum(), 1e-300)))
+    return (f - mean) / max(sd, 1e-12)
 
 
 def _margin_points(ring: np.ndarray, r: float, spacing: float, detail: float) -> np.ndarray:

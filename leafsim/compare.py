@@ -17,9 +17,9 @@ Metrics (:func:`compare_images`):
   definition on both masks, at the same resolution.  The ratio is model / photo.
 * **Colour** (:func:`colour_classes`): every blade pixel's CIE Lab colour (sRGB, D65) is put
   in one of eight classes — dark (L* < 18, or L* < 35 with chroma C* < 12: necrotic), grey
-  (C* < 8 or a bluish hue 200–270°), brown (hue 30–105° with L* < 52 or C* < 0.45 L*), then
-  by hue angle green (105–200°), yellow (70–105°), orange (45–70°), red (< 45° or ≥ 330°)
-  and purple (270–330°).  The class fractions of photo and model and their total-variation
+  (C* < 8 or a bluish hue 200–270°), brown (hue 45–105° with L* < 52 or C* < 0.45 L*), then
+  by hue angle green (105–200°), yellow (70–105°), orange (45–70°), red (< 45° or ≥ 350°)
+  and purple (270–350°).  The class fractions of photo and model and their total-variation
   distance ½ Σ |p − q| (0 = same mix, 1 = nothing in common); also the total-variation
   distances of the L* histogram (10 bins) and of the hue histogram (18 bins of 20°, pixels
   with C* ≥ 8).
@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -179,13 +180,13 @@ def classify_lab(lab: np.ndarray) -> np.ndarray:
     dark = (L < 18) | ((L < 35) & (C < 12))
     grey = ~dark & ((C < 8) | ((h >= 200) & (h < 270)))
     rest = ~dark & ~grey
-    brown = rest & (h >= 30) & (h < 105) & ((L < 52) | (C < 0.45 * L))
+    brown = rest & (h >= 45) & (h < 105) & ((L < 52) | (C < 0.45 * L))
     hue = rest & ~brown
     out[hue & (h >= 105) & (h < 200)] = 0
     out[hue & (h >= 70) & (h < 105)] = 1
     out[hue & (h >= 45) & (h < 70)] = 2
-    out[hue & ((h < 45) | (h >= 330))] = 3
-    out[hue & (h >= 270) & (h < 330)] = 4
+    out[hue & ((h < 45) | (h >= 350))] = 3
+    out[hue & (h >= 270) & (h < 350)] = 4
     out[brown] = 5
     out[dark] = 6
     return out
@@ -298,3 +299,76 @@ def compare_images(ref: Reference, model_rgb: np.ndarray, model_mask: np.ndarray
         "mean_delta_e": None if de is None else round(de, 2),
         "veins": None if model_veins is None else vein_agreement(ref.rgb, ref.blade, model_veins, length_px),
     }
+
+
+# ----------------------------------------------------------------------------- montage
+
+def _bar(fr: np.ndarray, width: int, height: int) -> np.ndarray:
+    """A horizontal stacked bar of class fractions (RGB)."""
+    bar = np.full((height, width, 3), 255, np.uint8)
+    x = 0.0
+    for k, f in enumerate(fr):
+        x1 = x + float(f) * width
+        bar[:, int(round(x)):int(round(x1))] = CLASS_RGB[k]
+        x = x1
+    return bar
+
+
+def _text(img: np.ndarray, lines, x: int, y: int, scale: float = 0.5) -> None:
+    for i, line in enumerate(lines):
+        cv2.putText(img, line, (x, y + i * int(22 * scale / 0.5)), cv2.FONT_HERSHEY_SIMPLEX, scale, (20, 20, 20), 1, cv2.LINE_AA)
+
+
+def _overlay(ref: Reference, picture: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Photo and model half and half, the photo's margin in cyan, the model's in magenta."""
+    out = (0.5 * ref.rgb.astype(np.float32) + 0.5 * picture.astype(np.float32)).astype(np.uint8)
+    for m, col in ((ref.blade, (0, 170, 230)), (mask, (230, 0, 200))):
+        cnts, _ = cv2.findContours(np.asarray(m, np.uint8), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+        cv2.drawContours(out, cnts, -1, col, max(1, out.shape[0] // 400), cv2.LINE_AA)
+    return out
+
+
+def _row_lines(row: dict) -> list[str]:
+    st = row["stage"]
+    v = row["veins"]
+    veins = (f"veins (main+lateral) precision {v['precision']:.2f} (chance {v['chance_precision']:.2f}), recall "
+             f"{v['recall']:.2f} (chance {v['chance_recall']:.2f})") if v else "veins: not measurable"
+    ratio = "n/a" if row["margin_ratio"] is None else f"{row['margin_ratio']:.3f}"
+    return [f"{row['kind']}: model frame {st['frame']} ({st['water'] * 100:.0f} % water) vs {Path(row['reference']).name}",
+            f"IoU {row['iou']:.4f}   margin model/photo {ratio}   colour TV {row['colour_tv']:.3f}   "
+            f"lightness TV {row['lightness_tv']:.3f}   hue TV {row['hue_tv']:.3f}   mean dE {row['mean_delta_e']}",
+            veins, row.get("note") or ""]
+
+
+def montage(report: dict, rows, height: int = 460) -> np.ndarray:
+    """The comparison as one RGB picture: per row photo | model | overlay, the metrics and the
+    colour classes of photo and model as stacked bars (legend at the bottom)."""
+    blocks = []
+    for row, meta in zip(rows, report["rows"]):
+        panels = [row.ref.rgb, row.picture, _overlay(row.ref, row.picture, row.mask)]
+        f = height / float(panels[0].shape[0])
+        panels = [cv2.resize(p, (int(round(p.shape[1] * f)), height), interpolation=cv2.INTER_AREA) for p in panels]
+        gap = np.full((height, 10, 3), 255, np.uint8)
+        pics = np.hstack([panels[0], gap, panels[1], gap, panels[2]])
+        W = pics.shape[1]
+        info = np.full((150, W, 3), 255, np.uint8)
+        _text(info, _row_lines(meta), 8, 22)
+        fp = np.array([meta["colour_photo"][c] for c in CLASSES])
+        fm = np.array([meta["colour_model"][c] for c in CLASSES])
+        bw = W - 90
+        info[100:114, 80:80 + bw] = _bar(fp, bw, 14)
+        info[122:136, 80:80 + bw] = _bar(fm, bw, 14)
+        _text(info, ["photo", "model"], 8, 112, 0.42)
+        blocks.append(np.vstack([pics, info]))
+    W = max(b.shape[1] for b in blocks)
+    blocks = [np.hstack([b, np.full((b.shape[0], W - b.shape[1], 3), 255, np.uint8)]) for b in blocks]
+    legend = np.full((40, W, 3), 255, np.uint8)
+    x = 8
+    for k, c in enumerate(CLASSES):
+        legend[12:28, x:x + 16] = CLASS_RGB[k]
+        _text(legend, [c], x + 20, 25, 0.45)
+        x += 30 + 11 * len(c)
+    head = np.full((36, W, 3), 255, np.uint8)
+    _text(head, [f"leafsim compare --species {report['species']} (seed {report['seed']}): photo | model top-down | overlay "
+                 "(photo margin cyan, model magenta)"], 8, 24, 0.55)
+    return np.vstack([head, *blocks, legend])

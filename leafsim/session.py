@@ -442,7 +442,8 @@ class Session:
 
         state = self.simulator.state()
         self.pigments0 = state.pigments.copy()
-        self.view = LeafView(self.model, self.photo_rgba, self.pigments0, self.photo_tint)
+        self.view = LeafView(self.model, self.photo_rgba, self.pigments0, self.photo_tint,
+                             photo_colour=self.shown_species.photo_colour)
         self.sim_error = None
         self._clear_history()
         old = self.worker
