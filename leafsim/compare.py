@@ -18,8 +18,8 @@ Metrics (:func:`compare_images`):
 * **Colour** (:func:`colour_classes`): every blade pixel's CIE Lab colour (sRGB, D65) is put
   in one of eight classes — dark (L* < 18, or L* < 35 with chroma C* < 12: necrotic), grey
   (C* < 8 or a bluish hue 200–270°), brown (hue 45–105° with L* < 52 or C* < 0.45 L*), then
-  by hue angle green (105–200°), yellow (70–105°), orange (45–70°), red (< 45° or ≥ 350°)
-  and purple (270–350°).  The class fractions of photo and model and their total-variation
+  by hue angle green (105–200°), yellow (70–105°), orange (45–70°), red (0–45°) and purple
+  (270–360°: red and purple part at 0°, about halfway between sRGB red, 40°, and magenta, 328°).  The class fractions of photo and model and their total-variation
   distance ½ Σ |p − q| (0 = same mix, 1 = nothing in common); also the total-variation
   distances of the L* histogram (10 bins) and of the hue histogram (18 bins of 20°, pixels
   with C* ≥ 8).
@@ -185,8 +185,8 @@ def classify_lab(lab: np.ndarray) -> np.ndarray:
     out[hue & (h >= 105) & (h < 200)] = 0
     out[hue & (h >= 70) & (h < 105)] = 1
     out[hue & (h >= 45) & (h < 70)] = 2
-    out[hue & ((h < 45) | (h >= 350))] = 3
-    out[hue & (h >= 270) & (h < 350)] = 4
+    out[hue & (h < 45)] = 3
+    out[hue & (h >= 270)] = 4
     out[brown] = 5
     out[dark] = 6
     return out

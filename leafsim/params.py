@@ -256,7 +256,7 @@ _f("colour.browning", 1.0, 0.0, 10.0, "", "Browning rate of dead tissue (oxidise
 _f("colour.dry_threshold", 0.35, 0.0, 0.95, "× water₀", "Relative water content at or below which tissue counts as fully dry (dead).", G, False)
 _f("colour.dry_rate", 2.0, 0.0, 100.0, "1/s", "How fast dead dry tissue turns: the chlorophyll it still holds becomes dark pheophytin (necrosis) and it browns, per second of simulated time.", G, False, log=True)
 _f("colour.stress_water", 0.8, 0.05, 1.0, "× water₀", "Relative water content below which living tissue is drought-stressed and runs its senescence program (colour.drought).", G, False)
-_f("colour.drought", 1.0, 0.0, 20.0, "season/s", "Drought-induced senescence: season units of senescence per second of simulated time in fully stressed living tissue (a detached, drying leaf turns this way; fast = yellow before it dies, slow = dies green and turns necrotic).", G, False, log=True)
+_f("colour.drought", 2.0, 0.0, 20.0, "season/s", "Drought-induced senescence: season units of senescence per second of simulated time in fully stressed living tissue (a detached, drying leaf turns this way; fast = yellow before it dies, slow = dies green and turns necrotic).", G, False, log=True)
 _f("colour.necrosis", 1.0, 0.0, 3.0, "", "Darkness of tissue that died before its chlorophyll was broken down (pheophytins, oxidised phenolics: dark necrotic spots); 0 = it just browns.", G, False)
 _f("colour.vein_pallor", 0.3, 0.0, 1.0, "", "Heavy (vein) tissue holds this much less chlorophyll than the thinnest lamina.", G, False)
 _f("colour.variation", 0.1, 0.0, 1.0, "", "Random per-leaf variation of pigment contents, rates and onset (drawn from the seed).", G, False)

@@ -28,7 +28,7 @@ The senescence exposure of a step is the season's and the drought's::
   senesced first just browns.  Never decreases.
 * carotenoids  ``K ← K·exp(−(carotenoid_decay·H + 0.1·E))`` — they mostly persist and are
   *unmasked* as chlorophyll goes: yellow/orange.
-* anthocyanins ``A ← (A + 2·(1 − d)·(1 − C)·ΔC_sen)·exp(−(anthocyanin_fade·stress·ΔG + 0.3·E))``
+* anthocyanins ``A ← (A + 2·(1 − d)·(1 − C)·ΔC_sen)·exp(−(anthocyanin_fade·stress·ΔG + 0.05·E))``
   — made in still-living cells from the programmed chlorophyll breakdown ``ΔC_sen`` and late
   in it (factor ``1 − C``: sugars accumulate once photosynthesis has declined, so the red
   follows the unmasked yellow instead of muddying full green), they peak and then fade with
@@ -205,14 +205,17 @@ PALETTES: dict[str, dict[str, float]] = {
                "colour.browning": 2.0, "colour.onset": 0.15},
     # Phytolacca americana: betacyanins (treated as the anthocyanin channel), few carotenoids
     # → magenta / purple-red.
-    "pokeweed": {"colour.chlorophyll": 1.0, "colour.carotenoid": 0.3, "colour.anthocyanin": 2.5,
-                 "colour.anthocyanin_fade": 0.6, "colour.browning": 0.8, "colour.onset": 0.2},
+    "pokeweed": {"colour.chlorophyll": 1.0, "colour.carotenoid": 0.1, "colour.anthocyanin": 2.5,
+                 "colour.anthocyanin_fade": 0.6, "colour.browning": 0.3, "colour.onset": 0.2},
     # Vitis vinifera (red-berried cultivar): anthocyanin + carotenoid → red with yellow patches.
     "grapevine": {"colour.chlorophyll": 0.9, "colour.carotenoid": 1.0, "colour.anthocyanin": 1.0,
                   "colour.anthocyanin_fade": 1.0, "colour.browning": 1.0, "colour.onset": 0.25},
     # Populus tremula/tremuloides: brilliant golden yellow, very little red.
+    # Drying, it dies faster than it senesces (slow drought senescence, patchy): dark necrotic
+    # patches in green, as the senescent photo shows.
     "aspen": {"colour.chlorophyll": 0.9, "colour.carotenoid": 1.2, "colour.anthocyanin": 0.05,
-              "colour.browning": 0.5, "colour.onset": 0.3, "colour.carotenoid_decay": 0.2},
+              "colour.browning": 0.5, "colour.onset": 0.3, "colour.carotenoid_decay": 0.2,
+              "colour.drought": 0.1, "colour.stress_water": 0.6, "colour.necrosis": 2.0},
     # Carpinus betulus: yellow then ochre/orange-brown.
     "hornbeam": {"colour.chlorophyll": 1.0, "colour.carotenoid": 1.3, "colour.anthocyanin": 0.0,
                  "colour.browning": 1.5, "colour.onset": 0.3},
@@ -398,7 +401,7 @@ def _particle(c, k, a, b, nn, wi, h, e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, m
         phi = phi if esen < np.float32(0.1) else (_ONE - fc) / esen
     # anthocyanin: 2·(1 − C)·ΔC_sen in living cells, then fading
     a = (a + np.float32(2.0) * (_ONE - d) * esen * phi * c * (_ONE - c)) * _expneg(
-        kaf * stress * h + np.float32(0.3) * enec, mode)
+        kaf * stress * h + np.float32(0.05) * enec, mode)
     c = c * fc
     lost = c * (_ONE - _expneg(enec, mode))
     c = c - lost
@@ -505,7 +508,7 @@ def step_pigments(pig: PigmentState, water_rel: np.ndarray, age: float, dt: floa
     kc, ws, kk, kaf, kb = (float(x) for x in args[:5])
     # the largest exponent any particle can see this step picks the cheapest accurate kernel
     smax = (1.0 + ws) * dG + dr
-    xmax = max(kc * smax, kaf * (1.0 + ws) * dG + dry, kk * smax + dry, kb * (0.5 * (1.0 + ws) * dG + dry), dry)
+    xmax = max(kc * smax, kaf * (1.0 + ws) * dG + 0.05 * dry, kk * smax + 0.1 * dry, kb * (0.5 * (1.0 + ws) * dG + dry), dry)
     arrays = (pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.necrosis, w)
     if xmax <= 0.01:
         _kernel_tiny(*arrays, dG, dry, dr, args)
