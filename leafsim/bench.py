@@ -1,15 +1,21 @@
-"""Performance benchmark (``leafsim bench`` / ``python -m leafsim.bench [--quick] [--json]``):
-median ms per stage and per full step.
+"""Performance benchmark (``leafsim bench [--quick] [--json]``, ``python -m leafsim.bench``).
 
-A *full step* is what the thesis ran per frame: osmosis + shrink + 10 PBD iterations over all
-distance constraints (both layers and links).  Every PBD variant is timed (fused serial
-Gauss–Seidel: all 10 passes in one numba call; graph-coloured parallel Gauss–Seidel: same,
-prange per colour; atomics-free parallel Jacobi), the full step is timed as one sequence with
-the faster variant, next to a vectorised-numpy implementation of the same step (per stage and
-whole) in the same run, next to the default production dynamics step (5 substeps × 2
-iterations with bending hinges, thickness constraints, ground and self-collision; one numba
-call per frame), and next to the colour-only step (pigments + RGB).  numba caches are warmed
-before timing; medians of many repetitions (the machine is shared and noisy).
+Three parts, each timed *interleaved*: one repetition of every contender per round, many
+rounds, median and 90th percentile — the machine is shared, so contenders timed one after
+another would each see a different load.
+
+1. **Spring race**: 10 XPBD passes over the blade's own distance constraints, by our
+   production kernel (float64, serial), the float32 *ceiling* (the same kernel compiled for
+   float32 positions, int32 indices and float32 records), the former graph-coloured parallel
+   kernel (one fork/join per colour), a two-block domain split (one fork/join per pass),
+   vectorised-numpy Jacobi and — when installed (``pip install -e ".[peers]"``) — warp and
+   Taichi on the CPU.  Every row reports the constraint residual max |C|/l after the passes
+   (a kernel that does nothing cannot win) and how far its positions are from ours.
+2. **Frame**: the production dynamics frame (``dynamics.*`` defaults: substeps × iterations,
+   hinges, thickness, ground, self-collision) on a flat leaf at rest and on a folded leaf in
+   self-contact, each with and without self-collision (the contact share); the per-kind cost
+   of one pass (ns per spring, hinge, volume); osmosis, shrink and the colour-only step.
+3. **Memory**: bytes per particle of the model, state and solver arrays, and the peak RSS.
 
 Example
 -------
@@ -18,17 +24,20 @@ Example
 
 from __future__ import annotations
 
+import os
+import resource
 import time
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
 from .params import ParamSet
-from .sim.model import LAYER_V, SPRING_VEIN, Model
+from .sim.model import Model
 
 #: name -> mesh.spacing on the built-in maple-like test outline (0.12 m long)
 SIZES = {"maple": 0.0158, "100k": 0.00385, "tiny": 0.05}
+#: passes of the spring race
+PASSES = 10
+EFFECTS = {e: True for e in ("gravity", "pbd", "bending", "ground", "self_collision", "shrink")}
 
 
 def _maple_like():
@@ -65,66 +74,275 @@ def build_bench_model(size: str | float, seed: int = 1) -> Model:
     return build_blade(shape, veins, ParamSet({"mesh.spacing": spacing}), seed)
 
 
-def _median_ms(fn, reps: int, warm: int = 2) -> float:
+def folded_state(model: Model, seed: int = 1):
+    """A state with the right half of the blade folded over the left, 0.3 r above it, and a
+    random bilayer curl: a leaf in self-contact (the contact-heavy case)."""
+    st = model.state()
+    q = st.particle_q
+    right = q[:, 0] > 0
+    q[right, 0] *= -1
+    q[right, 2] = -q[right, 2] + 3 * model.thickness + 0.3 * model.spacing
+    st.hinge_rest[:] = np.random.default_rng(seed).uniform(-0.2, 0.2, model.hinge_count)
+    return st
+
+
+# ----------------------------------------------------------------------------- timing
+def interleaved(jobs: dict, rounds: int, warm: int = 1) -> dict:
+    """Time ``jobs`` (name → (reset, run); ``reset`` untimed) round-robin: one run of each per
+    round.  Returns name → list of ms."""
     for _ in range(warm):
-        fn()
-    out = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        fn()
-        out.append((time.perf_counter() - t0) * 1e3)
-    return float(np.median(out))
+        for reset, run in jobs.values():
+            reset()
+            run()
+    out = {k: [] for k in jobs}
+    for _ in range(rounds):
+        for k, (reset, run) in jobs.items():
+            reset()
+            t0 = time.perf_counter()
+            run()
+            out[k].append((time.perf_counter() - t0) * 1e3)
+    return out
 
 
-class NumpyStep:
-    """Vectorised-numpy reference of the same full step (scipy LU osmosis, numpy shrink,
-    bincount Jacobi PBD) — the baseline for the speed-up ratio."""
+def _stats(ms) -> dict:
+    return {"median_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)), "rounds": len(ms)}
 
-    def __init__(self, model: Model, params: ParamSet, osm_A):
-        self.m = model
-        self.lu = splu(osm_A.tocsc())
-        t = model.spring_type
-        self.sigma = np.where(t == SPRING_VEIN, params["shrink.sigma_vein"], params["shrink.sigma_surface_bottom"])
-        self.sigma[t == 2] = params["shrink.sigma_surface_top"]
-        self.l_min = params["shrink.l_min"]
-        self.rate = np.where(model.particle_layer == LAYER_V, params["osmosis.evaporation_top"], params["osmosis.evaporation_bottom"])
-        self.dt = params["dynamics.dt"]
-        n = model.particle_count
-        self.deg = np.bincount(model.spring_ij.ravel(), minlength=n).astype(float)
 
-    def osmosis(self, w):
-        m = self.m
-        M = m.particle_cytosol
-        c = w / M
-        loss = np.minimum(self.rate * self.dt * m.particle_area, w)
-        cn = self.lu.solve(M * c - loss)
-        w[:] = np.maximum(cn, 0) * M
+def _load() -> float:
+    return float(os.getloadavg()[0])
 
-    def shrink(self, w, rest):
-        m = self.m
-        M = m.particle_cytosol
-        i, j = m.spring_ij[:, 0], m.spring_ij[:, 1]
-        mass = M + w
-        v = (mass[i] + mass[j]) / (m.particle_mass0[i] + m.particle_mass0[j])
-        rest[:] = m.spring_rest0 * np.clip(1 - self.sigma * np.clip(1 - v, 0, None), self.l_min, 1)
 
-    def pbd(self, q, w, rest, iterations=10):
-        m = self.m
-        i, j = m.spring_ij[:, 0], m.spring_ij[:, 1]
-        invm = 1.0 / (m.particle_cytosol + w)
-        wi, wj = invm[i], invm[j]
-        n = len(q)
-        for _ in range(iterations):
+def _nothing():
+    return None
+
+
+# ----------------------------------------------------------------------------- spring race
+class SpringProblem:
+    """The race's job on one model: perturbed positions (2 % of the spacing) of the rest leaf,
+    the fresh leaf's inverse masses and the default compliances, springs in production order."""
+
+    def __init__(self, model: Model, params: ParamSet | None = None):
+        from .sim.effects import Dynamics
+        from .sim.kernels import pbd as kp
+
+        params = params or ParamSet()
+        self.model = model
+        d = Dynamics(model)
+        d.configure(params, EFFECTS)
+        st = model.state()
+        d.gather(st)
+        self.ij = d.sij
+        self.rec = d.srec.copy()
+        self.rest = self.rec[:, 0].copy()
+        self.cs = model.spring_colour_start
+        rng = np.random.default_rng(0)
+        self.q0 = st.particle_q + rng.normal(0, 0.02 * model.spacing, st.particle_q.shape)
+        self.residual0 = float(kp.residual(self.q0, self.ij, self.rest))
+
+    def residual(self, q) -> float:
+        from .sim.kernels import pbd as kp
+
+        return float(kp.residual(np.ascontiguousarray(q, np.float64), self.ij, self.rest))
+
+
+class _Kernel:
+    """A numba contender: positions/lambdas of ``dtype`` reset from the problem; ``fn(q, lam)``."""
+
+    def __init__(self, prob: SpringProblem, fn, dtype=np.float64):
+        self.q0 = prob.q0.astype(dtype)
+        self.q = self.q0.copy()
+        self.lam = np.zeros(len(prob.ij), dtype)
+        self.fn = fn
+
+    def reset(self):
+        self.q[:] = self.q0
+        self.lam[:] = 0.0
+
+    def run(self, npass=PASSES):
+        self.fn(self.q, self.lam)
+
+    def positions(self):
+        return self.q.astype(np.float64)
+
+
+class _NumpyJacobi:
+    """Vectorised numpy: Jacobi passes with bincount gathers, relaxation 1.5 / degree."""
+
+    def __init__(self, prob: SpringProblem):
+        self.prob = prob
+        n = len(prob.q0)
+        self.i, self.j = prob.ij[:, 0].astype(np.int64), prob.ij[:, 1].astype(np.int64)
+        self.deg = np.maximum(np.bincount(np.r_[self.i, self.j], minlength=n), 1).astype(float)
+        self.q = prob.q0.copy()
+
+    def reset(self):
+        self.q[:] = self.prob.q0
+
+    def run(self, npass=PASSES):
+        r, i, j, q, n = self.prob.rec, self.i, self.j, self.q, len(self.q)
+        for _ in range(npass):
             d = q[i] - q[j]
             ln = np.sqrt((d * d).sum(1))
-            f = ((rest - ln) / np.maximum(ln, 1e-12) / (wi + wj))[:, None] * d
+            f = ((r[:, 0] - ln) * r[:, 2] / np.maximum(ln, 1e-12))[:, None] * d
             for k in range(3):
-                q[:, k] += 1.5 * (np.bincount(i, f[:, k] * wi, n) - np.bincount(j, f[:, k] * wj, n)) / np.maximum(self.deg, 1)
+                q[:, k] += 1.5 * (np.bincount(i, f[:, k] * r[:, 3], n) - np.bincount(j, f[:, k] * r[:, 4], n)) / self.deg
 
-    def step(self, q, w, rest):
-        self.osmosis(w)
-        self.shrink(w, rest)
-        self.pbd(q, w, rest)
+    def positions(self):
+        return self.q
+
+
+def spring_contenders(prob: SpringProblem, peers: bool = True, numpy: bool = True, parallel: bool = True) -> dict:
+    """name → contender (reset(), run(), positions()).  The first is ours (production)."""
+    from .sim.kernels import contenders as kc
+    from .sim.kernels import pbd as kp
+
+    ij, rec, cs = prob.ij, prob.rec, prob.cs
+    ij32, rec32 = ij.astype(np.int32), rec.astype(np.float32)
+    perm, bs = kc.block_order(ij, prob.model.particle_rest)
+    bij, brec = np.ascontiguousarray(ij[perm]), np.ascontiguousarray(rec[perm])
+    out = {
+        "ours (f64, serial)": _Kernel(prob, lambda q, lam: kp.springs_passes(q, ij, rec, lam, PASSES, 0.0)),
+        "ceiling (f32, serial)": _Kernel(prob, lambda q, lam: kp.springs_passes(q, ij32, rec32, lam, PASSES, 0.0),
+                                         np.float32),
+    }
+    if parallel:
+        out["coloured parallel (before)"] = _Kernel(prob, lambda q, lam: kc.coloured_passes(q, ij, rec, lam, cs, 2, PASSES))
+        out["2-block parallel"] = _Kernel(prob, lambda q, lam: kc.block_passes(q, bij, brec, lam, bs, PASSES))
+    if numpy:
+        out["numpy Jacobi"] = _NumpyJacobi(prob)
+    if peers:
+        from .peers import available
+
+        for name, Peer in available().items():
+            out[name] = _PeerAdapter(Peer(prob.q0, ij, rec, cs))
+    return out
+
+
+class _PeerAdapter:
+    def __init__(self, peer):
+        self.peer = peer
+        self.reset = peer.reset
+        self.positions = peer.positions
+
+    def run(self, npass=PASSES):
+        self.peer.run(npass)
+
+
+def spring_race(model: Model, rounds: int = 30, peers: bool = True, numpy: bool = True, parallel: bool = True) -> list[dict]:
+    """Race every contender on ``model``'s springs; rows with median/p90 ms, ratio to ours,
+    ns per spring, the residual after the passes and the largest distance of its positions
+    from ours (in mesh spacings)."""
+    prob = SpringProblem(model)
+    cons = spring_contenders(prob, peers, numpy, parallel)
+    load = _load()
+    times = interleaved({k: (c.reset, c.run) for k, c in cons.items()}, rounds)
+    ours = next(iter(cons))
+    for c in cons.values():
+        c.reset()
+        c.run()
+    q_ours = cons[ours].positions()
+    rows = []
+    for k, c in cons.items():
+        q = c.positions()
+        rows.append({"contender": k, **_stats(times[k]), "residual0": prob.residual0, "residual": prob.residual(q),
+                     "agree": float(np.abs(q - q_ours).max() / model.spacing),
+                     "ns_per_spring": float(np.median(times[k])) * 1e6 / PASSES / model.spring_count})
+    base = rows[0]["median_ms"]
+    for r in rows:
+        r["ratio"] = r["median_ms"] / base
+        r["load"] = load
+    return rows
+
+
+# ----------------------------------------------------------------------------- frame
+def _frame_job(model, params, effects, state_fn):
+    """(reset, run, dynamics) of one production frame on the state ``state_fn()`` (reset to
+    that state before every repetition when it is a fixed snapshot)."""
+    from .sim.effects import Dynamics
+
+    d = Dynamics(model)
+    d.configure(params, effects)
+    snap = state_fn()
+    st = snap.copy()
+
+    def reset():
+        for a, b in ((st.particle_q, snap.particle_q), (st.particle_qd, snap.particle_qd)):
+            a[:] = b
+
+    return reset, lambda: d.apply(st), d
+
+
+def _pass_jobs(model, params):
+    """10 passes of each constraint kind (production kernels) on a perturbed folded leaf."""
+    from .sim.effects import Dynamics
+    from .sim.kernels import pbd as kp
+
+    d = Dynamics(model)
+    d.configure(params, EFFECTS)
+    st = folded_state(model)
+    hidx, hrest, halpha, hlam = d.gather(st)
+    q0 = st.particle_q + np.random.default_rng(3).normal(0, 0.02 * model.spacing, st.particle_q.shape)
+    q = q0.copy()
+    S, H, V = model.spring_count, model.hinge_count, model.vol_count
+
+    def reset():
+        q[:] = q0
+
+    def springs():
+        for _ in range(PASSES):
+            kp.spring_pass(q, d.sij, d.srec, d.slam, 0, S)
+
+    def hinges():
+        for _ in range(PASSES):
+            kp.hinge_pass(q, d.invm, hidx, hrest, halpha, hlam, 1.0, 0, H)
+
+    def volumes():
+        for _ in range(PASSES):
+            kp.volume_pass(q, d.invm, d.vidx, d.vrest, 0, V)
+
+    return {"springs ×10": (reset, springs), "hinges ×10": (reset, hinges), "volumes ×10": (reset, volumes)}
+
+
+def _stage_jobs(model, params):
+    from .sim.effects import Osmosis, Shrink
+
+    st = model.state()
+    st.particle_water[:] *= np.linspace(0.6, 1.0, model.particle_count)
+    osm = Osmosis(model)
+    osm.configure(params)
+    sh = Shrink(model)
+    sh.configure(params)
+    return {"osmosis": (_nothing, lambda: osm.apply(st)), "shrink": (_nothing, lambda: sh.apply(st)),
+            "colour step": (_nothing, _colour_step_fn(model, params))}
+
+
+def frame_bench(model: Model, rounds: int = 20, params: ParamSet | None = None) -> dict:
+    """Interleaved production frames (flat / folded leaf, with and without self-collision),
+    per-kind passes and the other stages; returns stats per job and the derived ratios."""
+    params = params or ParamSet()
+    noself = {**EFFECTS, "self_collision": False}
+    jobs, dyn = {}, {}
+    for name, eff, sfn in (("frame", EFFECTS, model.state), ("frame, no self-collision", noself, model.state),
+                           ("frame folded", EFFECTS, lambda: folded_state(model)),
+                           ("frame folded, no self-collision", noself, lambda: folded_state(model))):
+        reset, run, d = _frame_job(model, params, eff, sfn)
+        if sfn is model.state:
+            reset = _nothing  # the flat leaf keeps lying on the ground: no reset needed
+        jobs[name], dyn[name] = (reset, run), d
+    jobs.update(_pass_jobs(model, params))
+    jobs.update(_stage_jobs(model, params))
+    load = _load()
+    ms = {k: _stats(v) for k, v in interleaved(jobs, rounds).items()}
+    med = {k: v["median_ms"] for k, v in ms.items()}
+    ns = {k: med[f"{k}s ×10"] * 1e6 / PASSES / c for k, c in
+          (("spring", model.spring_count), ("hinge", model.hinge_count), ("volume", model.vol_count))}
+    d = dyn["frame"]
+    return {"ms": ms, "load": load, "ns_per": ns, "hinge_vs_spring": ns["hinge"] / ns["spring"],
+            "volume_vs_spring": ns["volume"] / ns["spring"],
+            "contact_share": max(0.0, 1.0 - med["frame, no self-collision"] / med["frame"]),
+            "contact_share_folded": max(0.0, 1.0 - med["frame folded, no self-collision"] / med["frame folded"]),
+            "contact_searches": d.contact_searches, "substeps": d.substeps, "iterations": d.iters,
+            "full_step_ms": med["osmosis"] + med["shrink"] + med["frame"]}
 
 
 def _colour_step_fn(model: Model, params: ParamSet):
@@ -145,157 +363,118 @@ def _colour_step_fn(model: Model, params: ParamSet):
     return step
 
 
-def bench_model(model: Model, reps: int = 30, params: ParamSet | None = None, jacobi: bool = True) -> dict:
-    """Time every stage on one model; returns a dict of medians (ms) and counts."""
-    from .sim.effects import PARALLEL_MIN_PARTICLES, Dynamics, Osmosis, Shrink
-    from .sim.kernels import pbd as kp
+# ----------------------------------------------------------------------------- memory
+def memory(model: Model, params: ParamSet | None = None) -> dict:
+    """Bytes per particle of the model, one state and the stages' arrays (dynamics, osmosis
+    with its factors, shrink), and this process's peak RSS so far."""
+    from .sim.simulator import Simulator
 
-    params = params or ParamSet()
-    out = {"particles": model.particle_count, "springs": model.spring_count, "ms": {}}
-    ms = out["ms"]
-    st = model.state()
-    st.particle_water[:] *= np.linspace(0.6, 1.0, model.particle_count)
-    # --- osmosis: direct (factor once, fused numba triangular solves) vs warm-started PCG
-    osm = Osmosis(model)
-    t0 = time.perf_counter()
-    osm.configure(params.with_overrides({"osmosis.solver": "direct"}))
-    ms["osmosis_factor"] = (time.perf_counter() - t0) * 1e3
-    ms["osmosis_direct"] = _median_ms(lambda: osm.apply(st), reps)
-    osm_cg = Osmosis(model)
-    osm_cg.configure(params.with_overrides({"osmosis.solver": "cg", "osmosis.tolerance": 1e-8}))
-    ms["osmosis_cg"] = _median_ms(lambda: osm_cg.apply(st), max(5, reps // 3))
-    out["cg_iterations"] = osm_cg.last_iterations
-    best_osm = osm if ms["osmosis_direct"] <= ms["osmosis_cg"] else osm_cg
-    # --- shrink
-    sh = Shrink(model)
-    sh.configure(params)
-    ms["shrink"] = _median_ms(lambda: sh.apply(st), reps)
-    # --- 10 PBD iterations over distance constraints: fused serial / coloured parallel / Jacobi
-    dyn = Dynamics(model)
-    dyn.configure(params, {e: True for e in ("gravity", "pbd", "bending", "ground", "self_collision", "shrink")})
-    np.divide(1.0, model.particle_cytosol + st.particle_water, out=dyn.invm)
-    q = st.particle_q
-    rng = np.random.default_rng(0)
-    q += rng.normal(0, 0.02 * model.spacing, q.shape)
-    base = (dyn.invm, model.spring_ij, st.spring_rest, dyn.salpha, dyn.slam, model.spring_colour_start)
-    ser = lambda: kp.springs_multi_ser(q, *base, 10, 0.0)  # noqa: E731
-    par = lambda: kp.springs_multi_par(q, *base, dyn.change, 10, 0.0)  # noqa: E731
-    ms["pbd10_gs_serial"] = _median_ms(ser, reps)
-    ms["pbd10_gs_coloured_parallel"] = _median_ms(par, reps)
-    if jacobi:
-        n = model.particle_count
-        ij = model.spring_ij
-        inc = np.concatenate([ij[:, 0], ij[:, 1]])
-        sidx = np.concatenate([np.arange(len(ij)), np.arange(len(ij))])
-        sign = np.concatenate([np.ones(len(ij)), -np.ones(len(ij))])
-        order = np.argsort(inc, kind="stable")
-        ptr = np.concatenate([[0], np.cumsum(np.bincount(inc, minlength=n))]).astype(np.int64)
-        dq = np.zeros((len(ij), 3))
-        jargs = (dyn.invm, ij, st.spring_rest, dyn.salpha, dyn.slam, ptr, sidx[order].astype(np.int64), sign[order], dq)
-        ms["pbd10_jacobi_parallel"] = _median_ms(lambda: [kp.jacobi_springs(q, *jargs) for _ in range(10)], max(5, reps // 3))
-    use_par = ms["pbd10_gs_coloured_parallel"] < ms["pbd10_gs_serial"]
-    out["pbd_choice"] = "gs_coloured_parallel" if use_par else "gs_serial"
-    out["production_pbd"] = "timed ser|par" if model.particle_count >= PARALLEL_MIN_PARTICLES else "gs_serial"
-    pbd = par if use_par else ser
-    ms["pbd10"] = ms["pbd10_gs_coloured_parallel"] if use_par else ms["pbd10_gs_serial"]
-
-    def full():
-        best_osm.apply(st)
-        sh.apply(st)
-        np.divide(1.0, model.particle_cytosol + st.particle_water, out=dyn.invm)
-        pbd()
-
-    ms["full_step"] = _median_ms(full, reps)
-    # --- production dynamics step (defaults: substeps × iterations, hinges, volumes, ground, self-collision)
-    st2 = model.state()
-    ms["dynamics_default"] = _median_ms(lambda: dyn.apply(st2), reps)
-    out["dynamics_iterations"] = dyn.last_iterations
-    # --- colour-only step (pigment aging + RGB)
-    ms["colour_step"] = _median_ms(_colour_step_fn(model, params), max(reps, 50))
-    # --- numpy reference of the same full step, per stage and whole
-    ref = NumpyStep(model, params, osm.A)
-    q2, w2, r2 = model.particle_rest.copy(), st.particle_water.copy(), st.spring_rest.copy()
-    nr = max(5, reps // 3)
-    np_ms = out["numpy_ms"] = {}
-    np_ms["osmosis_direct"] = _median_ms(lambda: ref.osmosis(w2), nr, warm=1)
-    np_ms["shrink"] = _median_ms(lambda: ref.shrink(w2, r2), nr, warm=1)
-    np_ms["pbd10"] = _median_ms(lambda: ref.pbd(q2, w2, r2), nr, warm=1)
-    np_ms["full_step"] = ms["numpy_full_step"] = _median_ms(lambda: ref.step(q2, w2, r2), nr, warm=1)
-    out["speedup_vs_numpy"] = ms["numpy_full_step"] / ms["full_step"]
-    out["colour_vs_full"] = ms["full_step"] / ms["colour_step"]
-    return out
+    sim = Simulator(model, params or ParamSet(), watchdog=False)
+    st = sim.state()
+    sim.step(st)
+    n = model.particle_count
+    parts = {"model": _nbytes(model), "state": _nbytes(st), "dynamics": _nbytes(sim._dynamics),
+             "osmosis": _nbytes(sim._osmosis), "shrink": _nbytes(sim._shrink)}
+    return {"bytes_per_particle": {k: v / n for k, v in parts.items()},
+            "bytes_per_particle_total": sum(parts.values()) / n,
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
-def run_bench(sizes=("maple", "100k"), reps: int = 30, jacobi: bool = True) -> dict:
+def _nbytes(obj, seen=None) -> int:
+    """Bytes of the numpy arrays and scipy sparse matrices an object holds (one level of
+    tuples/lists, no double counting)."""
+    import scipy.sparse as sp
+
+    seen = set() if seen is None else seen
+    vals = obj if isinstance(obj, (tuple, list)) else (vars(obj).values() if hasattr(obj, "__dict__") else
+                                                       [getattr(obj, f) for f in getattr(obj, "__dataclass_fields__", {})])
+    total = 0
+    for v in vals:
+        if id(v) in seen:
+            continue
+        seen.add(id(v))
+        if isinstance(v, np.ndarray):
+            total += v.nbytes
+        elif sp.issparse(v):
+            total += sum(getattr(v, a).nbytes for a in ("data", "indices", "indptr") if hasattr(v, a))
+        elif isinstance(v, (tuple, list)):
+            total += _nbytes(v, seen)
+    return total
+
+
+def memory_subprocess(size: str) -> dict:
+    """:func:`memory` of a fresh process that builds only ``size`` (a clean peak RSS)."""
+    import json
+    import subprocess
+    import sys
+
+    code = ("import json, resource; from leafsim.bench import build_bench_model, memory; "
+            "r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0; "
+            f"m = build_bench_model({size!r}); r = memory(m); r['rss_after_imports_mb'] = r0; print(json.dumps(r))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+# ----------------------------------------------------------------------------- driver
+def run_bench(sizes=("maple", "100k"), rounds: int = 30, peers: bool = True, mem: bool = True,
+              parallel: bool = True) -> dict:
     """Benchmark each named size (see :data:`SIZES`) or explicit mesh.spacing; returns a dict."""
     res = {}
     for s in sizes:
         t0 = time.perf_counter()
         model = build_bench_model(s)
         build_s = time.perf_counter() - t0
-        r = bench_model(model, reps=reps if model.particle_count < 50000 else max(7, reps // 4), jacobi=jacobi)
-        r["build_s"] = build_s
+        big = model.particle_count >= 50000
+        r = {"particles": model.particle_count, "springs": model.spring_count, "hinges": model.hinge_count,
+             "volumes": model.vol_count, "build_s": build_s}
+        r["race"] = spring_race(model, rounds=max(7, rounds // 3) if big else rounds, peers=peers, parallel=parallel)
+        r["frame"] = frame_bench(model, rounds=max(5, rounds // 6) if big else rounds)
+        if mem:
+            r["memory"] = memory_subprocess(s) if big else memory(model)
         res[str(s)] = r
     return res
 
 
-#: (key, label) rows of the table; rows with a numpy reference get baseline and ratio columns
-ROWS = [
-    ("osmosis_factor", "osmosis factor (once)"),
-    ("osmosis_direct", "osmosis direct solve"),
-    ("osmosis_cg", "osmosis PCG"),
-    ("shrink", "shrink"),
-    ("pbd10_gs_serial", "PBD 10 passes GS serial"),
-    ("pbd10_gs_coloured_parallel", "PBD 10 passes GS coloured par"),
-    ("pbd10_jacobi_parallel", "PBD 10 passes Jacobi par"),
-    ("pbd10", "PBD 10 passes (best)"),
-    ("full_step", "full step (osm+shrink+10 PBD)"),
-    ("dynamics_default", "dynamics default (GUI frame)"),
-    ("colour_step", "colour-only step"),
-]
-
-
 def format_bench(res: dict) -> str:
-    """A plain-text table of :func:`run_bench` results: stage, ms per size, numpy baseline
-    per size and the speed-up ratio numpy / leafsim per size."""
-    names = list(res)
-    w0, w = 32, 11
-    hdr = "stage".ljust(w0) + "".join(f"{n} ms".rjust(w) for n in names)
-    hdr += "".join(f"numpy {n}".rjust(w + 2) for n in names) + "".join(f"ratio {n}".rjust(w + 1) for n in names)
-    lines = [hdr, "-" * len(hdr)]
-    lines.append("particles / springs".ljust(w0) + "  ".join(f"{res[n]['particles']}/{res[n]['springs']}" for n in names))
-    for k, label in ROWS:
-        if not any(k in res[n]["ms"] for n in names):
-            continue
-        row = label.ljust(w0)
-        row += "".join((f"{res[n]['ms'][k]:.3f}" if k in res[n]["ms"] else "-").rjust(w) for n in names)
-        row += "".join((f"{res[n]['numpy_ms'][k]:.3f}" if k in res[n].get("numpy_ms", {}) else "").rjust(w + 2) for n in names)
-        row += "".join((f"{res[n]['numpy_ms'][k] / res[n]['ms'][k]:.1f}x" if k in res[n].get("numpy_ms", {}) else "").rjust(w + 1)
-                       for n in names)
-        lines.append(row.rstrip())
-    lines.append("")
-    for n in names:
-        r = res[n]
-        lines.append(f"[{n}] full step {r['ms']['full_step']:.3f} ms = {r['speedup_vs_numpy']:.1f}x numpy; colour-only step "
-                     f"{r['ms']['colour_step']:.3f} ms, {r['colour_vs_full']:.1f}x cheaper than the full step; "
-                     f"PBD choice {r['pbd_choice']} (production {r['production_pbd']}); cg iterations {r['cg_iterations']}")
+    """Plain-text tables of :func:`run_bench` results."""
+    lines = []
+    for name, r in res.items():
+        lines.append(f"[{name}] {r['particles']} particles, {r['springs']} springs, {r['hinges']} hinges, "
+                     f"{r['volumes']} volumes")
+        lines.append(f"  spring race, {PASSES} passes (1-min load {r['race'][0]['load']:.1f}):")
+        lines.append(f"  {'contender':28s} {'median ms':>10s} {'p90 ms':>9s} {'ratio':>6s} {'ns/spring':>9s} "
+                     f"{'residual':>9s} {'Δq / r':>8s}")
+        for row in r["race"]:
+            lines.append(f"  {row['contender']:28s} {row['median_ms']:10.3f} {row['p90_ms']:9.3f} {row['ratio']:6.2f} "
+                         f"{row['ns_per_spring']:9.2f} {row['residual']:9.2e} {row['agree']:8.1e}")
+        lines.append(f"  (residual before the passes {r['race'][0]['residual0']:.2e})")
+        f = r["frame"]
+        lines.append(f"  frame ({f['substeps']} substeps × ≤ {f['iterations']} iterations; 1-min load {f['load']:.1f}):")
+        for k, v in f["ms"].items():
+            lines.append(f"  {k:34s} {v['median_ms']:9.3f} ms  p90 {v['p90_ms']:9.3f}")
+        lines.append(f"  ns per spring / hinge / volume: {f['ns_per']['spring']:.1f} / {f['ns_per']['hinge']:.1f} / "
+                     f"{f['ns_per']['volume']:.1f}; hinge {f['hinge_vs_spring']:.2f}× a spring, volume "
+                     f"{f['volume_vs_spring']:.2f}×")
+        lines.append(f"  self-collision share of a frame: flat {100 * f['contact_share']:.1f} %, folded "
+                     f"{100 * f['contact_share_folded']:.1f} %; full step (osmosis + shrink + frame) "
+                     f"{f['full_step_ms']:.2f} ms")
+        if "memory" in r:
+            m = r["memory"]
+            lines.append(f"  memory: {m['bytes_per_particle_total']:.0f} B per particle "
+                         + ", ".join(f"{k} {v:.0f}" for k, v in m["bytes_per_particle"].items())
+                         + f"; peak RSS {m['peak_rss_mb']:.0f} MB")
+        lines.append("")
     return "\n".join(lines)
 
 
 def main(json_out: bool = False, quick: bool = False) -> int:
-    """CLI entry (``leafsim bench``): ``quick`` = maple size only with few repetitions (well
-    under a minute); otherwise maple and 100k (a few minutes).  Prints the table, or the raw
-    result dict as JSON with ``json_out``.  Returns the exit status."""
+    """CLI entry (``leafsim bench``): ``quick`` = maple size only, few rounds, no peers and no
+    parallel contenders (under a minute); otherwise maple and 100k with the peers that are installed (several
+    minutes).  Prints the tables, or the raw result dict as JSON with ``json_out``."""
     import json
 
-    if quick:
-        res = run_bench(("maple",), reps=15, jacobi=False)
-    else:
-        res = run_bench(("maple", "100k"), reps=40)
-    if json_out:
-        print(json.dumps(res, indent=1, sort_keys=True))
-    else:
-        print(format_bench(res))
+    res = run_bench(("maple",), rounds=8, peers=False, parallel=False) if quick else run_bench(("maple", "100k"), rounds=30)
+    print(json.dumps(res, indent=1, sort_keys=True) if json_out else format_bench(res))
     return 0
 
 
@@ -306,12 +485,9 @@ if __name__ == "__main__":  # pragma: no cover
     flags = {a for a in argv if a.startswith("--")}
     sizes = tuple(a for a in argv if not a.startswith("--"))
     if sizes:
-        res = run_bench(sizes)
-        if "--json" in flags:
-            import json
+        import json
 
-            print(json.dumps(res, indent=1, sort_keys=True))
-        else:
-            print(format_bench(res))
+        out = run_bench(sizes, peers="--no-peers" not in flags)
+        print(json.dumps(out, indent=1, sort_keys=True) if "--json" in flags else format_bench(out))
     else:
         sys.exit(main(json_out="--json" in flags, quick="--quick" in flags))

@@ -49,6 +49,17 @@ def _common(p: argparse.ArgumentParser, seed=True):
                    help="override a declared parameter, e.g. --set veins.main.kappa=4 (repeatable)")
     if seed:
         p.add_argument("--seed", type=_seed, default=0, help="random seed, a non-negative integer (default 0)")
+    p.add_argument("--quality", default=None, choices=("draft", "balanced", "reference"),
+                   help="mesh and solver settings from the accuracy study's front (see `leafsim params`); --set wins")
+
+
+def _overrides(args) -> dict:
+    """The quality level's settings (if any), then the --set values (validated)."""
+    from .params import parse_set_args
+    from .sim.presets import quality_overrides
+
+    q = getattr(args, "quality", None)
+    return {**(quality_overrides(q) if q else {}), **parse_set_args(args.sets)}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -108,6 +119,13 @@ def build_parser() -> argparse.ArgumentParser:
     be = sub.add_parser("bench", help="benchmark the simulation kernels")
     be.add_argument("--json", action="store_true")
     be.add_argument("--quick", action="store_true", help="small sizes only")
+    ac = sub.add_parser("accuracy", help="accuracy against cost: every solver setting against a converged reference")
+    ac.add_argument("--species", default="maple", help="species to dry (default maple)")
+    ac.add_argument("--config", default=None)
+    ac.add_argument("--seed", type=int, default=0)
+    ac.add_argument("--out", default=None, help="folder for accuracy.json, accuracy.md and accuracy_pareto.png")
+    ac.add_argument("--quick", action="store_true", help="a coarse, fast-drying leaf and few settings (for tests)")
+    ac.add_argument("--json", action="store_true")
     _scene_export_parsers(sub)
     return ap
 
@@ -196,12 +214,10 @@ def _emit(args, obj: dict, text: str) -> None:
 
 def _load(args):
     """Species + validated parameters (species values, then --set overrides)."""
-    from .params import parse_set_args
     from .species import DEFAULT_SPECIES, get_species
 
-    overrides = parse_set_args(args.sets)
     sp = get_species(args.species or DEFAULT_SPECIES, args.config)
-    params = sp.params.with_overrides(overrides, where="--set")
+    params = sp.params.with_overrides(_overrides(args), where="--set")
     return sp, params
 
 
@@ -224,10 +240,21 @@ def cmd_params(args):
     if args.markdown:
         print(markdown_table())
         return
+    from .sim.presets import quality_table
+
     rows = [{"name": p.name, "kind": p.kind, "default": p.default, "lo": p.lo, "hi": p.hi, "unit": p.unit,
              "group": p.group, "rebuild": p.rebuild, "choices": list(p.choices), "help": p.help} for p in PARAMS.values()]
     text = "\n".join(f"{r['name']:36s} {str(r['default']):>10s} {r['unit']:10s} {'rebuild' if r['rebuild'] else 'live':7s} {r['help']}" for r in rows)
-    _emit(args, {"params": rows}, text)
+    quality = quality_table()
+    text += "\n\n--quality (measured by the accuracy study, docs/accuracy.md):\n" + "\n".join(
+        f"  {k:10s} {json.dumps(v['settings']):60s} " + (_quality_measured(v["measured"]) if v["measured"] else "not measured")
+        for k, v in quality.items())
+    _emit(args, {"params": rows, "quality": quality}, text)
+
+
+def _quality_measured(m: dict) -> str:
+    return (f"worst error {100 * m['worst_rel']:.0f} % of the reference, {m['ms_per_sim_s']:.0f} ms per simulated second "
+            f"({m['particles']} particles, maple)")
 
 
 def cmd_outline(args):
@@ -324,14 +351,13 @@ def _check_run_args(args) -> Path | None:
 def cmd_run(args):
     from .fileio import remove_stale_temps
     from .leaf import build_leaf, species_photo_rgba
-    from .params import parse_set_args
     from .sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
     from .sim.run import StatsStream, run_headless, save_npz
     from .sim.simulator import Simulator
     from .species import DEFAULT_SPECIES, get_species
 
     out = _check_run_args(args)
-    overrides = {**parse_set_args(args.sets), **_effects_overrides(args.effects)}
+    overrides = {**_overrides(args), **_effects_overrides(args.effects)}
     t0 = time.perf_counter()
     sp = get_species(args.species or DEFAULT_SPECIES, args.config)
     params = sp.params.with_overrides(overrides, where="--set")
@@ -450,7 +476,6 @@ def _stage_arg(text: str | None):
 
 
 def cmd_compare(args):
-    from .params import parse_set_args
     from .species import DEFAULT_SPECIES, get_species
 
     stage = _stage_arg(args.stage)
@@ -459,7 +484,7 @@ def cmd_compare(args):
     if args.out and not Path(args.out).resolve().parent.is_dir():
         raise LeafsimError(f"--out {args.out}: folder {Path(args.out).parent} does not exist")
     sp = get_species(args.species or DEFAULT_SPECIES, args.config)
-    params = sp.params.with_overrides({**parse_set_args(args.sets), **_effects_overrides(args.effects)}, where="--set")
+    params = sp.params.with_overrides({**_overrides(args), **_effects_overrides(args.effects)}, where="--set")
     from .compare import montage
     from .fileio import write_png_atomic
     from .render.compare_run import run_compare
@@ -477,6 +502,20 @@ def cmd_compare(args):
     _emit(args, rep, "\n".join(lines) + (f"\n-> {args.out}" if args.out else ""))
 
 
+def cmd_accuracy(args):
+    from .accuracy import markdown, study, write_report
+
+    out = Path(args.out) if args.out else None
+    if out is not None and out.exists() and not out.is_dir():
+        raise LeafsimError(f"--out {out}: exists and is not a folder")
+    if out is not None and not out.parent.exists():
+        raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
+    report = study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json)
+    if out is not None:
+        report["files"] = write_report(report, out)
+    _emit(args, report, markdown(report))
+
+
 def cmd_bench(args):
     from .bench import main as bench_main
 
@@ -484,11 +523,10 @@ def cmd_bench(args):
 
 
 def cmd_gui(args):
-    from .params import parse_set_args
 
     if args.screenshot and args.frames is None:
         raise LeafsimError("--screenshot needs --frames N")
-    overrides = parse_set_args(args.sets)
+    overrides = _overrides(args)
     from .gui.app import run_app
 
     return run_app(species=args.species, config=args.config, seed=args.seed, overrides=overrides,
@@ -539,7 +577,6 @@ def cmd_scene(args):
 def cmd_export(args):
     from .export import export_mesh, format_of
     from .leaf import build_leaf, species_photo_rgba
-    from .params import parse_set_args
     from .sim.run import run_headless
     from .sim.simulator import Simulator
     from .species import get_species
@@ -554,7 +591,7 @@ def cmd_export(args):
     if not folder.is_dir():
         raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")
     sp = get_species(args.species, args.config)
-    params = sp.params.with_overrides({**parse_set_args(args.sets), **_effects_overrides(args.effects)}, where="--set")
+    params = sp.params.with_overrides({**_overrides(args), **_effects_overrides(args.effects)}, where="--set")
     if args.texture == "photo" and sp.image is None:
         raise LeafsimError(f"--texture photo: species '{sp.key}' has no photo (drawn outline)")
     shape, veins, model = build_leaf(sp, params, args.seed)
@@ -586,7 +623,7 @@ COMMANDS = {
     "gui": cmd_gui, "species": cmd_species, "params": cmd_params, "outline": cmd_outline, "veins": cmd_veins,
     "build": cmd_build, "run": cmd_run, "bench": cmd_bench, "compare": cmd_compare,
 }
-COMMANDS.update(scene=cmd_scene, export=cmd_export)
+COMMANDS.update(scene=cmd_scene, export=cmd_export, accuracy=cmd_accuracy)
 
 if __name__ == "__main__":
     sys.exit(main())

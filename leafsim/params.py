@@ -16,7 +16,7 @@ Example
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping
 
 from .errors import LeafsimError
@@ -192,12 +192,13 @@ _f("osmosis.edge_evaporation", 2.0, 0.0, 20.0, "", "Margin-enhanced evaporation 
 _f("osmosis.edge_length", 0.003, 0.0, 0.1, "m", "Length scale ℓ of the margin-enhanced evaporation (a few mm: the boundary layer thickness near the edge).", G, False, log=True)
 _f("osmosis.patchiness", 0.0, 0.0, 2.0, "", "Patchy hydraulic failure a: evaporation × exp(a·f) for the blade's seeded smooth patch field f (zero mean, unit spread; patches ≈ 0.12 leaf lengths), normalised so the blade's mean stays the declared rate; 0 = none.", G, False)
 _b("osmosis.through_thickness", True, "Water also flows between the two layers through the blade's thickness (D over h/2: they stay in balance within milliseconds); off = Jeong's separate layers, where the faster-drying top curls the leaf transiently.", G, False)
+_i("osmosis.every", 1, 1, 50, "frames", "Solve osmosis and evaporation every k-th frame over k Δt (water moves far slower than the blade: a cheaper frame for a small error, see docs/accuracy.md).", G, False)
 _c("osmosis.solver", "auto", ("auto", "direct", "cg", "jacobi"), "Linear solver of the implicit osmosis step.", G, False)
 _f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True)
 
 # ---------------------------------------------------------------- shrink (live)
 G = "Shrink"
-_f("shrink.sigma_surface_top", 0.165, 0.0, 3.0, "", "σ of surface springs in the top layer V.", G, False)
+_f("shrink.sigma_surface_top", 0.16, 0.0, 3.0, "", "σ of surface springs in the top layer V.", G, False)
 _f("shrink.sigma_surface_bottom", 0.15, 0.0, 3.0, "", "σ of surface springs in the bottom layer T.", G, False)
 _f("shrink.sigma_vein", 0.05, 0.0, 3.0, "", "σ of vein springs.", G, False)
 _f("shrink.alpha", 1.0, 0.1, 4.0, "", "Exponent α of (1 − v_rel) in the shrink law.", G, False)
@@ -208,9 +209,10 @@ G = "Dynamics"
 _f("dynamics.dt", 0.002, 1e-5, 0.1, "s", "Time step Δt.", G, False, log=True)
 _f("dynamics.gravity", 9.81, 0.0, 50.0, "m/s²", "Gravity magnitude (acts along −z).", G, False)
 _f("dynamics.damping", 25.0, 0.0, 1000.0, "1/s", "Velocity damping rate c (v ← v·e^(−c·Δt); air drag and internal friction of the tissue).", G, False, log=True)
-_i("dynamics.substeps", 5, 1, 200, "", "Dynamics substeps per frame (small steps make stiff constraints converge far better than more iterations).", G, False)
+_i("dynamics.substeps", 20, 1, 200, "", "Dynamics substeps per frame at the default mesh spacing (small steps make stiff constraints converge far better than more iterations).", G, False)
+_b("dynamics.substep_scaling", True, "Scale the substeps with (default spacing / mesh.spacing)² so a finer mesh stays as converged (h ∝ r²; a coarse mesh gets fewer, at least 1).", G, False)
 _i("dynamics.iterations", 2, 1, 200, "", "Maximum constraint-projection iterations per substep.", G, False)
-_f("dynamics.relaxation", 1.8, 0.5, 1.95, "", "Over-relaxation ω of the bending projections (successive over-relaxation): > 1 carries a steady load (a blade held up against gravity) across the mesh in far fewer sweeps; 1 = plain Gauss–Seidel.", G, False)
+_f("dynamics.relaxation", 1.0, 0.5, 1.3, "", "Over-relaxation ω of the bending projections (successive over-relaxation): > 1 carries a steady load across the mesh in fewer sweeps but a free curling leaf may then never come to rest (limit cycles measured from ω 1.3, blow-ups from 1.5 without damping); 1 = plain Gauss–Seidel.", G, False)
 _f("dynamics.tolerance", 1e-4, 1e-9, 1.0, "", "Stop iterating when the largest position change per iteration falls below this × leaf length.", G, False, log=True)
 _f("dynamics.plasticity", 2.0, 0.0, 100.0, "1/s", "Rate at which drying tissue sets: bending hinges keep the largest bilayer curl they reached (0 = purely elastic, the curl relaxes when both layers are dry).", G, False, log=True)
 

@@ -1,7 +1,8 @@
-"""Dry every built-in species to the end, on the ground (g = 9.81) and free, and report
-margin lift and 3D area kept; saves a top/side picture per species into docs/drying/.
+"""Dry every built-in species to the end, on the ground (g = 9.81) and free, with the default
+physics; report margin lift, 3D and top-down area kept (resolution-independent probe metrics)
+and save a top/side picture per species into docs/drying/.
 
-    .venv/bin/python scripts/curl_report.py [--frames N] [--species a,b] [--json FILE]
+    .venv/bin/python scripts/curl_report.py [--species a,b] [--scenes ground,free] [--json FILE]
 """
 
 from __future__ import annotations
@@ -17,47 +18,66 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from leafsim.session import Session  # noqa: E402
-from leafsim.sim.run import shape_metrics  # noqa: E402
-from leafsim.species import load_library  # noqa: E402
+from leafsim.leaf import build_leaf, load_photo_rgba  # noqa: E402
+from leafsim.sim.metrics import Probe  # noqa: E402
+from leafsim.sim.run import leaf_frame, shape_metrics  # noqa: E402
+from leafsim.sim.simulator import Simulator  # noqa: E402
+from leafsim.species import get_species, load_library  # noqa: E402
+
+#: dry below this water fraction, then settle this much longer
+DRY, SETTLE = 0.02, 1.15
 
 
-def dry(key: str, scene: str, max_frames: int, snap_dir: Path | None):
-    s = Session(key, seed=0, overrides={"dynamics.scene": scene}, build=True)
-    t0 = time.perf_counter()
-    frames = 0
-    while frames < max_frames and s.water_fraction() > 0.02:
-        s.step(50)
-        frames += 50
+def dry(key: str, scene: str, max_time: float, snap_dir: Path | None) -> dict:
+    sp = get_species(key)
+    p = sp.params.with_overrides({"dynamics.scene": scene})
+    shape, _, model = build_leaf(sp, p, 0)
+    sim = Simulator(model, p, seed=0)
+    st = sim.state()
+    w0 = model.particle_water0.sum()
+    t0, t_dry = time.perf_counter(), None
+    while st.time < max_time:
+        sim.step(st)
+        if t_dry is None and st.particle_water.sum() < DRY * w0:
+            t_dry = st.time
+        if t_dry is not None and st.time >= SETTLE * t_dry:
+            break
     secs = time.perf_counter() - t0
-    m = shape_metrics(s.model, s.state, own_frame=(scene == "free"))
-    out = {"species": key, "scene": scene, "frames": frames, "seconds": round(secs, 1),
-           "water_left": round(s.water_fraction(), 4), "margin_lift": round(m["margin_lift"], 4),
-           "area_ratio": round(m["area_ratio"], 4), "inverted": int(m["inverted"]),
-           "particles": s.model.particle_count}
+    if scene == "free":  # measure the shape in the leaf's own frame, lying as at rest
+        st.particle_q[:] = leaf_frame(model, st)
+        st.particle_q[:, 2] -= st.particle_q[model.particle_layer == 0, 2].min()
+    f = Probe(shape).fields(model, st)
+    out = {"species": key, "scene": scene, "frames": st.frame, "seconds": round(secs, 1),
+           "time_to_dry": None if t_dry is None else round(t_dry, 3), "water_left": round(f["water"], 4),
+           "margin_lift": round(f["margin_lift"], 4), "area_3d": round(f["area_3d"], 4),
+           "area_top": round(f["area_top"], 4), "inverted": shape_metrics(model, st)["inverted"],
+           "particles": model.particle_count, "fresh_mass_g": round(1e3 * float(model.particle_mass0.sum()), 3)}
     if snap_dir is not None:
-        from leafsim.fileio import write_png_atomic
-        from leafsim.render.camera import OrbitCamera
-        from leafsim.render.offscreen import OffscreenRenderer, default_camera
-
-        from leafsim.render.options import RenderOptions
-
-        s.photo_tint = False  # photo species: pigment colour with the photo's detail, as in the GUI
-        opts = RenderOptions(albedo="detail" if s.use_texture() else "colours")
-        r = OffscreenRenderer(480, 400)
-        mesh = s.render_mesh()
-        imgs = []
-        for pitch, yaw in ((89.0, -90.0), (8.0, -90.0), (8.0, 0.0)):
-            cam = default_camera(mesh.positions, pitch=pitch, yaw=yaw)
-            imgs.append(r.render_array(mesh, camera=cam, options=opts))
-        r.release()
-        write_png_atomic(snap_dir / f"{key}_{scene}.png", np.hstack(imgs), rgb=True)
+        _pictures(sp, p, model, st, snap_dir / f"{key}_{scene}.png")
     return out
+
+
+def _pictures(sp, p, model, st, path: Path) -> None:
+    """Top-down, side and front views side by side (the GUI's look: photo detail where there is one)."""
+    from leafsim.fileio import write_png_atomic
+    from leafsim.render.offscreen import OffscreenRenderer, default_camera
+    from leafsim.render.options import RenderOptions
+    from leafsim.view import LeafView
+
+    photo = load_photo_rgba(sp.image) if sp.image is not None else None
+    view = LeafView(model, photo, photo_tint=False)
+    opts = RenderOptions(albedo="detail" if view.use_texture(p) else "colours")
+    r = OffscreenRenderer(480, 400)
+    mesh = view.mesh(st, p)
+    imgs = [r.render_array(mesh, camera=default_camera(mesh.positions, pitch=pitch, yaw=yaw), options=opts)
+            for pitch, yaw in ((89.0, -90.0), (8.0, -90.0), (8.0, 0.0))]
+    r.release()
+    write_png_atomic(path, np.hstack(imgs), rgb=True)
 
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--frames", type=int, default=6000)
+    ap.add_argument("--max-time", type=float, default=30.0, help="simulated seconds at most")
     ap.add_argument("--species", default=None)
     ap.add_argument("--scenes", default="ground,free")
     ap.add_argument("--json", default=None)
@@ -68,12 +88,13 @@ def main():
     if snap:
         snap.mkdir(parents=True, exist_ok=True)
     rows = []
-    print(f"{'species':16s} {'scene':7s} {'frames':>6s} {'water':>6s} {'lift/L':>7s} {'area':>6s} {'inv':>4s} {'s':>6s}")
+    print(f"{'species':16s} {'scene':7s} {'frames':>6s} {'t_dry':>6s} {'lift/L':>7s} {'3D':>6s} {'top':>6s} {'inv':>4s} {'s':>6s}")
     for k in keys:
         for sc in a.scenes.split(","):
-            r = dry(k, sc, a.frames, snap)
+            r = dry(k, sc, a.max_time, snap)
             rows.append(r)
-            print(f"{k:16s} {sc:7s} {r['frames']:6d} {r['water_left']:6.3f} {r['margin_lift']:7.3f} {r['area_ratio']:6.3f} {r['inverted']:4d} {r['seconds']:6.1f}", flush=True)
+            print(f"{k:16s} {sc:7s} {r['frames']:6d} {r['time_to_dry'] or float('nan'):6.2f} {r['margin_lift']:7.3f} "
+                  f"{r['area_3d']:6.3f} {r['area_top']:6.3f} {r['inverted']:4d} {r['seconds']:6.1f}", flush=True)
     if a.json:
         old = {}
         if Path(a.json).is_file():  # keep the rows of species not rerun

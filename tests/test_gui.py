@@ -202,6 +202,34 @@ def test_exports_create_the_folder_and_never_overwrite(tmp_path):
     assert leaf.mean() > 0.03, f"only {leaf.mean():.3%} leaf-green pixels"
 
 
+def test_export_mesh_button_writes_a_glb(tmp_path):
+    """"Export mesh" writes the leaf on screen as a binary glTF into the export folder (created
+    when missing), a second click a second file; trimesh loads it with the blade's counts."""
+    import trimesh
+
+    out = tmp_path / "meshes"
+    seen = {}
+
+    def body(ctx, app):
+        ctx.item_input_value("**/export folder", str(out))
+        ctx.yield_(1)
+        ctx.item_click("**/Export mesh")
+        ctx.yield_(2)
+        ctx.item_click("**/Export mesh")
+        ctx.yield_(2)
+        seen["msg"] = app.status.get("mesh")
+        seen["nT"] = int((app.session.model.particle_layer == 0).sum())
+
+    app = run_gui(body)
+    assert app.error is None
+    files = sorted(out.glob("oak_frame_*.glb"))
+    assert len(files) == 2 and files[0].stem + "_2" == files[1].stem
+    assert seen["msg"].path and str(out) in str(seen["msg"].path)
+    scene = trimesh.load(files[0])
+    blade = max(scene.geometry.values(), key=lambda g: len(g.faces))
+    assert blade.is_watertight and len(blade.vertices) >= 2 * seen["nT"]
+
+
 def test_layout_does_not_move_when_messages_appear(tmp_path):
     """Widget rectangles are the same with and without an error, a build in progress, an info
     message and a recording (everything transient lives in the fixed status bar)."""

@@ -35,11 +35,15 @@ def reference(tmp_path_factory):
     return np.load(d / "out" / "final.npz"), _stats(d / "s.jsonl")
 
 
-def _start_and_signal(tmp_path, sig, min_lines=20):
-    """Start a long run, wait until it has streamed ``min_lines`` frames, send ``sig``."""
+def _start_and_signal(tmp_path, sig, min_lines=20, fresh_compile=False):
+    """Start a long run, wait until it has streamed ``min_lines`` frames, send ``sig``.
+    ``fresh_compile``: the run compiles every kernel itself (an empty numba cache) while this
+    process uses cached ones — the first run on a new machine against a later resume, which
+    once differed in the 17th digit (fast-math reassociation depends on what LLVM inlined)."""
     out, stats = tmp_path / "out", tmp_path / "s.jsonl"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba")) if fresh_compile else None
     proc = subprocess.Popen([sys.executable, "-m", "leafsim", *BASE, "--frames", "1000000", "--out", str(out),
-                             "--stats", str(stats)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--stats", str(stats)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     deadline = time.time() + 120
     while time.time() < deadline and proc.poll() is None:
         if stats.exists() and stats.read_text().count("\n") >= min_lines:
@@ -67,7 +71,7 @@ def _assert_same(run, reference):
 
 
 def test_sigkill_then_resume_is_bit_identical(tmp_path, reference, capsys):
-    code, so, se, out, stats = _start_and_signal(tmp_path, signal.SIGKILL)
+    code, so, se, out, stats = _start_and_signal(tmp_path, signal.SIGKILL, fresh_compile=True)
     assert code == -signal.SIGKILL
     assert not (out / "final.npz").exists()
     # every streamed line is a whole frame; the checkpoint is from a multiple of 7

@@ -69,3 +69,18 @@ def test_integer_ranges_fit_an_int_slider():
     for p in PARAMS.values():
         if p.kind == "int":
             assert -(2**31 - 1) // 2 <= p.lo < p.hi <= (2**31 - 1) // 2, p.name
+
+
+def test_quality_levels_set_every_quality_key_and_are_recognised():
+    from leafsim.sim.presets import QUALITY, QUALITY_KEYS, quality_of, quality_overrides, quality_table
+
+    assert quality_of(ParamSet()) == "balanced"  # the declared defaults are the balanced level
+    for name in QUALITY:
+        o = quality_overrides(name)
+        assert set(o) == set(QUALITY_KEYS)
+        assert quality_of(ParamSet(o)) == name
+    assert quality_of(ParamSet({"dynamics.substeps": 7})) is None
+    t = quality_table()
+    assert set(t) == set(QUALITY) and all(v["measured"] is None or v["measured"]["ms_per_sim_s"] > 0 for v in t.values())
+    with pytest.raises(LeafsimError, match="expected one of draft"):
+        quality_overrides("best")

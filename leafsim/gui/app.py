@@ -470,6 +470,18 @@ class LeafApp(Panels):
             self.status.info("record", f"recorded {self.recorded} frames in {take}", path=take)
 
     # ------------------------------------------------------------------ actions
+    def export_mesh(self) -> Path:
+        """The current snapshot as ``<species>_frame_NNNNN.glb`` in the export folder."""
+        from ..export import export_mesh
+        from .exports import free_path
+
+        s = self.session
+        path = free_path(self._export_folder(), f"{s.species_key}_frame_{s.frame:05d}", ".glb")
+        rep = export_mesh(s.model, s.state.copy(), path, params=s._sim_params(), view=s.view, veins=True)
+        tri = sum(m["triangles"] for m in rep["meshes"].values())
+        self.status.info("mesh", f"exported mesh {path} ({tri} triangles)", path=path)
+        return path
+
     def save_preset(self) -> None:
         p = self.session.save_params(self.preset_path)
         self.status.info("preset", f"saved parameters to {p}", path=p)

@@ -259,6 +259,7 @@ class Panels:
         ch, seed = imgui.input_int("seed", s.seed)
         if ch and seed >= 0:
             s.set_seed(seed)
+        self._quality_row()
         pending = s.pending_rebuild and not s.building
         if pending:
             imgui.push_style_color(imgui.Col_.button, (0.85, 0.45, 0.05, 1.0))
@@ -269,6 +270,27 @@ class Panels:
             imgui.pop_style_color(2)
         imgui.same_line()
         imgui.text_colored((0.85, 0.45, 0.05, 1.0), "changes staged" if pending else "")
+
+    def _quality_row(self) -> None:
+        """Quality levels from the accuracy study's front; the tooltip shows each one's measured
+        error against the converged reference and its cost."""
+        from imgui_bundle import imgui
+
+        from ..sim.presets import quality_of, quality_table
+
+        table = self._quality = getattr(self, "_quality", None) or quality_table()
+        names = ["custom"] + list(table)
+        now = quality_of(self.session.params) or "custom"
+        imgui.set_next_item_width(150)
+        ch, i = imgui.combo("quality", names.index(now), names)
+        if ch and names[i] != "custom":
+            self._guard(self.set_params, table[names[i]]["settings"], topic="quality")
+        lines = []
+        for k, v in table.items():
+            m = v["measured"]
+            lines.append(f"{k}: " + (f"worst error {100 * m['worst_rel']:.0f} % of the reference, "
+                                     f"{m['ms_per_sim_s']:.0f} ms per simulated second" if m else "not measured"))
+        _tip("Mesh and solver settings from the accuracy study (docs/accuracy.md); measured on maple:\n" + "\n".join(lines))
 
     def _playback_rows(self) -> None:
         from imgui_bundle import imgui
@@ -371,15 +393,15 @@ class Panels:
         self._export_mesh_button()
 
     def _export_mesh_button(self) -> None:
-        """PLACE OF THE "Export mesh" BUTTON: disabled until the mesh-export module exists
-        (another engineer's work); it will call that module with the current snapshot."""
+        """"Export mesh": the leaf on screen as a binary glTF (both layers as a closed shell,
+        veins, pigment colours) into the export folder, never overwriting."""
         from imgui_bundle import imgui
 
-        imgui.begin_disabled(True)
-        imgui.button("Export mesh")
+        imgui.begin_disabled(not self.session.ready)
+        if imgui.button("Export mesh"):
+            self._guard(self.export_mesh, topic="mesh")
         imgui.end_disabled()
-        if imgui.is_item_hovered(imgui.HoveredFlags_.allow_when_disabled):
-            imgui.set_tooltip("Mesh export is not available yet")
+        _tip("Write the leaf on screen as a glTF 2.0 binary (.glb: closed two-layer shell, veins, pigment colours)")
 
     # ------------------------------------------------------------------ Stats
     def _stats(self) -> None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +18,6 @@ def write_png_atomic(rgb: np.ndarray, path) -> Path:
     Raises :class:`LeafsimError` naming the path if the folder is missing or not writable;
     no partial file is left behind.
     """
-    import cv2
 
     path = Path(path)
     return _write_png(path, np.asarray(rgb), rgb=True)

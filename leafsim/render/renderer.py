@@ -6,7 +6,6 @@ currently bound framebuffer) and offscreen (see :mod:`leafsim.render.offscreen`)
 
 from __future__ import annotations
 
-import math
 import re
 from pathlib import Path
 

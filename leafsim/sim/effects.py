@@ -5,7 +5,6 @@ called (costs nothing) and leaves its part of the State untouched."""
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import scipy.sparse as sp
@@ -15,15 +14,17 @@ from .kernels import osmosis as ko
 from .kernels import pbd as kp
 from .kernels import shrink as ks
 from .model import (
-    LAYER_T, LAYER_V, SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN, Model, State,
+    LAYER_T, LAYER_V, SPRING_LINK, SPRING_SURFACE, SPRING_VEIN, Model, State,
 )
 
 #: below this many particles the serial Gauss–Seidel kernel beats the coloured parallel one
 #: (measured by ``leafsim bench``: equal at 5.4 k particles, parallel 1-2 % faster at 83 k on this
 #: 2-core box; fork/join per colour dominates on small meshes)
 PARALLEL_MIN_PARTICLES = 30000
-#: large meshes re-time serial vs parallel projection every this many frames
-PROBE_EVERY = 500
+#: self-contact candidates are searched at (1 + this) × the contact radius and kept until a
+#: particle has moved half of what is left of that skin (Verlet list; the search radius of
+#: every substep before)
+CONTACT_SKIN = 0.5
 #: below this many unknowns the factor-once direct osmosis solve is used (measured: direct 1.2 ms vs
 #: PCG 3.2 ms vs pyamg 14 ms at 5.4 k; 20 ms vs 106 ms vs 576 ms at 83 k; factor 0.03 s / 0.55 s)
 DIRECT_MAX_UNKNOWNS = 300000
@@ -32,6 +33,20 @@ BILAYER_GAIN = 1.3
 #: largest rest angle a bending hinge may ask for [rad]: a curvature the mesh cannot resolve
 #: (radius below a few edge lengths) is clamped instead of fighting the stretch constraints
 HINGE_MAX_ANGLE = 0.35
+
+
+def effective_substeps(params) -> int:
+    """Substeps per frame: ``dynamics.substeps`` at the default mesh spacing r₀, scaled by
+    (r₀ / r)² with ``dynamics.substep_scaling``.  A bending hinge's XPBD stiffness relative to
+    its particles' inertia per substep, k h² / (m ℓ²), falls like h² / r⁴; Gauss–Seidel carries
+    a steady load (the blade's weight) across the mesh only while that number is not small,
+    so h ∝ r² keeps a refined mesh converging (measured in docs/accuracy.md)."""
+    from ..params import PARAMS
+
+    n = int(params["dynamics.substeps"])
+    if params["dynamics.substep_scaling"]:
+        n = round(n * (PARAMS["mesh.spacing"].default / params["mesh.spacing"]) ** 2)
+    return int(min(max(n, 1), 1000))
 
 
 def edge_factor(model: Model, beta: float, length: float) -> np.ndarray:
@@ -103,10 +118,11 @@ class Osmosis:
         K.sum_duplicates()
         return K
 
-    def configure(self, params):
+    def configure(self, params, dt: float | None = None):
+        """``dt``: the time one solve covers (default Δt; k Δt when solved every k-th frame)."""
         D = params["osmosis.diffusion"]
         through = params["osmosis.through_thickness"]
-        dt = params["dynamics.dt"]
+        dt = params["dynamics.dt"] if dt is None else dt
         solver = params["osmosis.solver"]
         if solver == "auto":
             solver = "direct" if self.model.particle_count <= DIRECT_MAX_UNKNOWNS else "cg"
@@ -145,7 +161,6 @@ class Osmosis:
             self.key = key
 
     def apply(self, state: State):
-        m = self.model
         w = state.particle_water
         M = self.M
         if self.solver == "direct":  # rhs, triangular solves and w = max(c, 0) M in one numba call
@@ -225,7 +240,13 @@ class Shrink:
 
 class Dynamics:
     """Gravity, XPBD constraints (distance, bending hinges, thickness), ground contact with
-    friction, self-collision, damping and the Voronoi-layer handling (SPEC §8)."""
+    friction, self-collision, damping and the Voronoi-layer handling (SPEC §8).
+
+    The kernels see every constraint in *projection order*: the model's colour order, sorted by
+    particle inside each colour (no two constraints of one colour share a particle, so this
+    changes no result and keeps the particle accesses nearly sequential), with uint32 indices.
+    Per frame the springs are packed into one record each (rest length, compliance, 1/W and
+    both inverse masses) and the hinges' and volumes' rest values gathered into that order."""
 
     def __init__(self, model: Model):
         self.model = model
@@ -233,15 +254,23 @@ class Dynamics:
         self.q_old = np.zeros((n, 3))
         self.invm = np.zeros(n)
         self.pen = np.zeros(n)
-        self.change = np.zeros(max(model.spring_count, model.hinge_count, model.vol_count, 1))
+        self.sperm = projection_order(model.spring_ij, model.spring_colour_start)
+        self.sij = model.spring_ij[self.sperm].astype(np.uint32)
+        self.srec = np.zeros((model.spring_count, 5))
         self.slam = np.zeros(model.spring_count)
+        self.hperm = projection_order(model.hinge_idx, model.hinge_colour_start)
+        self.hidx = model.hinge_idx[self.hperm].astype(np.uint32)
+        self.hrest = np.zeros(model.hinge_count)
         self.hlam = np.zeros(model.hinge_count)
-        self.vlam = np.zeros(model.vol_count)
+        self.vperm = projection_order(model.vol_idx, model.vol_colour_start)
+        self.vidx = model.vol_idx[self.vperm].astype(np.uint32)
+        self.vrest = np.zeros(model.vol_count)
+        self.no_hinges = (np.zeros((0, 4), np.uint32), np.zeros(0), np.zeros(0), np.zeros(0))
         self.hgt = np.zeros(model.vol_count)
         self.qa = np.zeros((n, 3))
         self.dint = np.zeros((n, 3))
-        # hinge stiffness geometry factor 3|e|²/(A1+A2) (discrete shells)
-        self.hgeom = 3.0 * model.hinge_edge_len ** 2 / np.maximum(model.hinge_area, 1e-30)
+        # hinge stiffness geometry factor 3|e|²/(A1+A2) (discrete shells), projection order
+        self.hgeom = (3.0 * model.hinge_edge_len ** 2 / np.maximum(model.hinge_area, 1e-30))[self.hperm]
         self.halpha = np.zeros(model.hinge_count)
         self.hrod = np.zeros(model.hinge_count)  # vein bending stiffness of the hinges that bend a vein
         T = np.flatnonzero(model.particle_layer == LAYER_T)
@@ -252,24 +281,22 @@ class Dynamics:
         self.out = np.zeros(3, np.int64)
         self.nxt = np.zeros(len(T), np.int64)
         self.pairs = np.zeros((8 * len(T) + 16, 2), np.int64)
-        self.empty_cs = np.zeros(1, np.int64)
+        self.qc = np.zeros((len(T), 3))  # T positions at the last contact search (Verlet skin)
+        self.cstate = np.array([0.0, -1.0, 0.0])  # search radius, pairs (−1: none), searches made
         self.last_iterations = 0
         self.last_contacts = 0
         self.last_uninverted = 0
-        self.parallel = n >= PARALLEL_MIN_PARTICLES
-        # large meshes: serial and coloured-parallel projection give identical results (no two
-        # constraints of one colour share a particle), so the faster one is picked by timing a
-        # few frames of each, re-probed every PROBE_EVERY frames (on a shared, loaded box the
-        # per-colour fork/joins can cost far more than they save)
-        self.adaptive = n >= PARALLEL_MIN_PARTICLES
-        self._frames = 0
-        self._probe = {True: [], False: []}
+
+    @property
+    def contact_searches(self) -> int:
+        """Spatial-hash contact searches made so far (the Verlet skin skips the others)."""
+        return int(self.cstate[2])
 
     def configure(self, params, effects):
         m = self.model
         dt = params["dynamics.dt"]
         self.dt = dt
-        self.substeps = params["dynamics.substeps"]
+        self.substeps = effective_substeps(params)
         self.h = dt / self.substeps
         self.g = -params["dynamics.gravity"] if effects["gravity"] else 0.0
         self.keep = math.exp(-params["dynamics.damping"] * self.h)
@@ -283,63 +310,66 @@ class Dynamics:
         # bending: D = E h³ / 12(1 − ν²) on discrete-shell hinges, veins add E_v I / ℓ̄
         self.kbend = E * h ** 3 / (12.0 * (1.0 - params["material.poisson"] ** 2))
         self.kdry = params["material.dry_stiffening"]
-        np.multiply(Ev, m.hinge_rod, out=self.hrod)
+        np.multiply(Ev, m.hinge_rod[self.hperm], out=self.hrod)
         self.replace = params["dynamics.voronoi"] == "replace"
         self.scene = params["dynamics.scene"]
         self.mu = params["dynamics.friction"]
         self.radius = params["dynamics.collision_radius"] * m.spacing
         self.skip2 = (params["dynamics.collision_skip"] * m.spacing) ** 2
+        self.cstate[1] = -1.0  # search again
         self.pbd = effects["pbd"]
         self.bending = effects["bending"] and m.hinge_count > 0 and self.kbend > 0
         self.ground = effects["ground"] and self.scene == "ground"
         self.self_coll = effects["self_collision"]
 
-    def _hinges(self, state):
-        m = self.model
-        kp.hinge_compliance(m.hinge_idx, state.particle_water, m.particle_water0, self.kbend, self.kdry, self.hgeom,
-                            self.hrod, 1.0 / (self.h * self.h), self.halpha)
-
-    def apply(self, state: State):
+    def gather(self, state):
+        """This frame's inverse masses, spring records, hinge compliances and rest values in
+        projection order."""
         m = self.model
         np.divide(1.0, m.particle_cytosol + state.particle_water, out=self.invm)
         if self.scene == "hanging":
             self.invm[m.particle_pinned] = 0.0
-        if self.pbd and self.bending:
-            self._hinges(state)
-        k = self._frames % PROBE_EVERY
-        self._frames += 1
-        probing = self.adaptive and 1 <= k <= 4
-        if probing:
-            self.parallel = k % 2 == 1
-            t0 = time.perf_counter()
+        kp.pack_springs(self.sperm, self.sij, self.invm, state.spring_rest, self.salpha, self.srec)
+        np.take(state.vol_rest, self.vperm, out=self.vrest)
+        if not (self.pbd and self.bending):
+            return self.no_hinges
+        kp.hinge_compliance(self.hidx, state.particle_water, m.particle_water0, self.kbend, self.kdry, self.hgeom,
+                            self.hrod, 1.0 / (self.h * self.h), self.halpha)
+        np.take(state.hinge_rest, self.hperm, out=self.hrest)
+        return self.hidx, self.hrest, self.halpha, self.hlam
+
+    def apply(self, state: State):
+        m = self.model
+        hidx, hrest, halpha, hlam = self.gather(state)
         # contacts and the un-inversion keep to the tissue's size: as it shrinks (in the plane and
         # through the thickness) so do the contact radius and the thickness (fixed values would
         # hold a strongly shrunken leaf apart against its own springs)
         shrunk = max(float(np.mean(state.spring_rest[self.T_springs] / m.spring_rest0[self.T_springs])), 0.1)
         radius = self.radius * shrunk
-        # the whole frame (all substeps and iterations) in one numba call
-        hcs = m.hinge_colour_start if self.bending else self.empty_cs
+        cons = (self.sij, self.srec, self.slam, hidx, hrest, halpha, hlam, self.vidx, self.vrest)
+        contact = (m.particle_rest, self.T_idx, radius, CONTACT_SKIN * radius, self.skip2, self.table, self.nxt,
+                   self.pairs, self.qc, self.cstate)
         out = self.out
         out[:] = 0
         out[1] = self.last_contacts
         out[2] = self.last_uninverted
+        # the whole frame (all substeps and iterations) in one numba call
         kp.frame(state.particle_q, state.particle_qd, self.q_old, self.invm, self.g, self.h, self.substeps,
-                 self.keep, self.iters, self.tol, self.parallel,
-                 m.spring_ij, state.spring_rest, self.salpha, self.slam, m.spring_colour_start,
-                 m.hinge_idx, state.hinge_rest, self.halpha, self.hlam, hcs,
-                 m.vol_idx, state.vol_rest, self.vlam, m.vol_colour_start,
-                 self.pbd, self.ground, self.pen, self.change, self.mu,
-                 self.self_coll, m.particle_rest, self.T_idx, 1.5 * radius, self.skip2, self.table, self.nxt,
-                 self.pairs, radius, self.replace, self.hgt, m.thickness * shrunk, self.scene != "hanging",
+                 self.keep, self.iters, self.tol, cons, m.vol_idx,
+                 self.pbd, self.ground, self.pen, self.mu, self.self_coll, contact,
+                 self.replace, self.hgt, m.thickness * shrunk, self.scene != "hanging",
                  self.qa, self.dint, self.omega, out)
         self.last_iterations = int(out[0])
         self.last_contacts = int(out[1])
         self.last_uninverted = int(out[2])
-        if probing:
-            self._probe[self.parallel].append(time.perf_counter() - t0)
-            if k == 4:
-                self.parallel = min(self._probe[True]) < min(self._probe[False])
-                self._probe = {True: [], False: []}
+
+
+def projection_order(idx: np.ndarray, colour_start: np.ndarray) -> np.ndarray:
+    """Permutation of constraints ``idx`` (k, p) that keeps the colour order ``colour_start``
+    and sorts each colour by its smallest particle index."""
+    key = idx.min(axis=1) if len(idx) else np.zeros(0, np.int64)
+    parts = [a + np.argsort(key[a:b], kind="stable") for a, b in zip(colour_start[:-1], colour_start[1:])]
+    return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, np.int64)
 
 
 class Colour:

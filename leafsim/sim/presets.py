@@ -25,10 +25,56 @@ THESIS_PRESET = {
     "shrink.alpha": 1.0,
 }
 
-DEFAULT_NOTES = (
-    "Defaults: σ_surface T 0.15 / V 0.165, σ_vein 0.05, l_min 0.5 → a dried leaf keeps ≈ 80–90 % "
-    "of its 3D area; 5 substeps × 2 XPBD iterations (same cost as 10 iterations, far stiffer); "
-    "hinges keep the largest bilayer curl they reached (plasticity) so the curl lasts."
-)
-
 PRESETS = {"thesis": THESIS_PRESET}
+
+#: quality levels: points of the accuracy study's Pareto front (docs/accuracy.md).  "balanced"
+#: is the declared defaults; the measured error and cost of each are in configs/quality.json,
+#: written by scripts/accuracy_study.py from the same study.
+_QUALITY_CHANGES = {
+    "draft": {"mesh.spacing": 0.0395},
+    "balanced": {},
+    "reference": {"mesh.spacing": 0.0199, "dynamics.substeps": 40, "dynamics.iterations": 3, "dynamics.tolerance": 1e-6},
+}
+#: the parameters a quality level sets (every level sets all of them)
+QUALITY_KEYS = ("mesh.spacing", "dynamics.substeps", "dynamics.iterations", "dynamics.tolerance", "dynamics.dt",
+                "osmosis.every")
+QUALITY_FILE = "quality.json"
+
+
+def _levels() -> dict:
+    from ..params import PARAMS
+
+    return {k: {key: v.get(key, PARAMS[key].default) for key in QUALITY_KEYS} for k, v in _QUALITY_CHANGES.items()}
+
+
+QUALITY = _levels()
+
+
+def quality_overrides(name: str) -> dict:
+    """The parameter values of quality level ``name`` (LeafsimError naming the choices)."""
+    from ..errors import LeafsimError
+
+    if name not in QUALITY:
+        raise LeafsimError(f"--quality {name!r}: expected one of {', '.join(QUALITY)}")
+    return dict(QUALITY[name])
+
+
+def quality_of(params) -> str | None:
+    """The quality level whose settings ``params`` has, or None (custom)."""
+    for k, v in QUALITY.items():
+        if all(params[key] == val for key, val in v.items()):
+            return k
+    return None
+
+
+def quality_table(config_dir=None) -> dict:
+    """Each quality level's settings with its measured error and cost (from configs/quality.json;
+    ``measured`` is None for a level the study has not measured)."""
+    import json
+    from pathlib import Path
+
+    from .. import ROOT
+
+    path = Path(config_dir or ROOT / "configs") / QUALITY_FILE
+    measured = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+    return {k: {"settings": v, "measured": measured.get(k)} for k, v in QUALITY.items()}

@@ -62,9 +62,10 @@ class Simulator:
         else:
             self.effects = {e: e in self._override for e in EFFECTS}
         e = self.effects
+        self.osmosis_every = int(params["osmosis.every"])
         if e["osmosis"]:
             self._osmosis = self._osmosis or Osmosis(self.model)
-            self._osmosis.configure(params)
+            self._osmosis.configure(params, dt=params["dynamics.dt"] * self.osmosis_every)
         if e["shrink"]:
             self._shrink = self._shrink or Shrink(self.model)
             self._shrink.configure(params)
@@ -102,8 +103,8 @@ class Simulator:
         """Advance one frame in place; returns milliseconds per executed stage."""
         ms = {}
         t0 = time.perf_counter()
-        if self.effects["osmosis"]:
-            self._osmosis.apply(state)
+        if self.effects["osmosis"] and state.frame % self.osmosis_every == 0:
+            self._osmosis.apply(state)  # one step of k Δt every k-th frame (osmosis.every)
             t1 = time.perf_counter()
             ms["osmosis"] = (t1 - t0) * 1e3
             t0 = t1

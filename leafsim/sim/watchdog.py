@@ -39,11 +39,11 @@ GROWTH_WINDOWS = 6
 #: ignore growth while the internal kinetic energy is below this × (mass × (L / s)²)
 ENERGY_FLOOR = 1e-4
 #: parameters that drive the dynamics, in the order they are blamed
-SUSPECTS = ("shrink.sigma_surface_top", "shrink.sigma_surface_bottom", "shrink.sigma_vein", "shrink.l_min",
-            "shrink.alpha", "dynamics.dt", "dynamics.substeps", "dynamics.iterations", "dynamics.damping",
-            "material.modulus", "material.vein_modulus", "material.dry_stiffening", "dynamics.plasticity",
-            "dynamics.relaxation",
-            "dynamics.gravity", "osmosis.evaporation_top", "osmosis.evaporation_bottom", "mesh.thickness")
+SUSPECTS = ("dynamics.relaxation", "dynamics.dt", "dynamics.damping", "dynamics.substeps", "dynamics.iterations",
+            "material.modulus", "material.vein_modulus", "material.dry_stiffening", "dynamics.substep_scaling",
+            "shrink.sigma_surface_top", "shrink.sigma_surface_bottom", "shrink.sigma_vein", "shrink.l_min",
+            "shrink.alpha", "dynamics.plasticity", "dynamics.gravity", "osmosis.evaporation_top",
+            "osmosis.evaporation_bottom", "mesh.thickness")
 
 
 def momenta(mass: np.ndarray, q: np.ndarray, qd: np.ndarray) -> dict:

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from . import FASTMATH
 
-@njit(inline="always", fastmath=True)
+
+@njit(inline="always", fastmath=FASTMATH)
 def _loss(w, rate, dt, w_ref):
     """Evaporation of one particle this step: rate Δt w_ref, never more than its water w."""
     l = rate * dt * w_ref
@@ -17,7 +19,7 @@ def _loss(w, rate, dt, w_ref):
     return l
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def loss_rhs(M, c, w0, rate, dt, rhs, loss):
     """rhs = M c − loss with loss = min(rate Δt w0, w) so water stays ≥ 0."""
     for i in range(M.shape[0]):
@@ -26,7 +28,7 @@ def loss_rhs(M, c, w0, rate, dt, rhs, loss):
         rhs[i] = w - loss[i]
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=True)
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH)
 def csr_matvec(indptr, indices, data, x, y):
     for i in prange(indptr.shape[0] - 1):
         s = 0.0

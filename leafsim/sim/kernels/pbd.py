@@ -1,10 +1,14 @@
-"""XPBD kernels: prediction, coloured Gauss–Seidel projection of distance, bending (signed
-dihedral) and thickness (tetrahedron volume) constraints, ground contact with friction,
-self-collision (spatial-hash contact candidates projected inside the iteration loop), velocity update and Voronoi re-placement.
+"""XPBD kernels: prediction, Gauss–Seidel projection of distance, bending (signed dihedral) and
+thickness (tetrahedron volume) constraints, ground contact with friction, self-collision
+(spatial-hash candidates kept with a Verlet skin, projected inside the iteration loop),
+velocity update and Voronoi re-placement.
 
-Every ``*_iteration`` kernel exists twice: ``_par`` (numba prange over the constraints of one
-colour; colours run one after another = Gauss–Seidel) and ``_ser`` (one thread, same order).
-Which one runs is chosen by measurement (see :mod:`leafsim.bench`).
+Everything runs on one thread: on the shared 2-core machines this project runs on, the former
+graph-coloured ``prange`` kernels (one fork/join per colour per pass) were 13–36× slower than
+serial under load, and a parallel path must never lose (measured in ``leafsim bench``,
+docs/performance.md).  Constraints are stored in colour order and, inside one colour, sorted
+by particle (no two constraints of one colour share a particle, so that order changes no
+result and makes the particle accesses nearly sequential).
 """
 
 from __future__ import annotations
@@ -12,11 +16,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
+
+from . import FASTMATH
 
 
-@njit(cache=True, nogil=True, fastmath=True)
-def predict(q, qd, q_old, invm, gz, dt):
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def predict(q, qd, q_old, qa, dint, invm, gz, dt):
+    """Start of a substep: q_old ← q, gravity, x ← x + v Δt; ``qa`` ← the prediction and
+    ``dint`` ← 0 (the internal displacement is counted from here), all in one pass."""
     for i in range(q.shape[0]):
         for k in range(3):
             q_old[i, k] = q[i, k]
@@ -24,278 +32,217 @@ def predict(q, qd, q_old, invm, gz, dt):
             qd[i, 2] += gz * dt
             for k in range(3):
                 q[i, k] += qd[i, k] * dt
+        for k in range(3):
+            qa[i, k] = q[i, k]
+            dint[i, k] = 0.0
 
 
-# ---------------------------------------------------------------- one constraint each
-# Inlined into every loop variant below (parallel colour loops write the change into an
-# array, serial loops track the largest inline); each returns |Δx| of its projection.
+# ---------------------------------------------------------------- projection passes
+# One Gauss–Seidel sweep over constraints lo…hi of one kind, in storage order (colour by
+# colour), each returning the largest |Δx| it made.  Written as plain loops in one function on
+# purpose (measured in docs/performance.md): the former ``inline="always"`` helpers that took
+# the arrays as arguments left 6 NRT_incref + 6 NRT_decref (atomic) calls around every hinge
+# in the generated code, and returned 17-tuples through the stack.  Indices are stored as
+# uint32, so no negative-index wrap-around code is emitted either.
 
-@njit(inline="always", fastmath=True)
-def _spring(q, invm, ij, rest, salpha, slam, s):
-    a = ij[s, 0]
-    b = ij[s, 1]
-    wa = invm[a]
-    wb = invm[b]
-    dx = q[a, 0] - q[b, 0]
-    dy = q[a, 1] - q[b, 1]
-    dz = q[a, 2] - q[b, 2]
-    d = math.sqrt(dx * dx + dy * dy + dz * dz)
-    W = wa + wb + salpha[s]
-    if d < 1e-12 or W <= 0.0:
-        return 0.0
-    C = d - rest[s]
-    dl = (-C - salpha[s] * slam[s]) / W
-    slam[s] += dl
-    f = dl / d
-    q[a, 0] += wa * f * dx
-    q[a, 1] += wa * f * dy
-    q[a, 2] += wa * f * dz
-    q[b, 0] -= wb * f * dx
-    q[b, 1] -= wb * f * dy
-    q[b, 2] -= wb * f * dz
-    return abs(dl) * max(wa, wb)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def pack_springs(perm, ij, invm, rest, salpha, rec):
+    """The per-spring record of one frame, in projection order: rec[s] = (rest length,
+    compliance / Δt², 1 / (w_a + w_b + compliance), w_a, w_b), for spring perm[s] of the model
+    (``rest`` and ``salpha`` in model order, ``ij`` already in projection order)."""
+    for s in range(perm.shape[0]):
+        k = perm[s]
+        wa = invm[ij[s, 0]]
+        wb = invm[ij[s, 1]]
+        W = wa + wb + salpha[k]
+        rec[s, 0] = rest[k]
+        rec[s, 1] = salpha[k]
+        rec[s, 2] = 1.0 / W if W > 0.0 else 0.0
+        rec[s, 3] = wa
+        rec[s, 4] = wb
 
 
-@njit(inline="always", fastmath=True)
-def _hinge_geom(q, hidx, e):
-    """Signed dihedral angle θ of hinge e = (x1, x2; x3–x4) and its gradients u1…u4 (Bridson
-    et al. 2003); also |e| and the wing gradient scales for the step limit.  ``ok`` False for a
-    degenerate hinge."""
-    i1 = hidx[e, 0]
-    i2 = hidx[e, 1]
-    i3 = hidx[e, 2]
-    i4 = hidx[e, 3]
-    ex = q[i4, 0] - q[i3, 0]
-    ey = q[i4, 1] - q[i3, 1]
-    ez = q[i4, 2] - q[i3, 2]
-    el = math.sqrt(ex * ex + ey * ey + ez * ez)
-    # n1 = (x1 - x3) x (x1 - x4), n2 = (x2 - x4) x (x2 - x3)
-    ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
-    bx = q[i1, 0] - q[i4, 0]; by = q[i1, 1] - q[i4, 1]; bz = q[i1, 2] - q[i4, 2]
-    n1x = ay * bz - az * by; n1y = az * bx - ax * bz; n1z = ax * by - ay * bx
-    cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
-    dx = q[i2, 0] - q[i3, 0]; dy = q[i2, 1] - q[i3, 1]; dz = q[i2, 2] - q[i3, 2]
-    n2x = cy * dz - cz * dy; n2y = cz * dx - cx * dz; n2z = cx * dy - cy * dx
-    l1 = n1x * n1x + n1y * n1y + n1z * n1z
-    l2 = n2x * n2x + n2y * n2y + n2z * n2z
-    if el < 1e-12 or l1 < 1e-30 or l2 < 1e-30:
-        return (False, 0.0, el, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    s1 = math.sqrt(l1)
-    s2 = math.sqrt(l2)
-    cosv = (n1x * n2x + n1y * n2y + n1z * n2z) / (s1 * s2)
-    # sin = (n2 x n1) . e / |e|
-    kx = n2y * n1z - n2z * n1y
-    ky = n2z * n1x - n2x * n1z
-    kz = n2x * n1y - n2y * n1x
-    sinv = (kx * ex + ky * ey + kz * ez) / (s1 * s2 * el)
-    th = math.atan2(sinv, cosv)
-    g1 = el / l1
-    g2 = el / l2
-    t31 = (bx * ex + by * ey + bz * ez) / el  # (x1 - x4).e/|e|
-    t32 = (cx * ex + cy * ey + cz * ez) / el  # (x2 - x4).e/|e|
-    t41 = (ax * ex + ay * ey + az * ez) / el  # (x1 - x3).e/|e|
-    t42 = (dx * ex + dy * ey + dz * ez) / el  # (x2 - x3).e/|e|
-    p1 = t31 / l1; p2 = t32 / l2
-    r1 = -t41 / l1; r2 = -t42 / l2
-    return (True, th, el, g1 * n1x, g1 * n1y, g1 * n1z, g2 * n2x, g2 * n2y, g2 * n2z,
-            p1 * n1x + p2 * n2x, p1 * n1y + p2 * n2y, p1 * n1z + p2 * n2z,
-            r1 * n1x + r2 * n2x, r1 * n1y + r2 * n2y, r1 * n1z + r2 * n2z, g1 * s1, g2 * s2)
-
-
-@njit(inline="always", fastmath=True)
-def _hinge_move(q, invm, hidx, e, dl, u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z):
-    i1 = hidx[e, 0]; i2 = hidx[e, 1]; i3 = hidx[e, 2]; i4 = hidx[e, 3]
-    w1 = invm[i1] * dl; w2 = invm[i2] * dl; w3 = invm[i3] * dl; w4 = invm[i4] * dl
-    q[i1, 0] += w1 * u1x; q[i1, 1] += w1 * u1y; q[i1, 2] += w1 * u1z
-    q[i2, 0] += w2 * u2x; q[i2, 1] += w2 * u2y; q[i2, 2] += w2 * u2z
-    q[i3, 0] += w3 * u3x; q[i3, 1] += w3 * u3y; q[i3, 2] += w3 * u3z
-    q[i4, 0] += w4 * u4x; q[i4, 1] += w4 * u4y; q[i4, 2] += w4 * u4z
-
-
-@njit(inline="always", fastmath=True)
-def _hinge_step_limit(invm, hidx, e, dl, el, u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z):
-    """Degenerate hinges: never move a vertex by more than half the edge length."""
-    gm = max(invm[hidx[e, 0]] * math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z),
-             invm[hidx[e, 1]] * math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z),
-             invm[hidx[e, 2]] * math.sqrt(u3x * u3x + u3y * u3y + u3z * u3z),
-             invm[hidx[e, 3]] * math.sqrt(u4x * u4x + u4y * u4y + u4z * u4z))
-    if abs(dl) * gm > 0.5 * el:
-        return math.copysign(0.5 * el / gm, dl)
-    return dl
-
-
-@njit(inline="always", fastmath=True)
-def _hinge(q, invm, hidx, hrest, halpha, hlam, e, omega):
-    ok, th, el, u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z, k1, k2 = _hinge_geom(q, hidx, e)
-    if not ok:
-        return 0.0
-    C = th - hrest[e]
-    if C > math.pi:
-        C -= 2 * math.pi
-    elif C < -math.pi:
-        C += 2 * math.pi
-    w1 = invm[hidx[e, 0]]; w2 = invm[hidx[e, 1]]; w3 = invm[hidx[e, 2]]; w4 = invm[hidx[e, 3]]
-    W = (w1 * (u1x * u1x + u1y * u1y + u1z * u1z) + w2 * (u2x * u2x + u2y * u2y + u2z * u2z)
-         + w3 * (u3x * u3x + u3y * u3y + u3z * u3z) + w4 * (u4x * u4x + u4y * u4y + u4z * u4z) + halpha[e])
-    if W <= 0.0:
-        return 0.0
-    dl = _hinge_step_limit(invm, hidx, e, omega * (-C - halpha[e] * hlam[e]) / W, el,
-                           u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z)
-    hlam[e] += dl
-    _hinge_move(q, invm, hidx, e, dl, u1x, u1y, u1z, u2x, u2y, u2z, u3x, u3y, u3z, u4x, u4y, u4z)
-    return abs(dl) * max(w1 * k1, w2 * k2)
-
-
-@njit(inline="always", fastmath=True)
-def _volume(q, invm, vidx, vrest, t):
-    iv = vidx[t, 0]
-    ia = vidx[t, 1]
-    ib = vidx[t, 2]
-    ic = vidx[t, 3]
-    bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
-    cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
-    vx = q[iv, 0] - q[ia, 0]; vy = q[iv, 1] - q[ia, 1]; vz = q[iv, 2] - q[ia, 2]
-    gvx = by * cz - bz * cy; gvy = bz * cx - bx * cz; gvz = bx * cy - by * cx
-    gbx = cy * vz - cz * vy; gby = cz * vx - cx * vz; gbz = cx * vy - cy * vx
-    gcx = vy * bz - vz * by; gcy = vz * bx - vx * bz; gcz = vx * by - vy * bx
-    gax = -(gvx + gbx + gcx); gay = -(gvy + gby + gcy); gaz = -(gvz + gbz + gcz)
-    C = vx * gvx + vy * gvy + vz * gvz - vrest[t]
-    wv = invm[iv]; wa = invm[ia]; wb = invm[ib]; wc = invm[ic]
-    W = (wv * (gvx * gvx + gvy * gvy + gvz * gvz) + wa * (gax * gax + gay * gay + gaz * gaz)
-         + wb * (gbx * gbx + gby * gby + gbz * gbz) + wc * (gcx * gcx + gcy * gcy + gcz * gcz))
-    if W <= 1e-300:
-        return 0.0
-    dl = -C / W
-    gm = max(wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz), wa * math.sqrt(gax * gax + gay * gay + gaz * gaz),
-             wb * math.sqrt(gbx * gbx + gby * gby + gbz * gbz), wc * math.sqrt(gcx * gcx + gcy * gcy + gcz * gcz))
-    lim = 0.5 * math.sqrt(math.sqrt(bx * bx + by * by + bz * bz) * math.sqrt(cx * cx + cy * cy + cz * cz))
-    if abs(dl) * gm > lim:
-        dl = math.copysign(lim / gm, dl)
-    q[iv, 0] += wv * dl * gvx; q[iv, 1] += wv * dl * gvy; q[iv, 2] += wv * dl * gvz
-    q[ia, 0] += wa * dl * gax; q[ia, 1] += wa * dl * gay; q[ia, 2] += wa * dl * gaz
-    q[ib, 0] += wb * dl * gbx; q[ib, 1] += wb * dl * gby; q[ib, 2] += wb * dl * gbz
-    q[ic, 0] += wc * dl * gcx; q[ic, 1] += wc * dl * gcy; q[ic, 2] += wc * dl * gcz
-    return abs(dl) * wv * math.sqrt(gvx * gvx + gvy * gvy + gvz * gvz)
-
-
-def _iteration(q, invm, ij, rest, salpha, slam, scs,
-               hidx, hrest, halpha, hlam, hcs, omega,
-               vidx, vrest, vlam, vcs, change):
-    """One Gauss–Seidel pass over all constraints, colour by colour.  ``salpha``/``halpha`` are
-    compliances already divided by Δt².  Writes |Δx| per constraint into ``change`` (size ≥
-    max count) and returns the largest."""
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def spring_pass(q, ij, rec, lam, lo, hi):
+    """XPBD distance constraints lo…hi (records of :func:`pack_springs`): one sqrt and one
+    division each."""
     big = 0.0
-    # ---------------- distance constraints
-    for c in range(scs.shape[0] - 1):
-        for s in prange(scs[c], scs[c + 1]):
-            change[s] = _spring(q, invm, ij, rest, salpha, slam, s)
-    for s in range(scs[-1]):
-        if change[s] > big:
-            big = change[s]
-    # ---------------- bending hinges (c, d, a, b): signed dihedral angle, cup (wings up) > 0
-    for c in range(hcs.shape[0] - 1):
-        for e in prange(hcs[c], hcs[c + 1]):
-            change[e] = _hinge(q, invm, hidx, hrest, halpha, hlam, e, omega)
-    for e in range(hcs[-1]):
-        if change[e] > big:
-            big = change[e]
-    # ---------------- thickness: 6 × volume of (v, a, b, c) = det, keeps V on the top side
-    for c in range(vcs.shape[0] - 1):
-        for t in prange(vcs[c], vcs[c + 1]):
-            change[t] = _volume(q, invm, vidx, vrest, t)
-    for t in range(vcs[-1]):
-        if change[t] > big:
-            big = change[t]
-    return big
-
-
-iteration_par = njit(cache=True, nogil=True, parallel=True, fastmath=True)(_iteration)
-
-
-@njit(cache=True, nogil=True, fastmath=True)
-def iteration_ser(q, invm, ij, rest, salpha, slam, scs,
-                  hidx, hrest, halpha, hlam, hcs, omega,
-                  vidx, vrest, vlam, vcs, change):
-    """Serial twin of :func:`_iteration` (same projection, same order; ``prange`` → ``range``
-    and the largest change tracked inline, so ``change`` is not written and not scanned —
-    keep the two in sync).  Returns the largest |Δx| of the pass.  Write-up of the
-    arguments: :func:`_iteration`."""
-    big = 0.0
-    # ---------------- distance constraints
-    for c in range(scs.shape[0] - 1):
-        for s in range(scs[c], scs[c + 1]):
-            ch = _spring(q, invm, ij, rest, salpha, slam, s)
-            if ch > big:
-                big = ch
-    # ---------------- bending hinges (c, d, a, b): signed dihedral angle, cup (wings up) > 0
-    for c in range(hcs.shape[0] - 1):
-        for e in range(hcs[c], hcs[c + 1]):
-            ch = _hinge(q, invm, hidx, hrest, halpha, hlam, e, omega)
-            if ch > big:
-                big = ch
-    # ---------------- thickness: 6 × volume of (v, a, b, c) = det, keeps V on the top side
-    for c in range(vcs.shape[0] - 1):
-        for t in range(vcs[c], vcs[c + 1]):
-            ch = _volume(q, invm, vidx, vrest, t)
-            if ch > big:
-                big = ch
-    return big
-
-
-def _springs_only(q, invm, ij, rest, salpha, slam, scs, change):
-    """Distance constraints only (the benchmark's PBD pass)."""
-    for c in range(scs.shape[0] - 1):
-        for s in prange(scs[c], scs[c + 1]):
-            change[s] = _spring(q, invm, ij, rest, salpha, slam, s)
-    big = 0.0
-    for s in range(scs[-1]):
-        if change[s] > big:
-            big = change[s]
-    return big
-
-
-springs_par = njit(cache=True, nogil=True, parallel=True, fastmath=True)(_springs_only)
-springs_ser = njit(cache=True, nogil=True, parallel=False, fastmath=True)(_springs_only)
-
-
-@njit(cache=True, nogil=True, parallel=True, fastmath=True)
-def jacobi_springs(q, invm, ij, rest, salpha, slam, adj_ptr, adj_s, adj_sign, dq):
-    """Atomics-free Jacobi pass: per-spring correction, then per-particle gather (CSR)."""
-    ns = ij.shape[0]
-    for s in prange(ns):
+    for s in range(lo, hi):
         a = ij[s, 0]
         b = ij[s, 1]
         dx = q[a, 0] - q[b, 0]
         dy = q[a, 1] - q[b, 1]
         dz = q[a, 2] - q[b, 2]
         d = math.sqrt(dx * dx + dy * dy + dz * dz)
-        W = invm[a] + invm[b] + salpha[s]
-        if d < 1e-12 or W <= 0.0:
-            dq[s, 0] = 0.0; dq[s, 1] = 0.0; dq[s, 2] = 0.0
+        if d < 1e-12:
             continue
-        dl = (rest[s] - d - salpha[s] * slam[s]) / W
-        slam[s] += dl
+        wa = rec[s, 3]
+        wb = rec[s, 4]
+        dl = (rec[s, 0] - d - rec[s, 1] * lam[s]) * rec[s, 2]
+        lam[s] += dl
         f = dl / d
-        dq[s, 0] = f * dx; dq[s, 1] = f * dy; dq[s, 2] = f * dz
-    for i in prange(q.shape[0]):
-        w = invm[i]
-        n = adj_ptr[i + 1] - adj_ptr[i]
-        if n == 0:
+        q[a, 0] += wa * f * dx; q[a, 1] += wa * f * dy; q[a, 2] += wa * f * dz
+        q[b, 0] -= wb * f * dx; q[b, 1] -= wb * f * dy; q[b, 2] -= wb * f * dz
+        ch = abs(dl) * max(wa, wb)
+        if ch > big:
+            big = ch
+    return big
+
+
+@njit(inline="always", fastmath=FASTMATH)
+def atan2_(y, x):
+    """atan2 without the libm call: Cephes' atan (rational P4/Q5 after reducing to
+    |t| ≤ tan π/8; relative error 1.9e-16) with atan2's quadrants.  Agrees with ``math.atan2``
+    to 4.5e-16 rad (tests/test_kernels.py); written with selects, so no branch to mispredict."""
+    ay = abs(y)
+    ax = abs(x)
+    t = min(ay, ax) / max(max(ay, ax), 1e-300)
+    hi = t > 0.41421356237309503
+    t = (t - 1.0) / (t + 1.0) if hi else t
+    z = t * t
+    p = (((-8.750608600031904122785e-1 * z - 1.615753718733365076637e1) * z - 7.500855792314704667340e1) * z
+         - 1.228866684490136173410e2) * z - 6.485021904942025371773e1
+    r = ((((z + 2.485846490142306297962e1) * z + 1.650270098316988542046e2) * z + 4.328810604912902668951e2) * z
+         + 4.853903996359136964868e2) * z + 1.945506571482613964425e2
+    a = t * z * p / r + t + (0.7853981633974483 + 3.061616997868383e-17 if hi else 0.0)
+    a = 1.5707963267948966 - a if ay > ax else a
+    a = math.pi - a if x < 0.0 else a
+    return a if y >= 0.0 else -a
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def hinge_pass(q, invm, hidx, hrest, halpha, hlam, omega, lo, hi):
+    """Bending hinges lo…hi, hidx = (x1, x2; x3–x4): signed dihedral angle θ (cup, wings up,
+    > 0) and its gradients u1…u4 (Bridson et al. 2003), XPBD step over-relaxed by ``omega``,
+    never moving a vertex by more than half the edge length (degenerate hinges).
+
+    With e = x4 − x3, a = x1 − x3, c = x2 − x4 the normals are n1 = e × a, n2 = c × e, and
+    (n2 × n1)·e = |e|² (n2·a), so θ = atan2(|e| n2·a, n1·n2) (no |n1| |n2|: both arguments
+    share that positive factor); u4 = −(u1 + u2 + u3) (translation invariance); the step limit
+    compares squares.  Same values as the textbook form to round-off, in about 60 % of the
+    operations: one atan2 (inline), one square root and four divisions per hinge."""
+    big2 = 0.0
+    for e in range(lo, hi):
+        i1 = hidx[e, 0]; i2 = hidx[e, 1]; i3 = hidx[e, 2]; i4 = hidx[e, 3]
+        ex = q[i4, 0] - q[i3, 0]; ey = q[i4, 1] - q[i3, 1]; ez = q[i4, 2] - q[i3, 2]
+        ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
+        cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
+        n1x = ey * az - ez * ay; n1y = ez * ax - ex * az; n1z = ex * ay - ey * ax
+        n2x = cy * ez - cz * ey; n2y = cz * ex - cx * ez; n2z = cx * ey - cy * ex
+        el2 = ex * ex + ey * ey + ez * ez
+        l1 = n1x * n1x + n1y * n1y + n1z * n1z
+        l2 = n2x * n2x + n2y * n2y + n2z * n2z
+        if el2 < 1e-24 or l1 < 1e-30 or l2 < 1e-30:
             continue
-        sx = 0.0; sy = 0.0; sz = 0.0
-        for k in range(adj_ptr[i], adj_ptr[i + 1]):
-            s = adj_s[k]
-            g = adj_sign[k]
-            sx += g * dq[s, 0]; sy += g * dq[s, 1]; sz += g * dq[s, 2]
-        # averaged (Jacobi) with relaxation 1.5 / n
-        f = 1.5 * w / n
-        q[i, 0] += f * sx; q[i, 1] += f * sy; q[i, 2] += f * sz
+        el = math.sqrt(el2)
+        C = atan2_(el * (n2x * ax + n2y * ay + n2z * az), n1x * n2x + n1y * n2y + n1z * n2z) - hrest[e]
+        if C > math.pi:
+            C -= 2 * math.pi
+        elif C < -math.pi:
+            C += 2 * math.pi
+        il1 = 1.0 / l1
+        il2 = 1.0 / l2
+        iel = 1.0 / el
+        g1 = el * il1
+        g2 = el * il2
+        p1 = (ax * ex + ay * ey + az * ez - el2) * iel * il1  # (x1 − x4)·e / |e| / |n1|²
+        p2 = (cx * ex + cy * ey + cz * ez) * iel * il2  # (x2 − x4)·e / |e| / |n2|²
+        u3x = p1 * n1x + p2 * n2x; u3y = p1 * n1y + p2 * n2y; u3z = p1 * n1z + p2 * n2z
+        u4x = -(g1 * n1x + g2 * n2x + u3x); u4y = -(g1 * n1y + g2 * n2y + u3y); u4z = -(g1 * n1z + g2 * n2z + u3z)
+        w1 = invm[i1]; w2 = invm[i2]; w3 = invm[i3]; w4 = invm[i4]
+        s1 = el2 * il1  # |u1|²
+        s2 = el2 * il2
+        s3 = u3x * u3x + u3y * u3y + u3z * u3z
+        s4 = u4x * u4x + u4y * u4y + u4z * u4z
+        W = w1 * s1 + w2 * s2 + w3 * s3 + w4 * s4 + halpha[e]
+        if W <= 0.0:
+            continue
+        dl = omega * (-C - halpha[e] * hlam[e]) / W
+        m12 = max(w1 * w1 * s1, w2 * w2 * s2)
+        gm2 = max(m12, max(w3 * w3 * s3, w4 * w4 * s4))
+        if dl * dl * gm2 > 0.25 * el2:
+            dl = math.copysign(0.5 * el / math.sqrt(gm2), dl)
+        hlam[e] += dl
+        f1 = w1 * dl * g1; f2 = w2 * dl * g2; f3 = w3 * dl; f4 = w4 * dl
+        q[i1, 0] += f1 * n1x; q[i1, 1] += f1 * n1y; q[i1, 2] += f1 * n1z
+        q[i2, 0] += f2 * n2x; q[i2, 1] += f2 * n2y; q[i2, 2] += f2 * n2z
+        q[i3, 0] += f3 * u3x; q[i3, 1] += f3 * u3y; q[i3, 2] += f3 * u3z
+        q[i4, 0] += f4 * u4x; q[i4, 1] += f4 * u4y; q[i4, 2] += f4 * u4z
+        ch2 = dl * dl * m12  # the change², compared squared: one square root per pass
+        if ch2 > big2:
+            big2 = ch2
+    return math.sqrt(big2)
 
 
-@njit(cache=True, nogil=True, fastmath=True)
-def ground_friction(q, q_old, pen, mu):
-    """Coulomb friction for particles that touched the ground this frame (PBD style)."""
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def volume_pass(q, invm, vidx, vrest, lo, hi):
+    """Thickness constraints lo…hi: 6 × the volume of tetrahedron (v, a, b, c) = det, which
+    keeps V on the top side; the step is limited to half the triangle's edge scale (compared
+    in squares: one square root and one division per tetrahedron)."""
+    big2 = 0.0
+    for t in range(lo, hi):
+        iv = vidx[t, 0]; ia = vidx[t, 1]; ib = vidx[t, 2]; ic = vidx[t, 3]
+        bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
+        cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
+        vx = q[iv, 0] - q[ia, 0]; vy = q[iv, 1] - q[ia, 1]; vz = q[iv, 2] - q[ia, 2]
+        gvx = by * cz - bz * cy; gvy = bz * cx - bx * cz; gvz = bx * cy - by * cx
+        gbx = cy * vz - cz * vy; gby = cz * vx - cx * vz; gbz = cx * vy - cy * vx
+        gcx = vy * bz - vz * by; gcy = vz * bx - vx * bz; gcz = vx * by - vy * bx
+        gax = -(gvx + gbx + gcx); gay = -(gvy + gby + gcy); gaz = -(gvz + gbz + gcz)
+        C = vx * gvx + vy * gvy + vz * gvz - vrest[t]
+        wv = invm[iv]; wa = invm[ia]; wb = invm[ib]; wc = invm[ic]
+        sv = gvx * gvx + gvy * gvy + gvz * gvz
+        sa = gax * gax + gay * gay + gaz * gaz
+        sb = gbx * gbx + gby * gby + gbz * gbz
+        sc = gcx * gcx + gcy * gcy + gcz * gcz
+        W = wv * sv + wa * sa + wb * sb + wc * sc
+        if W <= 1e-300:
+            continue
+        dl = -C / W
+        gm2 = max(max(wv * wv * sv, wa * wa * sa), max(wb * wb * sb, wc * wc * sc))
+        lim2 = 0.25 * math.sqrt((bx * bx + by * by + bz * bz) * (cx * cx + cy * cy + cz * cz))
+        if dl * dl * gm2 > lim2:
+            dl = math.copysign(math.sqrt(lim2 / gm2), dl)
+        fv = wv * dl; fa = wa * dl; fb = wb * dl; fc = wc * dl
+        q[iv, 0] += fv * gvx; q[iv, 1] += fv * gvy; q[iv, 2] += fv * gvz
+        q[ia, 0] += fa * gax; q[ia, 1] += fa * gay; q[ia, 2] += fa * gaz
+        q[ib, 0] += fb * gbx; q[ib, 1] += fb * gby; q[ib, 2] += fb * gbz
+        q[ic, 0] += fc * gcx; q[ic, 1] += fc * gcy; q[ic, 2] += fc * gcz
+        ch2 = dl * dl * wv * wv * sv
+        if ch2 > big2:
+            big2 = ch2
+    return math.sqrt(big2)
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, vrest):
+    """One Gauss–Seidel pass over all constraints: springs, hinges, thickness (each kind in
+    colour order).  Returns the largest |Δx| of the pass."""
+    big = spring_pass(q, ij, srec, slam, 0, ij.shape[0])
+    big = max(big, hinge_pass(q, invm, hidx, hrest, halpha, hlam, omega, 0, hidx.shape[0]))
+    return max(big, volume_pass(q, invm, vidx, vrest, 0, vidx.shape[0]))
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def springs_passes(q, ij, rec, lam, niter, tol):
+    """``niter`` spring passes in one call (the bench's job); stops early when the largest
+    change falls below ``tol``.  Returns the passes run."""
+    it = 0
+    while it < niter:
+        it += 1
+        if spring_pass(q, ij, rec, lam, 0, ij.shape[0]) < tol:
+            break
+    return it
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def ground_contact(q, q_old, invm, pen, mu):
+    """The substep's last ground clamp (:func:`ground_clamp`) and Coulomb friction for the
+    particles that touched the ground in it (PBD style), in one pass."""
     for i in range(q.shape[0]):
+        if q[i, 2] < 0.0 and invm[i] > 0.0:
+            pen[i] -= q[i, 2]
+            q[i, 2] = 0.0
         p = pen[i]
         if p <= 0.0:
             continue
@@ -313,15 +260,18 @@ def ground_friction(q, q_old, pen, mu):
         pen[i] = 0.0
 
 
-@njit(cache=True, nogil=True, fastmath=True)
-def update_velocity(q, q_old, qd, dt, keep):
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def update_velocity(q, q_old, qd, dt, keep, ground):
+    """v ← (x − x_old)/Δt × ``keep`` (damping), after lifting anything below the ground."""
     inv = 1.0 / dt
     for i in range(q.shape[0]):
+        if ground and q[i, 2] < 0.0:
+            q[i, 2] = 0.0
         for k in range(3):
             qd[i, k] = (q[i, k] - q_old[i, k]) * inv * keep
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def voronoi_heights(q, vidx, hgt):
     """Signed height of each V particle above its triangle's plane (store before projection)."""
     for t in range(vidx.shape[0]):
@@ -333,7 +283,7 @@ def voronoi_heights(q, vidx, hgt):
         hgt[t] = ((q[iv, 0] - q[ia, 0]) * nx + (q[iv, 1] - q[ia, 1]) * ny + (q[iv, 2] - q[ia, 2]) * nz) / nl
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def voronoi_replace(q, vidx, hgt, hmin):
     """Thesis re-placement: x_V = centroid + max(h_i, hmin) n_F (after the velocity update)."""
     for t in range(vidx.shape[0]):
@@ -351,16 +301,18 @@ def voronoi_replace(q, vidx, hgt, hmin):
             q[iv, k] = (q[ia, k] + q[ib, k] + q[ic, k]) / 3.0 + h * nk / nl
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def residual(q, ij, rest):
     """max |C| / l over springs."""
-    out = np.empty(ij.shape[0])
-    for s in prange(ij.shape[0]):
+    big = 0.0
+    for s in range(ij.shape[0]):
         a = ij[s, 0]
         b = ij[s, 1]
         dx = q[a, 0] - q[b, 0]; dy = q[a, 1] - q[b, 1]; dz = q[a, 2] - q[b, 2]
-        out[s] = abs(math.sqrt(dx * dx + dy * dy + dz * dz) - rest[s]) / max(rest[s], 1e-30)
-    return out.max() if out.shape[0] else 0.0
+        r = abs(math.sqrt(dx * dx + dy * dy + dz * dz) - rest[s]) / max(rest[s], 1e-30)
+        if r > big:
+            big = r
+    return big
 
 
 @njit(cache=True, nogil=True)
@@ -377,12 +329,13 @@ def dihedral_angles(q, hidx):
     return out
 
 
-@njit(cache=True, nogil=True, fastmath=True)
-def uninvert(q, invm, vidx, hmin, vonly, ground):
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def uninvert(q, invm, vidx, hmin, vonly, ground, dint):
     """Guard against layer inversion: a V particle closer than ``hmin`` to (or below) its
     triangle's plane is projected to height ``hmin`` (inverse-mass weighted between the V
     particle and the triangle, so momentum is conserved; with ``ground`` a vertex resting on
-    the ground is not pushed into it).  Returns how many were corrected."""
+    the ground is not pushed into it).  Every move is added to ``dint`` (internal
+    displacement).  Returns how many were corrected."""
     moved = 0
     for t in range(vidx.shape[0]):
         iv, ia, ib, ic = vidx[t, 0], vidx[t, 1], vidx[t, 2], vidx[t, 3]
@@ -405,14 +358,36 @@ def uninvert(q, invm, vidx, hmin, vonly, ground):
             dl = (hmin - h) / W
             f = invm[iv] * dl
             q[iv, 0] += f * nx; q[iv, 1] += f * ny; q[iv, 2] += f * nz
+            dint[iv, 0] += f * nx; dint[iv, 1] += f * ny; dint[iv, 2] += f * nz
             for j, wj in ((ia, wa), (ib, wb), (ic, wc)):
                 g = -wj * dl / 3.0
                 q[j, 0] += g * nx; q[j, 1] += g * ny; q[j, 2] += g * nz
+                dint[j, 0] += g * nx; dint[j, 1] += g * ny; dint[j, 2] += g * nz
             moved += 1
     return moved
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True)
+def canonical_pairs(pairs, g0, n):
+    """Sort the pairs [g0, n) of one particle i by j and drop repeats (hash collisions can
+    meet a pair twice); returns the new end."""
+    for a in range(g0 + 1, n):
+        jv = pairs[a, 1]
+        b = a - 1
+        while b >= g0 and pairs[b, 1] > jv:
+            pairs[b + 1, 1] = pairs[b, 1]
+            b -= 1
+        pairs[b + 1, 1] = jv
+    w = g0
+    for a in range(g0, n):
+        if a == g0 or pairs[a, 1] != pairs[w - 1, 1]:
+            pairs[w, 0] = pairs[a, 0]
+            pairs[w, 1] = pairs[a, 1]
+            w += 1
+    return w
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     """Candidate self-contact pairs (found once per substep with a spatial hash): layer-T
     particles closer than ``search`` whose rest distance² > ``skip2``.  Cells are 2 × search
@@ -436,6 +411,7 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     cap = pairs.shape[0]
     for k in range(idx.shape[0]):
         i = idx[k]
+        g0 = n
         gx = q[i, 0] * inv
         gy = q[i, 1] * inv
         gz = q[i, 2] * inv
@@ -471,10 +447,14 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
                                         pairs[n, 1] = j
                                         n += 1
                         m = nxt[m]
+        # canonical order (by i, then j): the projections then do not depend on the cell walk,
+        # so a list searched at another moment (a resumed run, another skin) projects the pairs
+        # that touch in the same order and gives bit-identical results
+        n = canonical_pairs(pairs, g0, n)
     return n
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def project_contacts(q, invm, pairs, n, radius):
     """Unilateral distance constraints |xi − xj| ≥ radius for the candidate pairs."""
     hits = 0
@@ -496,54 +476,7 @@ def project_contacts(q, invm, pairs, n, radius):
     return hits
 
 
-def _springs_multi(q, invm, ij, rest, salpha, slam, scs, change, niter, tol):
-    """``niter`` passes of :func:`springs_par` in one call (no Python between passes); stops
-    early when the largest change falls below ``tol``.  Returns the passes run."""
-    it = 0
-    while it < niter:
-        it += 1
-        big = _springs_only(q, invm, ij, rest, salpha, slam, scs, change)
-        if big < tol:
-            break
-    return it
-
-
-@njit(cache=True, nogil=True, fastmath=True)
-def springs_multi_ser(q, invm, ij, rest, salpha, slam, scs, niter, tol):
-    """Serial fused version of :func:`_springs_multi`: the largest change is tracked inline
-    (no ``change`` array, no second scan)."""
-    it = 0
-    while it < niter:
-        it += 1
-        big = 0.0
-        for s in range(scs[-1]):
-            ch = _spring(q, invm, ij, rest, salpha, slam, s)
-            if ch > big:
-                big = ch
-        if big < tol:
-            break
-    return it
-
-
-@njit(cache=True, nogil=True, parallel=True, fastmath=True)
-def springs_multi_par(q, invm, ij, rest, salpha, slam, scs, change, niter, tol):
-    """Coloured parallel passes, all in one call (fork/join per colour remains)."""
-    it = 0
-    while it < niter:
-        it += 1
-        for c in range(scs.shape[0] - 1):
-            for s in prange(scs[c], scs[c + 1]):
-                change[s] = _spring(q, invm, ij, rest, salpha, slam, s)
-        big = 0.0
-        for s in range(scs[-1]):
-            if change[s] > big:
-                big = change[s]
-        if big < tol:
-            break
-    return it
-
-
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha):
     """XPBD compliance / Δt² of every hinge: k = D (1 + k_dry · clip(dry, 0, 1)) · geom + k_rod
     [N·m/rad], D the blade's bending stiffness [N·m], geom = 3|e|²/(A₁+A₂), k_rod the vein's
@@ -559,7 +492,7 @@ def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha):
         halpha[e] = inv_h2 / (kbend * (1.0 + kdry * dry) * hgeom[e] + krod[e])
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def contact_velocities(q, qd, invm, pairs, n, radius):
     """Inelastic self-contact (restitution 0): for the pairs that touch after the substep,
     remove the separating part of their relative normal velocity (mass-weighted, so momentum
@@ -588,11 +521,11 @@ def contact_velocities(q, qd, invm, pairs, n, radius):
         qd[j, 0] += fj * nx; qd[j, 1] += fj * ny; qd[j, 2] += fj * nz
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def ground_clamp(q, invm, pen):
     """Ground plane z ≥ 0: lift penetrating particles and add the lift to ``pen``, the
     substep's total normal correction (∝ the normal impulse): the Coulomb budget of
-    :func:`ground_friction` — the sum, not the deepest, so that it does not depend on how many
+    :func:`ground_contact` — the sum, not the deepest, so that it does not depend on how many
     iterations the same impulse is spread over."""
     for i in range(q.shape[0]):
         if q[i, 2] < 0.0 and invm[i] > 0.0:
@@ -600,15 +533,7 @@ def ground_clamp(q, invm, pen):
             q[i, 2] = 0.0
 
 
-@njit(cache=True, fastmath=True, nogil=True)
-def add_delta(q, qa, dint):
-    """dint += q − qa (the displacement of the internal projections since the snapshot qa)."""
-    for i in range(q.shape[0]):
-        for k in range(3):
-            dint[i, k] += q[i, k] - qa[i, k]
-
-
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def remove_rigid(q, q_old, invm, dint):
     """Internal forces carry no net momentum.  A Gauss–Seidel sweep conserves linear and
     angular momentum only to first order (each projection is exact at the positions it sees,
@@ -661,84 +586,136 @@ def remove_rigid(q, q_old, invm, dint):
         q[i, 2] -= tz + wx * ry - wy * rx
 
 
-@njit(cache=True, nogil=True, fastmath=True)
-def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
-          ij, rest, salpha, slam, scs,
-          hidx, hrest, halpha, hlam, hcs,
-          vidx, vrest, vlam, vcs,
-          pbd, ground, pen, change, mu,
-          self_coll, qrest, T_idx, search, skip2, table, nxt, pairs, radius,
-          replace, hgt, thick, conserve, qa, dint, omega, out):
-    """All ``substeps`` of one dynamics frame in one call (no Python between substeps or
-    iterations; SPEC §8 order).  Per substep: predict; iterate (ground clamp — external —
-    then the internal constraints: springs, hinges, volumes, self-contacts); ground contact +
-    friction; un-invert layers; with ``conserve`` remove the rigid part of the internal
-    displacement (see :func:`remove_rigid`; not with pinned particles); velocity update with
-    damping, inelastic self-contacts.  ``omega`` over-relaxes the hinge projections (SOR).  ``par`` picks the coloured-parallel projection; ``qa``/``dint``
-    (n, 3) scratch.  Writes (iterations, contacts, uninverted) to ``out`` (int64[3])."""
-    its = 0
-    for _ in range(substeps):
-        predict(q, qd, q_old, invm, gz, h)
-        if replace:
-            voronoi_heights(q_old, vidx, hgt)
-        dint[:] = 0.0
-        it = 0
-        ncont = 0
-        if pbd:
-            slam[:] = 0.0
-            hlam[:] = 0.0
-            if self_coll:
-                ncont = find_contacts(q, qrest, T_idx, search, skip2, table, nxt, pairs)
-            hits = 0
-            while it < iters:
-                it += 1
-                if ground:
-                    ground_clamp(q, invm, pen)
-                qa[:] = q
-                if par:
-                    ch = iteration_par(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs, omega,
-                                       vidx, vrest, vlam, vcs, change)
-                else:
-                    ch = iteration_ser(q, invm, ij, rest, salpha, slam, scs, hidx, hrest, halpha, hlam, hcs, omega,
-                                       vidx, vrest, vlam, vcs, change)
-                if ncont:
-                    hits = project_contacts(q, invm, pairs, ncont, radius)
-                add_delta(q, qa, dint)
-                if ch < tol and hits == 0:
-                    break
-            out[1] = hits
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def contacts_stale(q, idx, qc, limit):
+    """True when a particle of ``idx`` moved more than ``limit`` from ``qc`` (its position at
+    the last contact search), or ``limit`` ≤ 0."""
+    if limit <= 0.0:
+        return True
+    l2 = limit * limit
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        dx = q[i, 0] - qc[k, 0]
+        dy = q[i, 1] - qc[k, 1]
+        dz = q[i, 2] - qc[k, 2]
+        if dx * dx + dy * dy + dz * dz > l2:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def update_contacts(q, qrest, idx, radius, skin, skip2, table, nxt, pairs, qc, cstate):
+    """Self-contact candidates with a Verlet skin: the spatial hash is searched at radius +
+    ``skin`` and kept until some particle has moved more than half of what is left of the skin
+    (the search radius less the 1.05 × ``radius`` the contact velocities look at), so every
+    pair that can touch since the search is in the list and nothing is searched while nothing
+    moves.  ``cstate`` float64[2] = (search radius of the list, pairs in it; −1 = none);
+    ``qc`` (|idx|, 3) the positions at the search.  Returns the number of pairs."""
+    if cstate[1] >= 0.0 and not contacts_stale(q, idx, qc, 0.5 * (cstate[0] - 1.05 * radius)):
+        return int(cstate[1])
+    search = radius + skin
+    n = find_contacts(q, qrest, idx, search, skip2, table, nxt, pairs)
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        qc[k, 0] = q[i, 0]; qc[k, 1] = q[i, 1]; qc[k, 2] = q[i, 2]
+    cstate[0] = search
+    cstate[1] = n
+    cstate[2] += 1.0
+    return n
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def internal_delta(q, qa, pen, dint):
+    """dint += q − qa less the ground's lift recorded in ``pen`` since the snapshot (the
+    ground is external: only the constraints' own displacement counts as internal)."""
+    for i in range(q.shape[0]):
+        dint[i, 0] += q[i, 0] - qa[i, 0]
+        dint[i, 1] += q[i, 1] - qa[i, 1]
+        dint[i, 2] += q[i, 2] - qa[i, 2] - pen[i]
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def clamp_ground(q):
+    for i in range(q.shape[0]):
+        if q[i, 2] < 0.0:
+            q[i, 2] = 0.0
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius, out):
+    """The substep's Gauss–Seidel iterations: (ground clamp, springs, hinges, volumes,
+    self-contacts) until the largest change < ``tol`` with no contact hit, at most ``iters``.
+    ``cons`` = (ij, srec, slam, hidx, hrest, halpha, hlam, vidx, vrest).  Writes the contact
+    hits of the last iteration to out[1]; returns the iterations run."""
+    ij, srec, slam, hidx, hrest, halpha, hlam, vidx, vrest = cons
+    slam[:] = 0.0
+    hlam[:] = 0.0
+    it = 0
+    hits = 0
+    while it < iters:
+        it += 1
         if ground:
             ground_clamp(q, invm, pen)
-            ground_friction(q, q_old, pen, mu)
+        ch = iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, vrest)
+        if ncont:
+            hits = project_contacts(q, invm, pairs, ncont, radius)
+        if ch < tol and hits == 0:
+            break
+    out[1] = hits
+    return it
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def settle(q, invm, vidx, thick, ground, dint, out):
+    """No layer inversion after the substep's projections: momentum-conserving passes (vertices
+    resting on the ground stay), then a V-only pass for anything neighbours undid."""
+    n_fix = 0
+    k = 0
+    for _r in range(3):
+        k = uninvert(q, invm, vidx, 0.25 * thick, False, ground, dint)
+        n_fix += k
+        if k == 0:
+            break
+    if k:
+        uninvert(q, invm, vidx, 0.2 * thick, True, ground, dint)
+    out[2] = n_fix
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
+          pbd, ground, pen, mu, self_coll, contact, replace, hgt, thick, conserve, qa, dint, omega, out):
+    """All ``substeps`` of one dynamics frame in one call (no Python between substeps or
+    iterations; SPEC §8 order).  Per substep: predict; iterate (:func:`project`: ground clamp —
+    external — then the internal constraints ``cons`` in projection order, self-contacts);
+    ground contact + friction; un-invert layers (``vidx`` in model order); with ``conserve``
+    remove the rigid part of the internal displacement (:func:`remove_rigid`; not with pinned
+    particles); velocity update with damping, inelastic self-contacts.  ``contact`` = (qrest,
+    T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate) for :func:`update_contacts`.
+    ``qa``/``dint`` (n, 3) scratch.  Writes (iterations, contact hits, uninverted) to ``out``
+    (int64[3])."""
+    qrest, T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate = contact
+    its = 0
+    for _ in range(substeps):
+        predict(q, qd, q_old, qa, dint, invm, gz, h)
+        if replace:
+            voronoi_heights(q_old, vidx, hgt)
+        ncont = 0
         if pbd:
-            # no layer inversion: momentum-conserving passes (vertices resting on the ground stay),
-            # then a V-only pass for anything neighbours undid
-            qa[:] = q
-            n_fix = 0
-            k = 0
-            for _r in range(3):
-                k = uninvert(q, invm, vidx, 0.25 * thick, False, ground)
-                n_fix += k
-                if k == 0:
-                    break
-            if k:
-                uninvert(q, invm, vidx, 0.2 * thick, True, ground)
-            out[2] = n_fix
-            add_delta(q, qa, dint)
+            if self_coll:
+                ncont = update_contacts(q, qrest, T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate)
+            its += project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius, out)
+            internal_delta(q, qa, pen, dint)
+        if ground:
+            ground_contact(q, q_old, invm, pen, mu)
+        if pbd:
+            settle(q, invm, vidx, thick, ground, dint, out)
             if conserve:
                 remove_rigid(q, q_old, invm, dint)
-            if ground:
-                for i in range(q.shape[0]):
-                    if q[i, 2] < 0.0:
-                        q[i, 2] = 0.0
-        update_velocity(q, q_old, qd, h, keep)
+        update_velocity(q, q_old, qd, h, keep, ground and pbd)
         if pbd and ncont:
             contact_velocities(q, qd, invm, pairs, ncont, radius)
         if replace:
             voronoi_replace(q, vidx, hgt, 0.25 * thick)
             if ground:
-                for i in range(q.shape[0]):
-                    if q[i, 2] < 0.0:
-                        q[i, 2] = 0.0
-        its += it
+                clamp_ground(q)
     out[0] = its

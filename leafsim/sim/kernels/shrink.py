@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit, prange
+
+from . import FASTMATH
 
 
 def _shrink_springs(ij, rest0, sigma, alpha, l_min, cyt, water, m0, rest):
@@ -31,11 +32,11 @@ def _shrink_springs(ij, rest0, sigma, alpha, l_min, cyt, water, m0, rest):
         rest[s] = rest0[s] * f
 
 
-shrink_springs = njit(cache=True, nogil=True, parallel=False, fastmath=True)(_shrink_springs)
-shrink_springs_par = njit(cache=True, nogil=True, parallel=True, fastmath=True)(_shrink_springs)
+shrink_springs = njit(cache=True, nogil=True, parallel=False, fastmath=FASTMATH)(_shrink_springs)
+shrink_springs_par = njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH)(_shrink_springs)
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def _strain(sigma, alpha, l_min, m, m0):
     d = 1.0 - m / m0
     if d < 0.0:
@@ -48,7 +49,7 @@ def _strain(sigma, alpha, l_min, m, m0):
     return e
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def hinge_targets(hidx, hV, ij, rest0, sig_top, sig_bot, alpha, l_min, cyt, water, w0, m0, h, gain, setw, plastic, hrest):
     """Bilayer rest angle per hinge: θ0 = θ_plastic + gain · (ε_top − ε_bottom) / h · d, h the
     current thickness h⁰ (1 − ε_bottom).
@@ -88,7 +89,7 @@ def hinge_targets(hidx, hV, ij, rest0, sig_top, sig_bot, alpha, l_min, cyt, wate
             hrest[e] = tb
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def vol_targets(vsp, rest0, rest, vol0, vrest):
     """Thickness constraint rest value (6 × prism volume) follows the isotropic shrink of its
     triangle: area ∝ f², thickness ∝ f."""
@@ -97,7 +98,7 @@ def vol_targets(vsp, rest0, rest, vol0, vrest):
         vrest[t] = vol0[t] * f * f * f
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def link_targets(links, tri_springs, rest0, rest):
     """Rest length of each link V → T vertex: the tissue shrinks isotropically with its
     bottom layer, in the plane and through the thickness, so a link (the triangle's
@@ -112,7 +113,7 @@ def link_targets(links, tri_springs, rest0, rest):
         rest[s] = rest0[s] * f / 3.0
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def dual_targets(hV, ij, tri_springs, nT, rest0, hrest, h, rest):
     """Rest length of each V spring (the top surface across hinge e): the dual edge bent to the
     hinge's rest angle θ0 at the current thickness f h, f (d0 − h θ0) (a strip of curvature

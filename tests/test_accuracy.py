@@ -1,0 +1,41 @@
+"""`leafsim accuracy --quick`: the report's shape, and that its errors mean something."""
+
+import json
+
+from leafsim.accuracy import METRICS, pareto_front
+from leafsim.cli import main
+
+
+def test_accuracy_quick_report(tmp_path, capsys):
+    out = tmp_path / "acc"
+    assert main(["accuracy", "--quick", "--species", "oak", "--out", str(out), "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["species"] == "oak" and rep["quick"] is True
+    ref = rep["reference"]
+    assert ref["time_to_dry"] > 0 and 0 < ref["area_3d"] <= 1 and ref["particles"] > 0
+    names = {r["name"] for r in rep["rows"]}
+    assert {"default", "osmosis every 5"} <= names
+    assert {r["group"] for r in rep["rows"]} >= {"default", "mesh", "iterations", "osmosis"}
+    for r in rep["rows"]:
+        assert "failed" not in r, r
+        for m in METRICS:
+            assert r[m] >= 0 and r[f"{m}_rel"] >= 0
+        assert r["worst_rel"] == max(r[f"{m}_rel"] for m in METRICS)
+        assert r["ms_frame"] > 0 and r["ms_per_sim_s"] > r["ms_frame"]  # Δt < 1 s
+    # more substeps are closer to the reference than fewer (the reference has the most)
+    rows = {r["name"]: r for r in rep["rows"]}
+    assert rows["40×2"]["position"] < rows["2×1"]["position"]
+    # the front is non-dominated and holds the cheapest run
+    assert rep["front"] == pareto_front(rep["rows"])
+    cheapest = min(rep["rows"], key=lambda r: r["ms_per_sim_s"])
+    assert cheapest["name"] in rep["front"]
+    for f in ("accuracy.json", "accuracy.md", "accuracy_pareto.png"):
+        assert (out / f).stat().st_size > 100
+    assert (out / "accuracy_pareto.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_accuracy_bad_out(tmp_path, capsys):
+    f = tmp_path / "file"
+    f.write_text("x")
+    assert main(["accuracy", "--quick", "--out", str(f)]) == 2
+    assert "not a folder" in capsys.readouterr().err
