@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -26,7 +26,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import Delaunay, cKDTree
 
 from .errors import LeafsimError
-from .geometry import LeafShape, distance_to_polygon, points_in_polygon, polygon_area, resample_closed, resample_polyline
+from .geometry import LeafShape, distance_to_outline, points_in_region, polygon_area, resample_closed, resample_polyline
 from .params import ParamSet
 from .sim.kernels.build import greedy_colour, poisson_accept
 from .sim.model import (
@@ -77,12 +77,18 @@ def estimate_particles(shape: LeafShape, params: ParamSet) -> int:
     Layer T holds ≈ 0.58 A/r² + 2.2 P/r particles (Poisson-disk interior plus contour), layer V
     one per triangle (≈ 2× T).  Fitted on 5 species × 3 spacings: within −10 % … +5 %.
     """
+    a, b = _estimate_terms(shape)
+    s = params["mesh.spacing"]
+    return int(round(a / s**2 + b / s))
+
+
+def _estimate_terms(shape: LeafShape) -> tuple[float, float]:
+    """(a, b) of the estimate ``a / spacing² + b / spacing`` (spacing relative to the length)."""
     c = np.asarray(shape.contour, float)
-    r = params["mesh.spacing"] * float(shape.length)
+    L = float(shape.length)
     area = abs(polygon_area(c))
     per = float(np.linalg.norm(np.diff(np.vstack([c, c[:1]]), axis=0), axis=1).sum())
-    n_t = 0.58 * area / r**2 + 2.2 * per / r
-    return int(round(3.0 * n_t))
+    return 3.0 * 0.58 * area / L**2, 3.0 * 2.2 * per / L
 
 
 def _physical_memory() -> float | None:
@@ -99,8 +105,9 @@ def check_mesh_budget(shape: LeafShape, params: ParamSet) -> int:
     limit = int(params["limits.max_particles"])
     spacing = params["mesh.spacing"]
     gb = (MEMORY_BASE_BYTES + MEMORY_PER_PARTICLE * n) / 1e9
-    # spacing at which the estimate meets the limit (the count scales with 1/spacing²)
-    ok_spacing = 1.01 * spacing * math.sqrt(n / limit) if n else spacing
+    # spacing at which the estimate meets the limit: limit·s² − b·s − a = 0
+    ea, eb = _estimate_terms(shape)
+    ok_spacing = 1.01 * (eb + math.sqrt(eb * eb + 4.0 * limit * ea)) / (2.0 * limit) if n else spacing
     if n > limit:
         raise LeafsimError(
             f"mesh.spacing = {spacing:g} would build about {n:,} particles (≈ {gb:.1f} GB) for this outline, more than "
@@ -141,8 +148,9 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     check_mesh_budget(shape, params)
     r = params["mesh.spacing"] * L
     h = params["mesh.thickness"]
-    P = _sample_particles(contour, veins, params, r, np.random.default_rng(seed), extra_points)
-    tri, P, remap = _triangulate(P, contour, r)
+    holes = tuple(np.asarray(hh, float) for hh in shape.holes)
+    P = _sample_particles(contour, veins, params, r, np.random.default_rng(seed), extra_points, holes)
+    tri, P, remap = _triangulate(P, contour, r, holes)
     nT, m = len(P.pts), len(tri)
     vp, vw, vo = _vein_chains(P, remap)
     E = _t_edges(P.pts, tri, vp, vo)
@@ -157,20 +165,72 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     vol_rest0 = 2.0 * tri_area * h  # 6 × tetra volume = det = h × 2A
     base = int(np.argmin(np.linalg.norm(P.pts - np.asarray(shape.base, float), axis=1)))
     M = _masses(P, tri, tri_area, S, E.n_T_springs, base, vp, vw, params)
-    return _finalize(shape, P, tri, rest, S, H, vol_idx, vol_rest0, E.tri_edge, M, base, vp, vw, vo, remap, L, h, r, E.share)
+    model = _finalize(shape, P, tri, rest, S, H, vol_idx, vol_rest0, E.tri_edge, M, base, vp, vw, vo, remap, L, h, r, E.share)
+    return replace(model, particle_patch=patch_field(model.particle_rest[:, :2], model.particle_area,
+                                                     model.particle_layer == LAYER_T, L, seed))
 
 
-def _sample_particles(contour, veins: VeinGraph, params: ParamSet, r: float, rng, extra_points) -> _Points:
-    """Contour particles at regular spacing, vein particles along the veins (merged at
-    junctions, snapped to the contour), Poisson-disk surface particles at spacing ``r``."""
+#: correlation length of the hydraulic patch field, × leaf length (patches a few mm to cm)
+PATCH_LENGTH = 0.12
+
+
+def patch_field(xy: np.ndarray, area: np.ndarray, ref: np.ndarray, length: float, seed: int) -> np.ndarray:
+    """(n,) smooth seeded random field over the blade, zero mean and unit spread (area-weighted
+    over the particles ``ref``): patchy hydraulic failure — some patches of the blade lose
+    water faster than others (a drying leaf's xylem fails in patches; Brodribb & Holbrook
+    2003, Plant Physiol. 132:2166).  A Gaussian-correlated field with correlation length
+    ``PATCH_LENGTH`` × length from 64 random Fourier features; a function of position only, so
+    the same seed gives the same patches at any mesh spacing."""
+    rng = np.random.default_rng([int(seed), 0x9A7C4])
+    k = 64
+    omega = rng.standard_normal((k, 2)) / (PATCH_LENGTH * float(length))
+    phase = rng.uniform(0.0, 2.0 * np.pi, k)
+    f = np.cos(np.asarray(xy, float) @ omega.T + phase).sum(1) * math.sqrt(2.0 / k)
+    w = np.asarray(area, float) * ref
+    mean = float(np.dot(w, f) / max(w.sum(), 1e-300))
+    sd = math.sqrt(float(np.dot(w, (f - mean) ** 2) / max(w.sum(), 1e-300)))
+    return (f - mean) / max(sd, 1e-12)
+
+
+def _margin_points(ring: np.ndarray, r: float, spacing: float, detail: float) -> np.ndarray:
+    """Particles along one closed margin ring (contour or hole), starting at its first point:
+    its corners — the vertices a Douglas–Peucker simplification at ``detail`` × r keeps (tooth
+    tips and notches), no two closer than 0.1 r along the margin — and evenly spaced points
+    along the margin between them, at most ``spacing`` apart (``detail`` = 0: evenly spaced
+    only, which cuts teeth smaller than the spacing)."""
+    seg = np.linalg.norm(np.diff(np.vstack([ring, ring[:1]]), axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    per = float(s[-1])
+    if detail <= 0:
+        return resample_closed(ring, max(12, int(round(per / spacing))))
+    import cv2
+
+    keep = cv2.approxPolyDP(np.ascontiguousarray(ring, np.float32).reshape(-1, 1, 2), float(detail * r), True).reshape(-1, 2)
+    idx = np.unique(np.concatenate([[0], cKDTree(ring).query(keep.astype(np.float64))[1]]))
+    corners = [0]
+    for i in idx[1:]:
+        if s[i] - s[corners[-1]] >= 0.1 * r and per - s[i] >= 0.1 * r:
+            corners.append(int(i))
+    ends = np.r_[s[corners], per]
+    t = np.concatenate([np.linspace(a, b, max(1, int(np.ceil((b - a) / spacing))), endpoint=False) for a, b in zip(ends[:-1], ends[1:])])
+    closed = np.vstack([ring, ring[:1]])
+    return np.column_stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])])
+
+
+def _sample_particles(contour, veins: VeinGraph, params: ParamSet, r: float, rng, extra_points, holes=()) -> _Points:
+    """Margin particles along the contour (first, in contour order) and the holes' edges
+    (:func:`_margin_points`), vein particles along the veins (merged at junctions, snapped to
+    the margin), Poisson-disk surface particles at spacing ``r`` in the blade."""
     max_order = _ORDER[params["mesh.veins_included"]]
-    per = float(np.linalg.norm(np.diff(np.vstack([contour, contour[:1]]), axis=0), axis=1).sum())
-    nc = max(12, int(round(per / (params["mesh.contour_spacing"] * r))))
-    cpts = resample_closed(contour, nc)
+    spacing, detail = params["mesh.contour_spacing"] * r, params["mesh.contour_detail"]
+    cpts = _margin_points(contour, r, spacing, detail)
+    nc = len(cpts)
+    rings = [cpts] + [_margin_points(hh, r, spacing, detail) for hh in holes]
+    cpts = np.vstack(rings)
     pts = [cpts]
-    kind = [np.full(nc, KIND_CONTOUR, np.int8)]
-    vorder = [np.full(nc, -1, np.int8)]
-    n = nc
+    kind = [np.full(len(cpts), KIND_CONTOUR, np.int8)]
+    vorder = [np.full(len(cpts), -1, np.int8)]
+    n = len(cpts)
     ctree = cKDTree(cpts)
     vein_lists, vein_ord, vein_wid = [], [], []
     vtree_pts = np.empty((0, 2))
@@ -183,7 +243,7 @@ def _sample_particles(contour, veins: VeinGraph, params: ParamSet, r: float, rng
         s_old = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(v.points, axis=0), axis=1))])
         s_new = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(Pv, axis=0), axis=1))])
         W = np.interp(s_new / max(s_new[-1], 1e-30), s_old / max(s_old[-1], 1e-30), np.asarray(v.widths, float)) if len(v.widths) == len(v.points) else np.full(len(Pv), 0.001)
-        inside = points_in_polygon(Pv, contour)
+        inside = points_in_region(Pv, contour, holes)
         idx, wid = [], []
         for p, w, ins in zip(Pv, W, inside):
             dc, jc = ctree.query(p)
@@ -196,7 +256,7 @@ def _sample_particles(contour, veins: VeinGraph, params: ParamSet, r: float, rng
                 if vtree is not None:
                     dv, jv = vtree.query(p)
                     if dv < (0.8 if not idx else 0.4) * vs:
-                        j = int(jv) + nc  # merge with an existing vein particle (junctions)
+                        j = int(jv) + len(cpts)  # merge with an existing vein particle (junctions)
                     elif dv < 0.6 * vs:
                         continue  # would crowd another vein's edge
                 if j < 0:
@@ -216,7 +276,7 @@ def _sample_particles(contour, veins: VeinGraph, params: ParamSet, r: float, rng
         if len(vtree_pts):
             vtree = cKDTree(vtree_pts)
     fixed = np.vstack(pts)
-    surf = _poisson_surface(contour, fixed, vein_lists, r, rng)
+    surf = _poisson_surface(contour, fixed, vein_lists, r, rng, holes)
     if extra_points is not None and len(extra_points):
         surf = np.vstack([surf, np.asarray(extra_points, float)])
     allp = np.vstack([fixed, surf])
@@ -227,14 +287,15 @@ def _sample_particles(contour, veins: VeinGraph, params: ParamSet, r: float, rng
     return _Points(allp, kinds, vords, vein_lists, vein_ord, vein_wid, nc)
 
 
-def _poisson_surface(contour, fixed, vein_lists, r: float, rng) -> np.ndarray:
-    """(k, 2) Poisson-disk surface points inside the outline, ≥ r from every fixed point and
-    kept off the vein segments (so consecutive vein particles stay Delaunay-connected)."""
+def _poisson_surface(contour, fixed, vein_lists, r: float, rng, holes=()) -> np.ndarray:
+    """(k, 2) Poisson-disk surface points in the blade (inside the outline, outside its
+    holes), ≥ r from every fixed point and kept off the vein segments (so consecutive vein
+    particles stay Delaunay-connected)."""
     lo, hi = contour.min(0) - r, contour.max(0) + r
     area = abs(polygon_area(contour))
     ncand = int(12 * area / (r * r)) + 100
     cand = lo + rng.random((ncand, 2)) * (hi - lo)
-    cand = cand[points_in_polygon(cand, contour)]
+    cand = cand[points_in_region(cand, contour, holes)]
     if vein_lists and len(cand):
         dense = np.vstack([resample_polyline(fixed[ch], 0.1 * r) for ch in vein_lists])
         dd, _ = cKDTree(dense).query(cand, distance_upper_bound=0.75 * r)
@@ -243,13 +304,14 @@ def _poisson_surface(contour, fixed, vein_lists, r: float, rng) -> np.ndarray:
     return cand[ok]
 
 
-def _triangulate(P: _Points, contour, r: float):
-    """Delaunay triangulation of layer T: outside triangles and boundary slivers dropped,
+def _triangulate(P: _Points, contour, r: float, holes=()):
+    """Delaunay triangulation of layer T: triangles outside the blade (outside the contour or
+    in a hole) and boundary slivers dropped,
     CCW, unused particles removed, particles and triangles in Morton order, missing vein
     edges flipped in.  Returns (tri (m, 3), reordered points, remap old → new index (−1 gone))."""
     allp, kinds, vords = P.pts, P.kinds, P.vorders
     tri = Delaunay(allp).simplices.astype(np.int64)
-    keep = points_in_polygon(allp[tri].mean(1), contour)
+    keep = points_in_region(allp[tri].mean(1), contour, holes)
     a, b, c = allp[tri[:, 0]], allp[tri[:, 1]], allp[tri[:, 2]]
     ar = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
     e2 = ((b - a) ** 2).sum(1) + ((c - b) ** 2).sum(1) + ((a - c) ** 2).sum(1)
@@ -545,7 +607,7 @@ def _finalize(shape, P, tri, rest, S: _Springs, H: _Hinges, vol_idx, vol_rest0, 
         particle_vein_order=np.concatenate([P.vorders, -np.ones(m, np.int8)]),
         particle_area=M.area, particle_cytosol=M.cytosol, particle_mass0=M.mass0, particle_water0=M.water0,
         particle_tau=M.tau, particle_vein_width=M.vein_width,
-        particle_margin_distance=distance_to_polygon(rest[:, :2], np.asarray(shape.contour, float)),
+        particle_margin_distance=distance_to_outline(rest[:, :2], np.asarray(shape.contour, float), shape.holes),
         particle_texcoord=shape.texcoords(rest[:, :2]),
         particle_pinned=pinned,
         tri_T=tri, tri_V=np.arange(nT, nT + m, dtype=np.int64),

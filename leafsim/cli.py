@@ -1,4 +1,4 @@
-"""Command line: ``leafsim [gui|species|params|outline|veins|build|run|bench] ...``.
+"""Command line: ``leafsim [gui|species|params|outline|veins|build|run|compare|bench|scene|export] ...``.
 
 Every command prints a one-line error and exits with status 2 on bad input; ``--json``
 prints one JSON object on stdout and nothing else.
@@ -106,6 +106,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"save the whole state to OUT/{CHECKPOINT} every K frames (default {CHECKPOINT_EVERY} with --out; 0 = never)")
     r.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out (same command otherwise)")
     r.add_argument("--json", action="store_true")
+
+    cp = sub.add_parser("compare", help="the model top-down beside the species photo (and a senescent one): IoU, margin, veins, colour")
+    _common(cp)
+    cp.add_argument("--photo", default=None, help="compare with this photo instead of the species photo (base and apex are detected)")
+    cp.add_argument("--stage", default=None, help="young, dried (2 %% of the water left) or a frame number; default: young, and "
+                                                 "the best-matching stage for a senescent photo named in the config")
+    cp.add_argument("--effects", default=None, help="comma-separated effects for the drying run (others off), e.g. osmosis,colour")
+    cp.add_argument("--out", default=None, help="montage PNG: photo | model | overlay per row, metrics, colour classes")
+    cp.add_argument("--json", action="store_true")
 
     be = sub.add_parser("bench", help="benchmark the simulation kernels")
     be.add_argument("--json", action="store_true")
@@ -341,7 +350,7 @@ def _check_run_args(args) -> Path | None:
 
 def cmd_run(args):
     from .fileio import remove_stale_temps
-    from .leaf import build_leaf, load_photo_rgba
+    from .leaf import build_leaf, species_photo_rgba
     from .sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
     from .sim.run import StatsStream, run_headless, save_npz
     from .sim.simulator import Simulator
@@ -369,8 +378,8 @@ def cmd_run(args):
     for target in ([ck, out / "final.npz", out / "frame_*.png"] if out is not None else []) + ([Path(args.stats)] if args.stats else []):
         remove_stale_temps(target)  # left by a run killed (SIGKILL) while writing
     if args.every:
-        photo = load_photo_rgba(sp.image, params["limits.image_pixels"]) if (sp.image is not None and params["render.texture"]) else None
-        snap = _FrameWriter(model, params, photo, out, sim.state())
+        photo = species_photo_rgba(sp, params) if (sp.image is not None and params["render.texture"]) else None
+        snap = _FrameWriter(model, params, photo, out, sim.state(), sp.photo_colour)
         if start == 0:
             snap.write(0, state)
 
@@ -430,10 +439,10 @@ class _FrameWriter:
     """Offscreen PNG frames of one leaf (photo species: the pigment colour carrying the photo's
     detail, as the GUI shows it); the camera is fixed by the first frame."""
 
-    def __init__(self, model, params, photo, out: Path, rest_state):
+    def __init__(self, model, params, photo, out: Path, rest_state, photo_colour: bool = False):
         from .view import LeafView
 
-        self.view = LeafView(model, photo, photo_tint=False)
+        self.view = LeafView(model, photo, rest_state.pigments.copy(), photo_tint=False, photo_colour=photo_colour)
         self.params, self.out = params, out
         self.rest = rest_state  # the camera frames the rest leaf (the same after --resume)
         self.renderer = self.camera = None
@@ -452,6 +461,45 @@ class _FrameWriter:
         else:
             self.renderer.render_png(self.view.update(state, self.params), path, camera=self.camera, options=opts)
         self.written += 1
+
+
+def _stage_arg(text: str | None):
+    if text is None or text in ("young", "dried"):
+        return text
+    try:
+        k = int(text)
+    except ValueError:
+        k = -1
+    if k < 0:
+        raise LeafsimError(f"--stage {text!r}: expected young, dried or a non-negative frame number")
+    return k
+
+
+def cmd_compare(args):
+    from .species import DEFAULT_SPECIES, get_species
+
+    stage = _stage_arg(args.stage)
+    if args.photo is not None and not Path(args.photo).is_file():
+        raise LeafsimError(f"--photo {args.photo}: file not found")
+    if args.out and not Path(args.out).resolve().parent.is_dir():
+        raise LeafsimError(f"--out {args.out}: folder {Path(args.out).parent} does not exist")
+    sp = get_species(args.species or DEFAULT_SPECIES, args.config)
+    params = sp.params.with_overrides({**_overrides(args), **_effects_overrides(args.effects)}, where="--set")
+    from .compare import montage
+    from .fileio import write_png_atomic
+    from .render.compare_run import run_compare
+
+    rep = run_compare(sp, params, seed=args.seed, photo=args.photo, stage=stage)
+    rows = rep.pop("_rows")
+    if args.out:
+        write_png_atomic(args.out, montage(rep, rows), rgb=True)
+        rep["montage"] = str(args.out)
+    lines = [f"{sp.key}: {'row':9s} {'frame':>6s} {'water':>6s} {'IoU':>7s} {'margin':>7s} {'colourTV':>8s} {'dE':>6s}  reference"]
+    for r in rep["rows"]:
+        m = "n/a" if r["margin_ratio"] is None else f"{r['margin_ratio']:.3f}"
+        lines.append(f"{sp.key}: {r['kind']:9s} {r['stage']['frame']:6d} {r['stage']['water']:6.2f} {r['iou']:7.4f} {m:>7s} "
+                     f"{r['colour_tv']:8.3f} {r['mean_delta_e'] or 0:6.1f}  {r['reference']}")
+    _emit(args, rep, "\n".join(lines) + (f"\n-> {args.out}" if args.out else ""))
 
 
 def cmd_accuracy(args):
@@ -528,7 +576,7 @@ def cmd_scene(args):
 
 def cmd_export(args):
     from .export import export_mesh, format_of
-    from .leaf import build_leaf, load_photo_rgba
+    from .leaf import build_leaf, species_photo_rgba
     from .sim.run import run_headless
     from .sim.simulator import Simulator
     from .species import get_species
@@ -562,8 +610,9 @@ def cmd_export(args):
         keys = [state]
     elif keys[-1].frame != state.frame:
         keys.append(state.copy())
-    photo = load_photo_rgba(sp.image) if sp.image is not None else None
-    rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=LeafView(model, photo),
+    photo = species_photo_rgba(sp, params) if sp.image is not None else None
+    view = LeafView(model, photo, sim.state().pigments, photo_colour=sp.photo_colour)
+    rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view,
                       layers=args.layers, veins=args.veins, texture=args.texture)
     rep.update(species=sp.key, seed=args.seed, frames=state.frame)
     counts = ", ".join(f"{k} {v['vertices']} vertices / {v['triangles']} triangles" for k, v in rep["meshes"].items())
@@ -572,7 +621,7 @@ def cmd_export(args):
 
 COMMANDS = {
     "gui": cmd_gui, "species": cmd_species, "params": cmd_params, "outline": cmd_outline, "veins": cmd_veins,
-    "build": cmd_build, "run": cmd_run, "bench": cmd_bench,
+    "build": cmd_build, "run": cmd_run, "bench": cmd_bench, "compare": cmd_compare,
 }
 COMMANDS.update(scene=cmd_scene, export=cmd_export, accuracy=cmd_accuracy)
 

@@ -39,9 +39,12 @@ def draw_veins(shape: LeafShape, graph: VeinGraph, size: int = 900, photo: np.nd
         to_px = lambda pts: np.column_stack([(pts[:, 0] - c[0]) * px_per_m + size / 2, (c[1] - pts[:, 1]) * px_per_m + size / 2])  # noqa: E731
         canvas = np.full((size, size, 3), 255, np.uint8)
         cv2.fillPoly(canvas, [np.round(to_px(shape.contour) * 16).astype(np.int32)], (150, 200, 150), cv2.LINE_AA, shift=4)
+        for hole in shape.holes:
+            cv2.fillPoly(canvas, [np.round(to_px(hole) * 16).astype(np.int32)], (255, 255, 255), cv2.LINE_AA, shift=4)
         left = None
     big = cv2.resize(canvas, (canvas.shape[1] * S, canvas.shape[0] * S), interpolation=cv2.INTER_NEAREST)
-    cv2.polylines(big, [np.round(to_px(shape.contour) * S).astype(np.int32)], True, (30, 90, 30), max(1, S), cv2.LINE_AA)
+    for ring in (shape.contour, *shape.holes):
+        cv2.polylines(big, [np.round(to_px(ring) * S).astype(np.int32)], True, (30, 90, 30), max(1, S), cv2.LINE_AA)
     for v in sorted(graph.veins, key=lambda v: -v.order):
         q = to_px(v.points) * S
         for k in range(len(q) - 1):

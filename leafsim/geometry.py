@@ -26,6 +26,9 @@ class LeafShape:
         identity-like for drawn outlines.  Its inverse gives texture coordinates.
     image : str | None — photo path, None for drawn outlines.
     image_size : (w, h) of the photo in pixels, or None.
+    holes : tuple of (k, 2) float64 — closed polygons (clockwise, metres) of holes in the
+        blade: closed sinuses where overlapping lobes leave the background showing.  They
+        are margins like the outer contour; nothing grows or is meshed inside them.
     """
 
     contour: np.ndarray
@@ -36,6 +39,15 @@ class LeafShape:
     px_to_world: np.ndarray = field(default_factory=lambda: np.eye(2, 3))
     image: str | None = None
     image_size: tuple[int, int] | None = None
+    holes: tuple = ()
+
+    def inside(self, pts: np.ndarray) -> np.ndarray:
+        """Boolean (n,) mask of points in the blade: inside the contour, outside every hole."""
+        return points_in_region(pts, self.contour, self.holes)
+
+    def margin_distance(self, pts: np.ndarray) -> np.ndarray:
+        """Distance (n,) from each point to the nearest margin (the contour or a hole's edge)."""
+        return distance_to_outline(pts, self.contour, self.holes)
 
     def world_to_px(self, pts: np.ndarray) -> np.ndarray:
         """Map world (n, 2) points back to photo pixel coordinates."""
@@ -56,7 +68,8 @@ class LeafShape:
 
     @property
     def area(self) -> float:
-        return polygon_area(self.contour)
+        """Blade area: the contour's minus its holes'."""
+        return polygon_area(self.contour) - sum(abs(polygon_area(h)) for h in self.holes)
 
 
 def polygon_area(poly: np.ndarray) -> float:
@@ -104,6 +117,29 @@ def points_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return out
 
 
+def points_in_region(pts: np.ndarray, contour: np.ndarray, holes=()) -> np.ndarray:
+    """Boolean (n,) mask of points inside ``contour`` and outside every polygon of ``holes``."""
+    inside = points_in_polygon(pts, contour)
+    for h in holes:
+        if inside.any():
+            inside[inside] &= ~points_in_polygon(np.asarray(pts, float).reshape(-1, 2)[inside], h)
+    return inside
+
+
+def distance_to_outline(pts: np.ndarray, contour: np.ndarray, holes=()) -> np.ndarray:
+    """Distance (n,) from each point to the nearest edge of the contour or of a hole."""
+    d = distance_to_polygon(pts, contour)
+    for h in holes:
+        d = np.minimum(d, distance_to_polygon(pts, h))
+    return d
+
+
+def outline_edges(contour: np.ndarray, holes=()) -> tuple[np.ndarray, np.ndarray]:
+    """All margin edges (P, Q) of a contour and its holes (each polygon closed)."""
+    rings = [np.asarray(contour, float)] + [np.asarray(h, float) for h in holes]
+    return np.vstack(rings), np.vstack([np.roll(r, -1, axis=0) for r in rings])
+
+
 def segments_intersect(p1, p2, q1, q2) -> bool:
     """Proper intersection test of segments p1p2 and q1q2 (touching at end points excluded)."""
     d1 = _cross(q2 - q1, p1 - q1)
@@ -136,10 +172,10 @@ def segment_hits(a: np.ndarray, b: np.ndarray, P: np.ndarray, Q: np.ndarray) -> 
     return t[ok]
 
 
-def ray_polygon_hit(origin: np.ndarray, direction: np.ndarray, poly: np.ndarray) -> float | None:
-    """Distance along a unit ``direction`` from ``origin`` to the first polygon edge, or None."""
-    P = poly
-    Q = np.roll(poly, -1, axis=0)
+def ray_polygon_hit(origin: np.ndarray, direction: np.ndarray, poly: np.ndarray, holes=()) -> float | None:
+    """Distance along a unit ``direction`` from ``origin`` to the first polygon edge (of
+    ``poly`` or of one of its ``holes``), or None."""
+    P, Q = outline_edges(poly, holes)
     s = Q - P
     r = direction
     denom = r[0] * s[:, 1] - r[1] * s[:, 0]
@@ -321,4 +357,32 @@ def targets_problem(targets: np.ndarray, contour: np.ndarray, length: float) -> 
             x, y = (float(v) / length for v in t[k])
             return (f"target {k} at ({x:.4g}, {y:.4g}) leaf units lies {d:.3g} leaf lengths outside the outline "
                     "(expected inside the blade)")
+    return None
+
+
+def holes_problem(holes, contour: np.ndarray) -> str | None:
+    """Why these holes cannot be holes of this blade outline, or None: each has at least 3
+    points, lies inside the contour and touches neither the contour, itself nor another
+    hole.  The text is a sentence fragment for a one-line error ("the outline ...")."""
+    c = np.asarray(contour, float)
+    rings = [c] + [np.asarray(h, float).reshape(-1, 2) for h in holes]
+    for k, h in enumerate(rings[1:]):
+        if len(h) < 3 or not np.isfinite(h).all() or abs(polygon_area(h)) <= 0:
+            return f"has hole {k} with fewer than 3 distinct finite points or no area"
+        if not points_in_polygon(h, c).all():
+            return f"has hole {k} reaching outside the blade contour"
+    P = np.vstack(rings)
+    Q = np.vstack([np.roll(r, -1, axis=0) for r in rings])
+    ring = np.concatenate([np.full(len(r), i) for i, r in enumerate(rings)])
+    pairs = crossing_pairs(P, Q, touching=True)
+    n = np.array([len(r) for r in rings])[ring]
+    start = np.concatenate([[0], np.cumsum([len(r) for r in rings])[:-1]])[ring]
+    for i, j in pairs:
+        if ring[i] == ring[j]:
+            a, b = i - start[i], j - start[j]
+            if abs(a - b) == 1 or abs(a - b) == n[i] - 1:
+                continue  # neighbours on one ring share a vertex
+            if ring[i] == 0:
+                continue  # the contour itself is checked by outline_problem
+        return f"has hole {max(ring[i], ring[j]) - 1} touching {'the contour' if min(ring[i], ring[j]) == 0 else 'another hole or itself'}"
     return None

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -28,6 +28,7 @@ import numpy as np
 from .errors import LeafsimError
 from .fileio import write_png_atomic
 from .geometry import LeafShape, polygon_area, resample_closed
+from .outline_holes import hole_polygons, kept_holes, petiole_band, sinus_junction, without_band
 from .params import ParamSet
 
 __all__ = [
@@ -45,6 +46,8 @@ __all__ = [
 MIN_LEAF_FRACTION = 0.005
 #: A second region at least this fraction of the leaf's area makes the photo ambiguous.
 SECOND_LEAF_FRACTION = 0.25
+#: A hole in the blade at least this fraction of the leaf's area is kept (a closed sinus).
+HOLE_MIN_FRACTION = 0.001
 _DEBUG = False
 
 
@@ -72,6 +75,10 @@ class TracedOutline:
         has the working size, every coordinate is in full-photo pixels.
     border_fraction : share of the image border the traced leaf covers (> 0: the leaf runs
         off the photo and the frame's straight edge is part of the outline).
+    holes_px : list of (k, 2) float64 — closed holes of the blade (sinuses closed by
+        overlapping lobes), clockwise as seen; ``hole_mask`` the same at the working size.
+    petiole_mask : (h, w) uint8 0/255 or None — pixels of a petiole lying on the blade (its
+        colour is no blade's: inpaint it in a texture), at the working size.
     """
 
     mask: np.ndarray
@@ -88,6 +95,9 @@ class TracedOutline:
     seconds: float = 0.0
     work_scale: float = 1.0
     border_fraction: float = 0.0
+    holes_px: list = field(default_factory=list)
+    hole_mask: np.ndarray | None = None
+    petiole_mask: np.ndarray | None = None
 
     @property
     def length_px(self) -> float:
@@ -276,6 +286,15 @@ def segment_leaf(img: np.ndarray, path: str = "image") -> np.ndarray:
     Raises LeafsimError ``<path>: no leaf found (...)`` when nothing leaf-sized stands out, and
     ``<path>: ... leaf-sized regions`` when there is more than one leaf.
     """
+    return segment_with_holes(img, path)[0]
+
+
+def segment_with_holes(img: np.ndarray, path: str = "image") -> tuple[np.ndarray, np.ndarray]:
+    """:func:`segment_leaf` and the holes it filled that are real openings of the blade:
+    (filled mask, hole mask), both uint8 0/255.  A hole is kept when the cleaned foreground
+    (thin clutter removed, small gaps closed) leaves it open and it covers at least
+    ``HOLE_MIN_FRACTION`` of the leaf (closed sinuses where lobes overlap; specks and glints
+    are filled)."""
     if img is None or img.ndim != 3 or img.shape[2] not in (3, 4):
         raise LeafsimError(f"{path}: no leaf found (expected a colour image)")
     h, w = img.shape[:2]
@@ -292,7 +311,8 @@ def segment_leaf(img: np.ndarray, path: str = "image") -> np.ndarray:
     k_close = max(3, int(round(0.006 * diag)))
     opened = cv2.morphologyEx(fg, cv2.MORPH_OPEN, _disk(k_open))
     leaf = _pick_leaf(cv2.morphologyEx(opened, cv2.MORPH_CLOSE, _disk(k_close)), path)
-    return _fill_holes(_restore_petiole(fg, opened, leaf, lab))
+    filled = _fill_holes(_restore_petiole(fg, opened, leaf, lab))
+    return filled, kept_holes(filled, leaf, HOLE_MIN_FRACTION)
 
 
 def _pick_leaf(fg: np.ndarray, path: str) -> np.ndarray:
@@ -475,7 +495,7 @@ def _find_petiole(mask: np.ndarray, scale: float, where: str = "image"):
     two petioles: overlapping leaves, refused with a LeafsimError.  The winner is then cut at
     full resolution with a finer opening just wider than the petiole.
 
-    Returns (blade_mask, junction_xy, tip_xy) or None.
+    Returns (blade_mask, junction_xy, tip_xy, width_px) or None.
     """
     H, W = mask.shape
     f = min(1.0, 320.0 / max(scale, 1.0))
@@ -529,7 +549,7 @@ def _find_petiole(mask: np.ndarray, scale: float, where: str = "image"):
     dd = (xs + X0 - junction[0]) ** 2 + (ys + Y0 - junction[1]) ** 2
     q = int(np.argmax(dd))
     tip = np.array([xs[q] + X0, ys[q] + Y0], float)
-    return blade_mask, junction, tip
+    return blade_mask, junction, tip, float(width_full)
 
 
 def _base_from_shape(P: np.ndarray, mask: np.ndarray, L: float) -> np.ndarray:
@@ -731,6 +751,7 @@ def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = No
     if f != 1.0:
         back = lambda q: None if q is None else (np.asarray(q, float) + 0.5) / f - 0.5  # noqa: E731
         t.contour_px, t.lobes_px, t.petiole_px = back(t.contour_px), back(t.lobes_px), back(t.petiole_px)
+        t.holes_px = [back(hp) for hp in t.holes_px]
         t.base_px = np.asarray(base_px, float).reshape(2) if base_px is not None else back(t.base_px)
         t.apex_px = np.asarray(apex_px, float).reshape(2) if apex_px is not None else back(t.apex_px)
         t.area_px /= f * f
@@ -739,54 +760,91 @@ def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = No
     return t
 
 
-def _trace(img: np.ndarray, p: ParamSet, where: str, base_px, apex_px) -> TracedOutline:
-    """:func:`trace_outline` on an image in memory (all coordinates in its pixels)."""
-    h, w = img.shape[:2]
-    diag = math.hypot(w, h)
-    mask = segment_leaf(img, where)
+@dataclass
+class _Blade:
+    """Masks and petiole of one traced leaf while :func:`_trace` works on them."""
+
+    mask: np.ndarray            # filled blade silhouette (petiole cut off)
+    holes: np.ndarray           # kept holes (closed sinuses)
+    petiole: np.ndarray | None  # [junction, tip] of a petiole sticking out, or None
+    width: float | None         # its width [px]
+    band: np.ndarray | None     # pixels of a petiole lying on the blade (over blade or a sinus)
+    junction: np.ndarray | None
+
+
+def _petiole(lab, mask, holes, where, base_given: bool) -> _Blade:
+    """Cut a petiole sticking out of the blade (also when the base is given: it never becomes
+    blade); without a given base, follow it into a sinus closed by overlapping basal lobes."""
     area = float(np.count_nonzero(mask))
-    scale = math.sqrt(area)
+    found = _find_petiole(mask, math.sqrt(area), where)
+    out = _Blade(mask, holes, None, None, None, None)
+    if found is None or np.count_nonzero(found[0]) <= 0.8 * area:
+        return out
+    blade, junction, tip, width = found
+    piece = (mask > 0) & (blade == 0)
+    colour = np.median(lab[piece], axis=0) if piece.any() else None
+    out.mask, out.petiole, out.width, out.junction = blade, np.array([junction, tip], float), width, junction
+    if not base_given:
+        length = float(max(np.ptp(np.nonzero(blade)[0]), np.ptp(np.nonzero(blade)[1]), 1))
+        behind = sinus_junction(lab, blade, holes, junction, tip, width, length, colour)
+        if behind is not None:
+            out.junction = behind
+    return out
 
-    petiole = None
-    method = "given"
-    detected_base = None
-    if base_px is None:
-        found = _find_petiole(mask, scale, where)
-        if found is not None:
-            blade, junction, tip = found
-            if np.count_nonzero(blade) > 0.8 * area:
-                mask = blade
-                area = float(np.count_nonzero(mask))
-                detected_base = junction
-                petiole = np.array([junction, tip], float)
-                method = "petiole"
 
+def _lay_petiole_off(b: _Blade, lab, base, apex) -> None:
+    """A petiole lying on the blade is no blade: under it the blade continues where blade lies
+    on both of its sides, elsewhere (a sinus, the background) it is background."""
+    band = petiole_band(lab, b.mask, b.holes, base, apex, b.width)
+    if band is None:
+        return
+    width = b.width or 0.016 * float(np.linalg.norm(np.asarray(apex) - base))
+    leaf, _ = without_band(b.mask, b.holes, band, width, base)
+    # the pale petiole base where it joins the blade is no sinus: close gaps around the base
+    near = np.zeros_like(leaf)
+    cv2.circle(near, (int(round(base[0])), int(round(base[1]))), int(round(2.0 * width)) + 2, 255, -1)
+    leaf = cv2.bitwise_or(leaf, cv2.bitwise_and(cv2.morphologyEx(leaf, cv2.MORPH_CLOSE, _disk(int(round(1.2 * width)))), near))
+    filled = _fill_holes(_largest_component(leaf))
+    b.mask, b.holes, b.band = filled, kept_holes(filled, leaf, HOLE_MIN_FRACTION), band
+
+
+def _polygon(mask: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """(simplified outer contour counter-clockwise as seen, dense resampling of it)."""
     raw = _outer_contour(mask)
-    eps = float(p["outline.simplify"]) * diag
     simp = cv2.approxPolyDP(raw.astype(np.float32).reshape(-1, 1, 2), eps, True).reshape(-1, 2).astype(np.float64) if eps > 0 else raw
     if len(simp) < 3:
         simp = raw
-    # orientation: counter-clockwise as seen (negative signed area with y down)
-    if polygon_area(simp) > 0:
+    if polygon_area(simp) > 0:  # counter-clockwise as seen (negative signed area with y down)
         simp = simp[::-1].copy()
     perim = float(np.linalg.norm(np.diff(np.vstack([simp, simp[:1]]), axis=0), axis=1).sum())
-    dense = resample_closed(simp, int(np.clip(perim / 2.0, 200, 4000)))
-    L_est = float(max(np.ptp(dense[:, 0]), np.ptp(dense[:, 1]), 1.0))
+    return simp, resample_closed(simp, int(np.clip(perim / 2.0, 200, 4000)))
 
+
+def _trace(img: np.ndarray, p: ParamSet, where: str, base_px, apex_px) -> TracedOutline:
+    """:func:`trace_outline` on an image in memory (all coordinates in its pixels)."""
+    h, w = img.shape[:2]
+    eps = float(p["outline.simplify"]) * math.hypot(w, h)
+    mask, holes = segment_with_holes(img, where)
+    lab = cv2.cvtColor(np.ascontiguousarray(img[..., :3]).astype(np.float32) * (1.0 / 255.0), cv2.COLOR_BGR2Lab)
+    b = _petiole(lab, mask, holes, where, base_px is not None)
+    simp, dense = _polygon(b.mask, eps)
+    L_est = float(max(np.ptp(dense[:, 0]), np.ptp(dense[:, 1]), 1.0))
+    method = "given" if base_px is not None else ("petiole" if b.junction is not None else "shape")
     if base_px is not None:
         base = np.asarray(base_px, float).reshape(2)
-    elif detected_base is not None:
-        base = dense[int(np.argmin(np.linalg.norm(dense - detected_base, axis=1)))].copy()
+    elif b.junction is not None:
+        near = dense[int(np.argmin(np.linalg.norm(dense - b.junction, axis=1)))]
+        # on the margin, or on a sinus behind overlapping lobes (inside the silhouette)
+        base = near.copy() if np.linalg.norm(near - b.junction) < 2.0 * (b.width or 1.0) + 2.0 else b.junction.copy()
     else:
-        base = _base_from_shape(dense, mask, L_est)
-        method = "shape"
-
+        base = _base_from_shape(dense, b.mask, L_est)
+    apex0 = np.asarray(apex_px, float).reshape(2) if apex_px is not None else dense[int(np.argmax(np.linalg.norm(dense - base, axis=1)))]
+    _lay_petiole_off(b, lab, base, apex0)
+    if b.band is not None:
+        simp, dense = _polygon(b.mask, eps)
     n = int(p["outline.points"])
     contour = resample_closed(_start_at(simp, base), n)
-    if apex_px is not None:
-        apex = np.asarray(apex_px, float).reshape(2)
-    else:
-        apex = contour[int(np.argmax(np.linalg.norm(contour - base, axis=1)))].copy()
+    apex = np.asarray(apex_px, float).reshape(2) if apex_px is not None else contour[int(np.argmax(np.linalg.norm(contour - base, axis=1)))].copy()
     length = float(np.linalg.norm(apex - base))
     if length < 1e-6:
         raise LeafsimError(f"{where}: base and apex coincide at {base.tolist()} (expected distinct points)")
@@ -795,11 +853,14 @@ def _trace(img: np.ndarray, p: ParamSet, where: str, base_px, apex_px) -> Traced
     if len(tips):  # snap onto the output contour
         k = np.argmin(np.linalg.norm(contour[None, :, :] - tips[:, None, :], axis=2), axis=1)
         tips = contour[np.unique(k)]
+    perim = float(np.linalg.norm(np.diff(np.vstack([contour, contour[:1]]), axis=0), axis=1).sum())
+    mask = b.mask
     return TracedOutline(
-        mask=mask, contour_px=contour, area_px=area, base_px=base, apex_px=apex,
+        mask=mask, contour_px=contour, area_px=float(np.count_nonzero(mask)), base_px=base, apex_px=apex,
         lobes_px=np.asarray(tips, float).reshape(-1, 2), iou=_iou(contour, mask), image_size=(int(w), int(h)),
-        path=where, petiole_px=petiole, base_method=method,
+        path=where, petiole_px=b.petiole, base_method=method,
         border_fraction=float(np.mean(np.concatenate([mask[0], mask[-1], mask[1:-1, 0], mask[1:-1, -1]]) > 0)),
+        holes_px=hole_polygons(b.holes, eps, perim / n), hole_mask=b.holes, petiole_mask=b.band,
     )
 
 
@@ -838,6 +899,7 @@ def to_leaf_shape(traced: TracedOutline, length_m: float) -> LeafShape:
     contour = tf(traced.contour_px)
     if polygon_area(contour) < 0:
         contour = np.vstack([contour[:1], contour[:0:-1]])
+    holes = tuple(hw if polygon_area(hw) < 0 else hw[::-1].copy() for hw in (tf(hp) for hp in traced.holes_px))
     return LeafShape(
         contour=contour,
         base=np.zeros(2),
@@ -847,6 +909,7 @@ def to_leaf_shape(traced: TracedOutline, length_m: float) -> LeafShape:
         px_to_world=M,
         image=traced.path,
         image_size=tuple(traced.image_size),
+        holes=holes,
     )
 
 
@@ -868,6 +931,8 @@ def outline_report(traced: TracedOutline) -> dict:
         "base_method": traced.base_method,
         "petiole": None if traced.petiole_px is None else [r2(q) for q in traced.petiole_px],
         "iou": round(float(traced.iou), 5),
+        "holes": [round(abs(polygon_area(hp)), 1) for hp in traced.holes_px],
+        "petiole_on_blade": traced.petiole_mask is not None,
         "work_scale": round(float(traced.work_scale), 6),
         "border_fraction": round(float(traced.border_fraction), 5),
         "seconds": round(float(traced.seconds), 4),
@@ -896,6 +961,8 @@ def draw_outline(traced: TracedOutline, img: np.ndarray, out_png: str | os.PathL
     fp = lambda q: (int(round(q[0] * S)), int(round(q[1] * S)))  # noqa: E731
     pts = np.round(traced.contour_px * S).astype(np.int32).reshape(-1, 1, 2)
     cv2.polylines(canvas, [pts], True, (255, 255, 0), th, cv2.LINE_AA, shift=4)
+    for hp in traced.holes_px:
+        cv2.polylines(canvas, [np.round(hp * S).astype(np.int32).reshape(-1, 1, 2)], True, (255, 0, 255), th, cv2.LINE_AA, shift=4)
     if traced.petiole_px is not None:
         cv2.line(canvas, fp(traced.petiole_px[0]), fp(traced.petiole_px[1]), (255, 0, 255), th, cv2.LINE_AA, shift=4)
     for q in traced.lobes_px:

@@ -121,8 +121,8 @@ def _c(name, default, choices, help="", group="", rebuild=False):
 
 # ---------------------------------------------------------------- outline (rebuild)
 G = "Outline"
-_f("outline.simplify", 0.0015, 0.0, 0.02, "× diagonal", "Douglas–Peucker tolerance as a fraction of the image diagonal.", G, True)
-_i("outline.points", 400, 40, 4000, "", "Number of points the traced contour is resampled to (equal arc length).", G, True)
+_f("outline.simplify", 0.0005, 0.0, 0.02, "× diagonal", "Douglas–Peucker tolerance as a fraction of the image diagonal (≈ 1 px: keeps the margin's teeth).", G, True)
+_i("outline.points", 2000, 40, 8000, "", "Number of points the traced contour is resampled to (equal arc length); enough to carry a doubly serrate margin.", G, True)
 _f("outline.lobe_depth", 0.06, 0.0, 0.5, "× length", "Minimum sinus depth (relative to leaf length) that separates two lobes.", G, True)
 
 # ---------------------------------------------------------------- veins (rebuild)
@@ -167,6 +167,7 @@ G = "Mesh"
 _f("mesh.spacing", 0.028, 0.002, 0.1, "× length", "Poisson-disk spacing r of surface particles, relative to the leaf length.", G, True, log=True)
 _f("mesh.vein_spacing", 0.75, 0.3, 2.0, "× r", "Spacing of vein particles along veins relative to r.", G, True)
 _f("mesh.contour_spacing", 0.8, 0.3, 2.0, "× r", "Spacing of contour particles along the outline relative to r.", G, True)
+_f("mesh.contour_detail", 0.05, 0.0, 1.0, "× r", "Contour particles also sit on the margin's corners (tooth tips and notches) that stand out more than this × r from a straight edge; 0 = evenly spaced only (teeth smaller than the spacing are cut).", G, True)
 _f("mesh.thickness", 0.0004, 0.00005, 0.005, "m", "Blade thickness h: distance of layer V above layer T.", G, True, log=True)
 _c("mesh.veins_included", "sublateral", ("main", "lateral", "sublateral", "net"), "Highest vein order that gets vein particles.", G, True)
 
@@ -189,6 +190,7 @@ _f("osmosis.evaporation_top", 0.014, 0.0, 100.0, "kg/(m²·s)", "Evaporation fro
 _f("osmosis.evaporation_bottom", 0.0105, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the bottom surface (layer T) per unit leaf area and simulated second.", G, False, log=True)
 _f("osmosis.edge_evaporation", 2.0, 0.0, 20.0, "", "Margin-enhanced evaporation β: a particle at distance d from the margin evaporates 1 + β √(ℓ/(d + ℓ)) times more (the boundary layer is thin at the edge), normalised so the blade's mean stays the declared rate; 0 = uniform.", G, False)
 _f("osmosis.edge_length", 0.003, 0.0, 0.1, "m", "Length scale ℓ of the margin-enhanced evaporation (a few mm: the boundary layer thickness near the edge).", G, False, log=True)
+_f("osmosis.patchiness", 0.0, 0.0, 2.0, "", "Patchy hydraulic failure a: evaporation × exp(a·f) for the blade's seeded smooth patch field f (zero mean, unit spread; patches ≈ 0.12 leaf lengths), normalised so the blade's mean stays the declared rate; 0 = none.", G, False)
 _b("osmosis.through_thickness", True, "Water also flows between the two layers through the blade's thickness (D over h/2: they stay in balance within milliseconds); off = Jeong's separate layers, where the faster-drying top curls the leaf transiently.", G, False)
 _i("osmosis.every", 1, 1, 50, "frames", "Solve osmosis and evaporation every k-th frame over k Δt (water moves far slower than the blade: a cheaper frame for a small error, see docs/accuracy.md).", G, False)
 _c("osmosis.solver", "auto", ("auto", "direct", "cg", "jacobi"), "Linear solver of the implicit osmosis step.", G, False)
@@ -254,7 +256,10 @@ _f("colour.anthocyanin", 0.0, 0.0, 3.0, "", "Anthocyanin (or betacyanin) made du
 _f("colour.anthocyanin_fade", 1.2, 0.0, 20.0, "1/season", "Anthocyanin breakdown per season unit after the onset (so reds peak, then fade).", G, False)
 _f("colour.browning", 1.0, 0.0, 10.0, "", "Browning rate of dead tissue (oxidised phenolics); high for oak, low for maple.", G, False)
 _f("colour.dry_threshold", 0.35, 0.0, 0.95, "× water₀", "Relative water content at or below which tissue counts as fully dry (dead).", G, False)
-_f("colour.dry_rate", 0.5, 0.0, 100.0, "1/s", "How fast dry tissue bleaches chlorophyll and browns, per second of simulated time.", G, False, log=True)
+_f("colour.dry_rate", 2.0, 0.0, 100.0, "1/s", "How fast dead dry tissue turns: the chlorophyll it still holds becomes dark pheophytin (necrosis) and it browns, per second of simulated time.", G, False, log=True)
+_f("colour.stress_water", 0.8, 0.05, 1.0, "× water₀", "Relative water content below which living tissue is drought-stressed and runs its senescence program (colour.drought).", G, False)
+_f("colour.drought", 2.0, 0.0, 20.0, "season/s", "Drought-induced senescence: season units of senescence per second of simulated time in fully stressed living tissue (a detached, drying leaf turns this way; fast = yellow before it dies, slow = dies green and turns necrotic).", G, False, log=True)
+_f("colour.necrosis", 1.0, 0.0, 3.0, "", "Darkness of tissue that died before its chlorophyll was broken down (pheophytins, oxidised phenolics: dark necrotic spots); 0 = it just browns.", G, False)
 _f("colour.vein_pallor", 0.3, 0.0, 1.0, "", "Heavy (vein) tissue holds this much less chlorophyll than the thinnest lamina.", G, False)
 _f("colour.variation", 0.1, 0.0, 1.0, "", "Random per-leaf variation of pigment contents, rates and onset (drawn from the seed).", G, False)
 

@@ -270,10 +270,10 @@ def _write(folder: Path, files: dict) -> None:
 
 def _export(job: LeafJob, sp, model: Model, params, states: list, folder: Path) -> None:
     from .export import export_mesh
-    from .leaf import load_photo_rgba
+    from .leaf import species_photo_rgba
     from .view import LeafView
 
     o = job.output
-    photo = load_photo_rgba(sp.image) if o["texture"] == "photo" and sp.image is not None else None
+    photo = species_photo_rgba(sp, params) if o["texture"] == "photo" and sp.image is not None else None
     export_mesh(model, states, folder / f"leaf.{o['mesh']}", params=params, view=LeafView(model, photo),
                 layers=o["layers"], veins=o["veins"], texture=o["texture"])

@@ -65,7 +65,7 @@ class BuildResult:
 
 public_mode = _public_mode  # file mode a plain open() would give (used for screenshots)
 
-from .leaf import load_photo_rgba  # noqa: E402  (re-exported: the GUI's photo panel)
+from .leaf import load_photo_rgba, species_photo_rgba  # noqa: E402  (re-exported: the GUI's photo panel)
 from .view import PIGMENT_VIEWS  # noqa: E402,F401
 
 
@@ -193,7 +193,7 @@ class Session:
         if sp.image is not None:
             stage(0.97, "photo: loading the species photo")
             try:
-                photo = load_photo_rgba(sp.image, params["limits.image_pixels"])
+                photo = species_photo_rgba(sp, params)
             except LeafsimError as e:
                 photo_error = str(e)
         stage(0.98, "simulator: preparing the stages")
@@ -441,7 +441,8 @@ class Session:
 
         state = self.simulator.state()
         self.pigments0 = state.pigments.copy()
-        self.view = LeafView(self.model, self.photo_rgba, self.pigments0, self.photo_tint)
+        self.view = LeafView(self.model, self.photo_rgba, self.pigments0, self.photo_tint,
+                             photo_colour=self.shown_species.photo_colour)
         self.sim_error = None
         self._clear_history()
         old = self.worker

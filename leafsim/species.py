@@ -29,10 +29,21 @@ DEFAULT_SPECIES = "maple"
 
 _ENTRY_KEYS = {
     "name", "latin", "description", "image", "has_photo", "length_m", "base_px", "apex_px",
-    "outline", "targets", "main_origin", "lateral_profile", "params", "photo_note",
+    "outline", "targets", "main_origin", "lateral_profile", "params", "photo_note", "photo_stage", "senescent_photo",
 }
+_REFERENCE_KEYS = {"image", "base_px", "apex_px"}
 _OUTLINE_KEYS = {"points", "smooth", "teeth"}
 _TEETH_KEYS = {"count", "depth", "skip_base"}
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A photo of the species to compare with (``senescent_photo``): the file and, optionally,
+    its base and apex in photo pixels (else they are found by the tracer)."""
+
+    image: Path
+    base_px: tuple[float, float] | None = None
+    apex_px: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -56,6 +67,8 @@ class Species:
     description: str = ""
     overrides: dict = field(default_factory=dict)
     config: Path | None = None  # the config file the entry came from (for error messages)
+    photo_stage: str = "young"  # what the photo shows: "young" (its colour is the young colour) or "senescent"
+    senescent: "Reference | None" = None  # a photo of a senescent leaf of the species (compare's reference)
 
     def error(self, key: str | None, msg: str) -> LeafsimError:
         """A one-line error naming this entry's config file, the species and ``key``."""
@@ -64,6 +77,11 @@ class Species:
     @property
     def has_photo(self) -> bool:
         return self.image is not None
+
+    @property
+    def photo_colour(self) -> bool:
+        """The photo shows the young leaf: its colour is the young leaf's colour."""
+        return self.image is not None and self.photo_stage == "young"
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -75,7 +93,13 @@ class Species:
             "targets": "auto" if self.targets is None else len(self.targets),
             "main_origin": self.main_origin,
             "overrides": len(self.overrides),
+            "photo_stage": self.photo_stage if self.image is not None else None,
+            "senescent_photo": _rel(self.senescent.image) if self.senescent is not None else None,
         }
+
+
+def _rel(p: Path) -> str:
+    return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p)
 
 
 def _err(path: Path, species: str | None, key: str | None, msg: str) -> LeafsimError:
@@ -134,18 +158,11 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
         if k in e and not isinstance(e[k], str):
             raise _err(path, key, k, f"expected a text string, got {_show(e[k])}")
 
-    image = None
-    if e.get("image") is not None:
-        if not isinstance(e["image"], str):
-            raise _err(path, key, "image", "expected a path string relative to the config's project")
-        image = Path(e["image"])
-        if not image.is_absolute():
-            base_dir = path.parent.parent if path.parent.name == "configs" else path.parent
-            image = (base_dir / image).resolve()
-        if image.is_dir():
-            raise _err(path, key, "image", f"photo {image} is a folder, expected an image file")
-        if not image.is_file():
-            raise _err(path, key, "image", f"photo {image} not found")
+    image = _image(path, key, "image", e["image"]) if e.get("image") is not None else None
+    stage = e.get("photo_stage", "young")
+    if stage not in ("young", "senescent"):
+        raise _err(path, key, "photo_stage", f"expected 'young' or 'senescent' (what the photo shows), got {_show(stage)}")
+    senescent = _reference(path, key, e["senescent_photo"]) if e.get("senescent_photo") is not None else None
 
     outline_pts, smooth, teeth = _outline(path, key, e["outline"]) if "outline" in e else (None, 0, None)
     if image is None and outline_pts is None:
@@ -185,7 +202,35 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
         description=str(e.get("description", "")),
         overrides=dict(overrides),
         config=path,
+        photo_stage=stage,
+        senescent=senescent,
     )
+
+
+def _image(path: Path, key: str, name: str, value: Any) -> Path:
+    """A photo path of an entry (relative to the config's project), checked to exist."""
+    if not isinstance(value, str):
+        raise _err(path, key, name, "expected a path string relative to the config's project")
+    image = Path(value)
+    if not image.is_absolute():
+        base_dir = path.parent.parent if path.parent.name == "configs" else path.parent
+        image = (base_dir / image).resolve()
+    if image.is_dir():
+        raise _err(path, key, name, f"photo {image} is a folder, expected an image file")
+    if not image.is_file():
+        raise _err(path, key, name, f"photo {image} not found")
+    return image
+
+
+def _reference(path: Path, key: str, value: Any) -> Reference:
+    """``senescent_photo``: a path, or an object with ``image`` and optional ``base_px``/``apex_px``."""
+    name = "senescent_photo"
+    if isinstance(value, str):
+        return Reference(_image(path, key, name, value))
+    if not isinstance(value, dict) or "image" not in value or set(value) - _REFERENCE_KEYS:
+        raise _err(path, key, name, "expected a photo path, or an object with 'image' and optional 'base_px', 'apex_px'")
+    return Reference(_image(path, key, f"{name}.image", value["image"]), _pair(path, key, f"{name}.base_px", value.get("base_px")),
+                     _pair(path, key, f"{name}.apex_px", value.get("apex_px")))
 
 
 def _outline(path: Path, key: str, o: Any) -> tuple[np.ndarray, int, dict | None]:

@@ -66,7 +66,8 @@ from scipy.spatial import ConvexHull, cKDTree  # noqa: E402
 from .geometry import (  # noqa: E402
     LeafShape,
     crossing_pairs,
-    points_in_polygon,
+    outline_edges,
+    points_in_region,
     ray_polygon_hit,
     segment_hits,
 )
@@ -176,8 +177,8 @@ class _Grower:
         self.rng = rng
         self.L = shape.length
         self.C = shape.contour
-        self.CP = self.C
-        self.CQ = np.roll(self.C, -1, axis=0)
+        # margin edges: the contour and the holes (closed sinuses), veins never cross them
+        self.CP, self.CQ = outline_edges(shape.contour, shape.holes)
         self.P = np.empty((0, 2))
         self.Q = np.empty((0, 2))
         self.budget = int(params["limits.vein_tests"])
@@ -207,7 +208,7 @@ class _Grower:
             return True
         if len(segment_hits(a, b, self.P, self.Q)):
             return True
-        return not points_in_polygon(((a + b) / 2)[None], self.C)[0]
+        return not self.shape.inside(((a + b) / 2)[None])[0]
 
     def _self_hit(self, pts: list, a: np.ndarray, b: np.ndarray) -> bool:
         """Would segment ab cross the growing vein's own earlier segments?"""
@@ -289,15 +290,13 @@ class _Grower:
         return np.linspace(start, target, n)
 
     def _waypoint(self, centre: np.ndarray, radius: float) -> np.ndarray | None:
-        from .geometry import distance_to_polygon
-
         g = np.linspace(-radius, radius, 15)
         gx, gy = np.meshgrid(g, g)
         cand = centre + np.column_stack([gx.ravel(), gy.ravel()])
-        cand = cand[points_in_polygon(cand, self.C)]
+        cand = cand[self.shape.inside(cand)]
         if len(cand) == 0:
             return None
-        score = distance_to_polygon(cand, self.C) - 0.3 * np.linalg.norm(cand - centre, axis=1)
+        score = self.shape.margin_distance(cand) - 0.3 * np.linalg.norm(cand - centre, axis=1)
         return cand[int(np.argmax(score))]
 
 
@@ -309,7 +308,7 @@ def _inside_point(shape: LeafShape, tip: np.ndarray, toward: np.ndarray, offset:
         return tip
     for k in range(1, 8):
         q = tip + d / n * min(offset * k, 0.5 * n)
-        if points_in_polygon(q[None], shape.contour)[0]:
+        if shape.inside(q[None])[0]:
             return q
     return tip + 0.5 * d
 
@@ -320,7 +319,7 @@ def _root(shape: LeafShape, g: "_Grower", d_target: np.ndarray, d_apex: np.ndarr
     for w in np.linspace(0.0, 0.9, 10):
         d = _unit((1 - w) * d_target + w * d_apex)
         q = shape.base + d * dist
-        if points_in_polygon(q[None], shape.contour)[0] and not len(segment_hits(shape.base + 1e-9 * d, q, g.CP, g.CQ)) \
+        if shape.inside(q[None])[0] and not len(segment_hits(shape.base + 1e-9 * d, q, g.CP, g.CQ)) \
                 and not len(segment_hits(shape.base, q, g.P, g.Q)):
             return q
     return None
@@ -474,7 +473,7 @@ def grow_veins(
                 for side in sides:
                     ang = p["veins.lateral.angle"] + rng.uniform(-1, 1) * p["veins.lateral.angle_jitter"]
                     d = _rot(fwd, side * ang)
-                    hit = ray_polygon_hit(pts[i], d, shape.contour)
+                    hit = ray_polygon_hit(pts[i], d, shape.contour, shape.holes)
                     if hit is None:
                         continue
                     f = float(np.interp(frac[i] * 100, prof[:, 0], prof[:, 1]))
@@ -513,7 +512,7 @@ def grow_veins(
                 fwd = _unit(lv.points[i + 1] - lv.points[i - 1])
                 side = 1 if (k + li) % 2 == 0 else -1
                 d = _rot(fwd, side * p["veins.sub.angle"])
-                hit = ray_polygon_hit(lv.points[i], d, shape.contour)
+                hit = ray_polygon_hit(lv.points[i], d, shape.contour, shape.holes)
                 if hit is None:
                     continue
                 a = lv.points[i]
@@ -544,7 +543,7 @@ def grow_veins(
         lo, hi = shape.contour.min(0), shape.contour.max(0)
         gx, gy = np.meshgrid(np.arange(lo[0], hi[0], sp), np.arange(lo[1], hi[1], sp))
         pts = np.column_stack([gx.ravel(), gy.ravel()]) + rng.uniform(-0.35, 0.35, (gx.size, 2)) * sp
-        pts = pts[points_in_polygon(pts, shape.contour)]
+        pts = pts[shape.inside(pts)]
         owner_pts, owner_idx, owner_w = [], [], []
         for vi, v in enumerate(graph.veins):
             owner_pts.append(v.points)
@@ -580,14 +579,15 @@ def count_crossings(graph: VeinGraph) -> int:
     return len(crossing_pairs(P, Q))
 
 
-def outside_length(graph: VeinGraph, contour: np.ndarray, samples: int = 8) -> float:
-    """Total vein length lying outside the contour (sampled at segment interior points)."""
+def outside_length(graph: VeinGraph, contour: np.ndarray, holes=(), samples: int = 8) -> float:
+    """Total vein length lying outside the blade: outside the contour or in a hole (sampled
+    at segment interior points)."""
     P, Q, _ = graph.segments()
     if len(P) == 0:
         return 0.0
     t = (np.arange(samples) + 0.5) / samples
     pts = P[:, None, :] + (Q - P)[:, None, :] * t[None, :, None]
-    inside = points_in_polygon(pts.reshape(-1, 2), contour).reshape(len(P), samples)
+    inside = points_in_region(pts.reshape(-1, 2), contour, holes).reshape(len(P), samples)
     seg_len = np.linalg.norm(Q - P, axis=1)
     return float((seg_len * (1 - inside.mean(1))).sum())
 
@@ -600,7 +600,7 @@ def vein_stats(graph: VeinGraph, shape: LeafShape, main_targets=None, auto=True)
         stats["lengths_m"][name] = round(sum(v.length for v in vs), 6)
         stats["segments"][name] = int(sum(max(len(v.points) - 1, 0) for v in vs))
     stats["crossings"] = count_crossings(graph)
-    stats["outside_length"] = round(outside_length(graph, shape.contour), 9)
+    stats["outside_length"] = round(outside_length(graph, shape.contour, shape.holes), 9)
     mains = graph.of_order(MAIN)
     stats["main_target_error_m"] = round(max((float(np.linalg.norm(v.points[-1] - v.target)) for v in mains), default=0.0), 9)
     stats["main_last_step_m"] = round(max((float(np.linalg.norm(v.points[-1] - v.points[-2])) for v in mains if len(v.points) > 1), default=0.0), 9)

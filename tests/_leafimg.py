@@ -90,3 +90,59 @@ def mask_of(poly: np.ndarray, shape) -> np.ndarray:
 def iou(a: np.ndarray, b: np.ndarray) -> float:
     a, b = a > 0, b > 0
     return float(np.count_nonzero(a & b) / max(np.count_nonzero(a | b), 1))
+
+
+PETIOLE = (120, 150, 200)  # BGR: a pale pinkish petiole, as on the grapevine photo
+
+
+def _band(img, a, c, b, r0, r1, colour, n=80):
+    """A tapering band along the quadratic Bézier a→c→b (radius r0 → r1), drawn as discs."""
+    t = np.linspace(0, 1, n)[:, None]
+    pts = (1 - t) ** 2 * np.asarray(a, float) + 2 * (1 - t) * t * np.asarray(c, float) + t ** 2 * np.asarray(b, float)
+    for p, tt in zip(pts, t[:, 0]):
+        r = r0 + (r1 - r0) * tt
+        cv2.circle(img, (int(round(p[0] * 16)), int(round(p[1] * 16))), int(round(r * 16)), colour, -1, cv2.LINE_AA, shift=4)
+
+
+def palmate_fan(base, length, open_deg=150.0, n=400) -> np.ndarray:
+    """A five-lobed palmate blade (pixels, y down) whose margin runs into the base from both
+    sides: the petiolar sinus ends at the petiole junction."""
+    th = np.radians(np.linspace(-open_deg, open_deg, n))
+    r = length * (0.6 + 0.4 * np.abs(np.cos(2.5 * th)) ** 2.5) * np.clip((np.radians(open_deg) - np.abs(th)) / 0.5, 0, 1) ** 0.5
+    return np.vstack([base, base + np.column_stack([r * np.sin(th), -r * np.cos(th)])])
+
+
+def overlapping_lobes_photo(size=800, petiole_over=False, flip=False):
+    """A grapevine-like leaf whose basal lobes sweep down past the petiole and overlap: the
+    petiolar sinus is closed (the paper shows through it, a hole of the blade) and the petiole
+    leaves the silhouette far from its junction, under the lobes (``petiole_over`` False) or
+    lying on them (True).  ``flip``: base up, as the grapevine photo is stored.
+
+    Returns (BGR image, junction (x, y), apex (x, y), hole centre (x, y))."""
+    img = np.zeros((size, size, 3), np.uint8)
+    img[:] = PAPER
+    base = np.array([0.5, 0.52]) * size
+    L = 0.44 * size
+    tip = base + np.array([0.0, 0.42]) * size
+
+    def petiole():
+        cv2.line(img, tuple(np.round(base * 16).astype(int)), tuple(np.round(tip * 16).astype(int)), PETIOLE,
+                 max(2, int(0.016 * size)), cv2.LINE_AA, shift=4)
+
+    if not petiole_over:
+        petiole()
+    cv2.fillPoly(img, [np.round(palmate_fan(base, L) * 16).astype(np.int32)], (60, 120, 70), cv2.LINE_AA, shift=4)
+    for s in (1, -1):  # basal lobes: from the blade's lower margins down across the midline
+        th = np.radians(s * 128)
+        a = base + 0.30 * L * np.array([np.sin(th), -np.cos(th)])
+        _band(img, a, base + np.array([s * 0.32, 0.22]) * L, base + np.array([-s * 0.12, 0.34]) * L, 0.11 * L, 0.07 * L,
+              (60, 120, 70))
+    if petiole_over:
+        petiole()
+    apex = base - np.array([0.0, L])
+    hole = base + np.array([0.0, 0.15]) * L
+    if flip:
+        img = np.ascontiguousarray(img[::-1])
+        flip_y = lambda q: np.array([q[0], size - 1 - q[1]])  # noqa: E731
+        base, apex, hole = flip_y(base), flip_y(apex), flip_y(hole)
+    return img, base, apex, hole

@@ -12,6 +12,7 @@ import pytest
 from leafsim import ROOT
 from leafsim.errors import LeafsimError
 from leafsim.geometry import polygon_area
+from leafsim.params import PARAMS
 from leafsim.outline import (
     draw_outline,
     load_image,
@@ -51,7 +52,7 @@ def test_photo_outline(name):
     w, h = t.image_size
     assert t.iou >= 0.98
     assert exp["frac"][0] <= t.area_px / (w * h) <= exp["frac"][1]
-    assert t.contour_px.shape == (400, 2)
+    assert t.contour_px.shape == (PARAMS["outline.points"].default, 2)
     assert polygon_area(t.contour_px) < 0  # counter-clockwise as seen (y down)
     assert np.allclose(t.contour_px[0], t.base_px, atol=1e-6) or np.linalg.norm(t.contour_px[0] - t.base_px) < 2
     assert np.linalg.norm(t.base_px - exp["base"]) <= exp["tol"], t.base_px

@@ -26,7 +26,7 @@ from .colour import PigmentState
 from .model import Model, State
 
 FORMAT = "leafsim-checkpoint/1"
-_PIGMENT_ARRAYS = ("chlorophyll", "carotenoid", "anthocyanin", "browning", "vein", "leaf")
+_PIGMENT_ARRAYS = ("chlorophyll", "carotenoid", "anthocyanin", "browning", "necrosis", "vein", "leaf")
 
 
 def model_fingerprint(model: Model) -> str:

@@ -1,7 +1,7 @@
-"""Leaf colour from pigments: chlorophyll, carotenoids, anthocyanins and browning.
+"""Leaf colour from pigments: chlorophyll, carotenoids, anthocyanins, browning and necrosis.
 
 Beyond the thesis (SPEC §9; Wang et al. 2009, *Survey on modeling and visualization of plant
-leaf color*).  Each particle carries four pigment amounts that change with the season clock
+leaf color*).  Each particle carries five pigment amounts that change with the season clock
 (``age``) and with the particle's water content; a Beer–Lambert style model turns them into a
 linear-RGB reflectance.  The stage is O(n), has no OpenGL and no state outside
 :class:`PigmentState`.
@@ -10,30 +10,46 @@ Pigment dynamics (:func:`step_pigments`)
 ----------------------------------------
 Let ``w`` = water_rel ∈ [0, 1] (current / initial water of the particle), ``G(age) =
 max(age − onset, 0)`` the senescence exposure (season units after the onset), ``ΔG`` its
-increase over the step, ``stress = 1 + water_sensitivity·(1 − w)`` and the dryness
-``d = clip((1 − w)/(1 − dry_threshold), 0, 1)`` (1 = dead dry tissue).  Over one step, with
-``E_dry = dry_rate·d·dt``:
+increase over the step, ``stress = 1 + water_sensitivity·(1 − w)``, the dryness
+``d = clip((1 − w)/(1 − dry_threshold), 0, 1)`` (1 = dead dry tissue) and the drought stress
+``σ = clip((stress_water − w)/0.05, 0, 1)`` (living tissue below ``colour.stress_water``).
+The senescence exposure of a step is the season's and the drought's::
 
-* chlorophyll  ``C ← C·exp(−(chlorophyll_decay·stress·ΔG + E_dry))``  — programmed breakdown
-  after the onset, faster where water is lost, plus bleaching of dry tissue.  Never increases.
-* carotenoids  ``K ← K·exp(−(carotenoid_decay·stress·ΔG + 0.1·E_dry))``  — they mostly persist
-  and are *unmasked* as chlorophyll goes: yellow/orange.
-* anthocyanins ``A ← (A + 2·(1 − d)·(1 − C)·ΔC_sen)·exp(−(anthocyanin_fade·stress·ΔG + 0.3·E_dry))``
+    H = stress·ΔG + drought·σ·(1 − d)·dt
+
+(a detached, drying leaf runs its senescence program while its cells still live; Munné-Bosch
+& Alegre 2004, Funct. Plant Biol. 31:203).  Death comes with dryness: ``E = dry_rate·d⁴·dt``.
+
+* chlorophyll  ``C ← C·exp(−chlorophyll_decay·H)``, then a share ``1 − exp(−E)`` of what is
+  left turns necrotic — programmed breakdown in living cells (unmasking the carotenoids),
+  conversion to dark pheophytins in dying ones.  Never increases.
+* necrosis     ``N ← N + C·(1 − exp(−E))`` — chlorophyll that was still there when the tissue
+  died: tissue that dies before it senesced turns dark (necrotic spots), tissue that
+  senesced first just browns.  Never decreases.
+* carotenoids  ``K ← K·exp(−(carotenoid_decay·H + 0.1·E))`` — they mostly persist and are
+  *unmasked* as chlorophyll goes: yellow/orange.
+* anthocyanins ``A ← (A + 2·(1 − d)·(1 − C)·ΔC_sen)·exp(−(anthocyanin_fade·stress·ΔG + 0.05·E))``
   — made in still-living cells from the programmed chlorophyll breakdown ``ΔC_sen`` and late
   in it (factor ``1 − C``: sugars accumulate once photosynthesis has declined, so the red
-  follows the unmasked yellow instead of muddying full green), they peak and then fade; dry dead cells make none.  The species
-  level ``colour.anthocyanin`` scales them at colour time (0 = species makes none).
-* browning     ``B ← 1 − (1 − B)·exp(−browning·(1 − C)²·(0.5·stress·ΔG + E_dry))`` — oxidised
-  phenolics in tissue whose chlorophyll is gone, fast where it is dry.  Never decreases.
+  follows the unmasked yellow instead of muddying full green), they peak and then fade with
+  the season; dry dead cells make none and keep most of theirs.  The species level
+  ``colour.anthocyanin`` scales them at colour time (0 = species makes none).
+* browning     ``B ← 1 − (1 − B)·exp(−browning·(1 − C)²·(0.5·stress·ΔG + E))`` — oxidised
+  phenolics in tissue whose chlorophyll is gone, fast where it is dying.  Never decreases.
 
-All four are exact exponential updates, so any step size is stable and monotone; large steps
+All five are exact exponential updates, so any step size is stable and monotone; large steps
 are sub-stepped (no exponent above 0.1 per sub-step; season and time advance together, so a
 step that crosses the onset while drying is resolved) so the couplings (anthocyanin from
 chlorophyll loss, browning from dead tissue) stay accurate.  With ``w = 1``
 and a constant ``age`` nothing changes at all.  Nothing here looks at positions or distances:
-margins and intercostal areas turn first, and veins stay green longest, only because the
-osmosis stage leaves them with less water.  Uniform water and uniform mass give a uniform
-colour.
+the spatial pattern is the water field's.  Margins and intercostal areas turn first, and veins
+and their surroundings stay green longest, because the osmosis stage leaves them with less
+water (the margin evaporates more, light intercostal tissue holds less, veins carry extra
+water and feed their neighbours); where the blade's seeded patch field makes it lose water
+faster (``osmosis.patchiness``: patchy hydraulic failure) tissue is stressed earlier and, if it
+dies before it senesced, necrotic.  The drought stress switches on within 5 % of water, so a
+small difference in water becomes a difference in *when* a place turns: a visible front, not a
+uniform fade.  Uniform water and uniform mass give a uniform colour.
 
 Amounts are stored relative to the leaf's own summer content (``C``, ``K`` start at 1,
 ``A``, ``B`` at 0), so the palette parameters below act live (GUI sliders) at colour time.
@@ -54,6 +70,7 @@ pigment-free leaf tissue (white-ish, slightly yellow from cell walls).  Concentr
     c_car = colour.carotenoid  · leaf_car · K
     c_ant = colour.anthocyanin · leaf_ant · A
     c_brn = B
+    c_nec = colour.necrosis · colour.chlorophyll · leaf_chl · (1 − vein_pallor·m̂) · N
 
 with per-leaf factors ``leaf_*`` from the seed and ``m̂`` the min–max normalised rest mass
 (heavy vein tissue is paler).  Absorption coefficients ``k_p`` (natural-log absorbance per unit
@@ -72,7 +89,17 @@ anthocyanin    0.25   2.60   0.50   cyanidin (and pokeweed's betacyanins) absorb
                                     magenta/purple without them (pokeweed).
 browning       1.30   2.30   4.00   oxidised phenolics/melanoidins absorb broadly, rising
                                     toward the blue → brown (dry leaf ≈ sRGB (137, 90, 50)).
+necrosis       2.40   2.40   2.60   pheophytins and oxidised phenolics of tissue that died
+                                    green absorb across the spectrum → olive-black spots.
 =============  =====  =====  =====  ============================================================
+
+``c_nec = colour.necrosis · (the chlorophyll content) · (1 − vein_pallor·m̂) · N``: the darker
+a leaf was, the darker its necrotic tissue.
+
+Photo species (:func:`fit_photo_contents`, :class:`leafsim.view.LeafView`): the young colour is
+the photo's; the chlorophyll content and an extra surface reflectance are fitted so the
+model's young colour is the photo's mean colour, and aging multiplies the photo by the model's
+reflectance change, rgb(now) / rgb(young) with those contents.
 
 Band-averaged Beer–Lambert is an approximation (the exponential of a mean absorbance is not
 the mean of the exponentials), good enough for RGB rendering; the coefficients were tuned by
@@ -134,18 +161,20 @@ __all__ = [
     "step_pigments",
     "pigments_to_rgb",
     "tint_for_texture",
+    "fit_photo_contents",
     "age_at",
     "linear_to_srgb",
     "bench_colour",
 ]
 
-#: Absorption coefficients k_p (rows: chlorophyll, carotenoid, anthocyanin, browning; cols: R, G, B).
+#: Absorption coefficients k_p (rows: chlorophyll, carotenoid, anthocyanin, browning, necrosis; cols: R, G, B).
 ABSORPTION = np.array(
     [
         [3.20, 1.15, 3.00],  # chlorophyll
         [0.02, 0.45, 3.50],  # carotenoid
         [0.25, 2.60, 0.50],  # anthocyanin
         [1.30, 2.30, 4.00],  # browning
+        [2.40, 2.40, 2.60],  # necrosis (pheophytins and oxidised phenolics of tissue that died green)
     ],
     dtype=np.float32,
 )
@@ -176,14 +205,17 @@ PALETTES: dict[str, dict[str, float]] = {
                "colour.browning": 2.0, "colour.onset": 0.15},
     # Phytolacca americana: betacyanins (treated as the anthocyanin channel), few carotenoids
     # → magenta / purple-red.
-    "pokeweed": {"colour.chlorophyll": 1.0, "colour.carotenoid": 0.3, "colour.anthocyanin": 2.5,
-                 "colour.anthocyanin_fade": 0.6, "colour.browning": 0.8, "colour.onset": 0.2},
+    "pokeweed": {"colour.chlorophyll": 1.0, "colour.carotenoid": 0.1, "colour.anthocyanin": 2.5,
+                 "colour.anthocyanin_fade": 0.6, "colour.browning": 0.3, "colour.onset": 0.2},
     # Vitis vinifera (red-berried cultivar): anthocyanin + carotenoid → red with yellow patches.
     "grapevine": {"colour.chlorophyll": 0.9, "colour.carotenoid": 1.0, "colour.anthocyanin": 1.0,
                   "colour.anthocyanin_fade": 1.0, "colour.browning": 1.0, "colour.onset": 0.25},
     # Populus tremula/tremuloides: brilliant golden yellow, very little red.
+    # Drying, it dies faster than it senesces (slow drought senescence, patchy): dark necrotic
+    # patches in green, as the senescent photo shows.
     "aspen": {"colour.chlorophyll": 0.9, "colour.carotenoid": 1.2, "colour.anthocyanin": 0.05,
-              "colour.browning": 0.5, "colour.onset": 0.3, "colour.carotenoid_decay": 0.2},
+              "colour.browning": 0.5, "colour.onset": 0.3, "colour.carotenoid_decay": 0.2,
+              "colour.drought": 0.1, "colour.stress_water": 0.6, "colour.necrosis": 2.0},
     # Carpinus betulus: yellow then ochre/orange-brown.
     "hornbeam": {"colour.chlorophyll": 1.0, "colour.carotenoid": 1.3, "colour.anthocyanin": 0.0,
                  "colour.browning": 1.5, "colour.onset": 0.3},
@@ -200,6 +232,8 @@ class PigmentState:
     carotenoid : (n,) float32, fraction of the summer carotenoids left, 1 → 0.
     anthocyanin : (n,) float32, anthocyanin made, in units of the species level (0 → ~0.7).
     browning : (n,) float32, browning (oxidised phenolics), 0 → 1.
+    necrosis : (n,) float32, chlorophyll that was still there when the tissue died (turned into
+        dark pheophytins: necrotic spots), in units of the summer content, 0 → 1.
     vein : (n,) float32, min–max normalised rest mass m̂ (0 thinnest lamina, 1 heaviest vein);
         the tissue holds ``1 − colour.vein_pallor·m̂`` of the lamina's chlorophyll (live).
     leaf : (6,) float64 per-leaf factors from the seed: chlorophyll, carotenoid, anthocyanin,
@@ -216,7 +250,12 @@ class PigmentState:
     leaf: np.ndarray
     age: float = 0.0
     seed: int = 0
+    necrosis: np.ndarray | None = None
     _coeffs: tuple | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self):
+        if self.necrosis is None:  # states saved before necrosis existed: none yet
+            self.necrosis = np.zeros_like(self.chlorophyll)
 
     @property
     def n(self) -> int:
@@ -230,6 +269,7 @@ class PigmentState:
             carotenoid=self.carotenoid.copy(),
             anthocyanin=self.anthocyanin.copy(),
             browning=self.browning.copy(),
+            necrosis=self.necrosis.copy(),
             vein=self.vein.copy(),
             leaf=self.leaf.copy(),
             _coeffs=None,
@@ -286,6 +326,7 @@ def init_pigments(n: int, params: Mapping[str, Any], seed: int = 0,
         carotenoid=np.ones(n, np.float32),
         anthocyanin=np.zeros(n, np.float32),
         browning=np.zeros(n, np.float32),
+        necrosis=np.zeros(n, np.float32),
         vein=vein,
         leaf=leaf,
         age=0.0,
@@ -339,85 +380,90 @@ def _expneg(x, mode):  # pragma: no cover - numba; mode is a literal at every ca
 
 
 @njit(inline="always", fastmath=_FM)
-def _particle(c, k, a, b, wi, h, e, kc, ws, kk, kaf, kb, inv_dry, mode):  # pragma: no cover
-    """One (sub-)step of one particle: ΔG = h season units, dry exposure e = dry_rate·dt."""
+def _particle(c, k, a, b, nn, wi, h, e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, mode):  # pragma: no cover
+    """One (sub-)step of one particle: ΔG = h season units, dry exposure e = dry_rate·dt,
+    drought exposure dr = drought·dt (season units at full water stress)."""
     half = np.float32(0.5)
     wi = min(wi if wi >= _ZERO else _ZERO, _ONE)  # NaN → 0 (needs the no-'nnan' flag set)
     lack = _ONE - wi
     d = min(lack * inv_dry, _ONE)          # dryness, 1 = dead dry tissue
-    stress = _ONE + ws * lack               # water loss speeds senescence
-    esen = kc * stress * h                  # programmed chlorophyll breakdown
-    edry = e * d                            # desiccation damage
-    etot = esen + edry
-    fc = _expneg(etot, mode)
+    stress = _ONE + ws * lack               # water loss speeds seasonal senescence
+    sig = min(max((w_s - wi) * np.float32(20.0), _ZERO), _ONE)  # drought stress below w_s
+    hs = stress * h + dr * sig * (_ONE - d)  # senescence exposure: season and drought, living cells
+    esen = kc * hs                          # programmed chlorophyll breakdown
+    d2 = d * d
+    enec = e * d2 * d2                      # death: what chlorophyll is left turns necrotic
+    fc = _expneg(esen, mode)
     # phi = (1 − e^−x)/x: the breakdown per unit exposure, without 0/0
-    phi = _ONE - etot * (half - etot * (np.float32(1.0 / 6.0) - etot * (
-        np.float32(1.0 / 24.0) - etot * np.float32(1.0 / 120.0))))
+    phi = _ONE - esen * (half - esen * (np.float32(1.0 / 6.0) - esen * (
+        np.float32(1.0 / 24.0) - esen * np.float32(1.0 / 120.0))))
     if mode == 2:
-        phi = phi if etot < np.float32(0.1) else (_ONE - fc) / etot
+        phi = phi if esen < np.float32(0.1) else (_ONE - fc) / esen
     # anthocyanin: 2·(1 − C)·ΔC_sen in living cells, then fading
     a = (a + np.float32(2.0) * (_ONE - d) * esen * phi * c * (_ONE - c)) * _expneg(
-        kaf * stress * h + np.float32(0.3) * edry, mode)
+        kaf * stress * h + np.float32(0.05) * enec, mode)
     c = c * fc
-    k = k * _expneg(kk * stress * h + np.float32(0.1) * edry, mode)
-    dead = _ONE - c
-    b = _ONE - (_ONE - b) * _expneg(kb * (half * stress * h + edry) * dead * dead, mode)
-    # every factor is in [0, 1]: C and K never grow and B never shrinks, even in float32
-    return c, k, a, b
+    lost = c * (_ONE - _expneg(enec, mode))
+    c = c - lost
+    nn = nn + lost
+    k = k * _expneg(kk * hs + np.float32(0.1) * enec, mode)
+    gone = _ONE - c
+    b = max(b, _ONE - (_ONE - b) * _expneg(kb * (half * stress * h + enec) * gone * gone, mode))  # no float32 round-down
+    # every factor is in [0, 1]: C and K never grow, N and B never shrink, even in float32
+    return c, k, a, b, nn
 
 
-# Two explicit top-level kernels (not a factory: numba's on-disk cache cannot tell closures
-# apart and would recompile them in every process).  Straight-line bodies: the loop vectorises.
+# Explicit top-level kernels (not a factory: numba's on-disk cache cannot tell closures apart
+# and would recompile them in every process).  Straight-line bodies: the loop vectorises.
 @njit(cache=True, fastmath=_FM, nogil=True, error_model="numpy")
-def _kernel_tiny(C, K, A, B, w, h, e, kc, ws, kk, kaf, kb, inv_dry):  # pragma: no cover - numba
-    """One step of all particles when every exponent is ≤ 0.01 (ordinary physics steps)."""
-    h, e, kc, ws = np.float32(h), np.float32(e), np.float32(kc), np.float32(ws)
-    kk, kaf, kb, inv_dry = np.float32(kk), np.float32(kaf), np.float32(kb), np.float32(inv_dry)
+def _kernel_tiny(C, K, A, B, N, w, h, e, dr, co):  # pragma: no cover - numba
+    """One step of all particles when every exponent is ≤ 0.01 (ordinary physics steps);
+    ``co`` = (kc, ws, kk, kaf, kb, inv_dry, w_s) as float32."""
+    h, e, dr = np.float32(h), np.float32(e), np.float32(dr)
+    kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
     for i in range(C.shape[0]):
-        C[i], K[i], A[i], B[i] = _particle(C[i], K[i], A[i], B[i], w[i], h, e, kc, ws, kk, kaf, kb,
-                                           inv_dry, 0)
+        C[i], K[i], A[i], B[i], N[i] = _particle(C[i], K[i], A[i], B[i], N[i], w[i], h, e, dr, kc, ws, kk, kaf, kb,
+                                                 inv_dry, w_s, 0)
 
 
 @njit(cache=True, fastmath=_FM, nogil=True, error_model="numpy")
-def _kernel_small(C, K, A, B, w, h, e, kc, ws, kk, kaf, kb, inv_dry):  # pragma: no cover - numba
+def _kernel_small(C, K, A, B, N, w, h, e, dr, co):  # pragma: no cover - numba
     """One step of all particles when every exponent is ≤ 0.1."""
-    h, e, kc, ws = np.float32(h), np.float32(e), np.float32(kc), np.float32(ws)
-    kk, kaf, kb, inv_dry = np.float32(kk), np.float32(kaf), np.float32(kb), np.float32(inv_dry)
+    h, e, dr = np.float32(h), np.float32(e), np.float32(dr)
+    kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
     for i in range(C.shape[0]):
-        C[i], K[i], A[i], B[i] = _particle(C[i], K[i], A[i], B[i], w[i], h, e, kc, ws, kk, kaf, kb,
-                                           inv_dry, 1)
+        C[i], K[i], A[i], B[i], N[i] = _particle(C[i], K[i], A[i], B[i], N[i], w[i], h, e, dr, kc, ws, kk, kaf, kb,
+                                                 inv_dry, w_s, 1)
 
 
 @njit(cache=True, fastmath=_FM, nogil=True, error_model="numpy")
-def _kernel_substeps(C, K, A, B, w, hs, e, kc, ws, kk, kaf, kb, inv_dry):  # pragma: no cover - numba
-    """Large steps: sub-steps with season exposures hs[j] (follows the onset) and dry exposure e."""
-    e = np.float32(e)
-    kc = np.float32(kc)
-    ws = np.float32(ws)
-    kk = np.float32(kk)
-    kaf = np.float32(kaf)
-    kb = np.float32(kb)
-    inv_dry = np.float32(inv_dry)
+def _kernel_substeps(C, K, A, B, N, w, hs, e, dr, co):  # pragma: no cover - numba
+    """Large steps: sub-steps with season exposures hs[j] (follows the onset), dry exposure e
+    and drought exposure dr per sub-step."""
+    e, dr = np.float32(e), np.float32(dr)
+    kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
     for i in range(C.shape[0]):
-        c, k, a, b, wi = C[i], K[i], A[i], B[i], w[i]
+        c, k, a, b, nn, wi = C[i], K[i], A[i], B[i], N[i], w[i]
         for j in range(hs.shape[0]):
-            c, k, a, b = _particle(c, k, a, b, wi, hs[j], e, kc, ws, kk, kaf, kb, inv_dry, 2)
-        C[i], K[i], A[i], B[i] = c, k, a, b
+            c, k, a, b, nn = _particle(c, k, a, b, nn, wi, hs[j], e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, 2)
+        C[i], K[i], A[i], B[i], N[i] = c, k, a, b, nn
 
 
 def _coefficients(pig: PigmentState, params: Mapping[str, Any]) -> tuple:
     """Step constants from params × per-leaf factors; cached on ``pig`` for an (immutable) ParamSet."""
     leaf = pig.leaf
     rate = float(leaf[4])
-    args = (
+    args = np.array([
         float(params["colour.chlorophyll_decay"]) * rate,
         float(params["colour.water_sensitivity"]),
         float(params["colour.carotenoid_decay"]) * rate,
         float(params["colour.anthocyanin_fade"]) * rate,
         float(params["colour.browning"]) * float(leaf[3]),
         1.0 / (1.0 - float(params["colour.dry_threshold"])),
-    )
-    co = (params, float(params["colour.onset"]) + float(leaf[5]), float(params["colour.dry_rate"]), args)
+        float(params["colour.stress_water"]),
+    ], np.float32)
+    co = (params, float(params["colour.onset"]) + float(leaf[5]), float(params["colour.dry_rate"]),
+          float(params["colour.drought"]) * rate, args)
     # only a ParamSet is immutable; a plain dict could change behind our back
     pig._coeffs = co if isinstance(params, ParamSet) else None
     return co
@@ -448,54 +494,59 @@ def step_pigments(pig: PigmentState, water_rel: np.ndarray, age: float, dt: floa
     co = pig._coeffs
     if co is None or co[0] is not params:
         co = _coefficients(pig, params)
-    _, onset, dry_rate, args = co
+    _, onset, dry_rate, drought, args = co
     a0, a1 = pig.age, float(age)
     dG = max(a1 - onset, 0.0) - max(a0 - onset, 0.0)
     if dG < 0.0:
         dG = 0.0
     if a1 > a0:
         pig.age = a1
-    dry = dry_rate * max(float(dt), 0.0)
-    if dG == 0.0 and dry == 0.0:
+    dt = max(float(dt), 0.0)
+    dry, dr = dry_rate * dt, drought * dt
+    if dG == 0.0 and dry == 0.0 and dr == 0.0:
         return
-    kc, ws, kk, kaf, kb, _ = args
+    kc, ws, kk, kaf, kb = (float(x) for x in args[:5])
     # the largest exponent any particle can see this step picks the cheapest accurate kernel
-    smax = (1.0 + ws) * dG
-    xmax = max(kc * smax + dry, kaf * smax + dry, kk * smax + dry, kb * (0.5 * smax + dry))
+    smax = (1.0 + ws) * dG + dr
+    xmax = max(kc * smax, kaf * (1.0 + ws) * dG + 0.05 * dry, kk * smax + 0.1 * dry, kb * (0.5 * (1.0 + ws) * dG + dry), dry)
+    arrays = (pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.necrosis, w)
     if xmax <= 0.01:
-        _kernel_tiny(pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, w, dG, dry, *args)
+        _kernel_tiny(*arrays, dG, dry, dr, args)
         return
     if xmax <= 0.1:
-        _kernel_small(pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, w, dG, dry, *args)
+        _kernel_small(*arrays, dG, dry, dr, args)
         return
     nsub = max(1, math.ceil(xmax / _MAX_EXPOSURE))
-    if dry > 0.0 and dG > 0.0:  # resolve the onset within the step: age and dt advance together
+    if (dry > 0.0 or dr > 0.0) and dG > 0.0:  # resolve the onset within the step: age and dt advance together
         nsub = max(nsub, math.ceil((a1 - a0) / _MAX_DG))
     nsub = min(nsub, _MAX_SUBSTEPS)
     ages = np.linspace(a0, max(a0, a1), nsub + 1)
     hs = np.diff(np.maximum(ages - onset, 0.0)).astype(np.float32)
-    _kernel_substeps(pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, w, hs, dry / nsub, *args)
+    _kernel_substeps(*arrays, hs, dry / nsub, dr / nsub, args)
 
 
 @njit(cache=True, fastmath=_FM, nogil=True, error_model="numpy")
-def _rgb_kernel(C, K, A, B, vein, s_chl, s_car, s_ant, pallor, absorb, base, surface, out):  # pragma: no cover
+def _rgb_kernel(C, K, A, B, N, vein, s_chl, s_car, s_ant, s_nec, pallor, absorb, base, surface, out):  # pragma: no cover
     """out[i] = surface + base·exp(−Σ c_p k_p) for every particle (vectorised, float32)."""
     k00, k01, k02 = absorb[0, 0], absorb[0, 1], absorb[0, 2]
     k10, k11, k12 = absorb[1, 0], absorb[1, 1], absorb[1, 2]
     k20, k21, k22 = absorb[2, 0], absorb[2, 1], absorb[2, 2]
     k30, k31, k32 = absorb[3, 0], absorb[3, 1], absorb[3, 2]
+    k40, k41, k42 = absorb[4, 0], absorb[4, 1], absorb[4, 2]
     b0, b1, b2 = base[0], base[1], base[2]
     n = C.shape[0]
     planar = np.empty((3, n), np.float32)
     o0, o1, o2 = planar[0], planar[1], planar[2]
     for i in range(n):
-        c_chl = s_chl * (_ONE - pallor * vein[i]) * C[i]
+        tissue = _ONE - pallor * vein[i]
+        c_chl = s_chl * tissue * C[i]
         c_car = s_car * K[i]
         c_ant = s_ant * A[i]
         c_brn = B[i]
-        x0 = c_chl * k00 + c_car * k10 + c_ant * k20 + c_brn * k30
-        x1 = c_chl * k01 + c_car * k11 + c_ant * k21 + c_brn * k31
-        x2 = c_chl * k02 + c_car * k12 + c_ant * k22 + c_brn * k32
+        c_nec = s_nec * tissue * N[i]
+        x0 = c_chl * k00 + c_car * k10 + c_ant * k20 + c_brn * k30 + c_nec * k40
+        x1 = c_chl * k01 + c_car * k11 + c_ant * k21 + c_brn * k31 + c_nec * k41
+        x2 = c_chl * k02 + c_car * k12 + c_ant * k22 + c_brn * k32 + c_nec * k42
         o0[i] = surface + b0 * _exp_any(max(x0, _ZERO))
         o1[i] = surface + b1 * _exp_any(max(x1, _ZERO))
         o2[i] = surface + b2 * _exp_any(max(x2, _ZERO))
@@ -505,22 +556,65 @@ def _rgb_kernel(C, K, A, B, vein, s_chl, s_car, s_ant, pallor, absorb, base, sur
         out[i, 2] = o2[i]
 
 
-def pigments_to_rgb(pig: PigmentState, params: Mapping[str, Any]) -> np.ndarray:
+def pigments_to_rgb(pig: PigmentState, params: Mapping[str, Any], contents: tuple | None = None) -> np.ndarray:
     """(n, 3) float32 linear-RGB reflectance ``surface + base·exp(−Σ c_p k_p)`` (module docstring).
 
     Concentrations are ``c_chl = colour.chlorophyll·leaf_chl·(1 − vein_pallor·m̂)·C``,
     ``c_car = colour.carotenoid·leaf_car·K``, ``c_ant = colour.anthocyanin·leaf_ant·A``,
-    ``c_brn = B``; all palette values act live.
+    ``c_brn = B``, ``c_nec = colour.necrosis·(chlorophyll content)·(1 − vein_pallor·m̂)·N``;
+    all palette values act live.  ``contents`` = (chlorophyll, carotenoid, extra surface
+    reflectance) replaces the palette's contents and the per-leaf factors (a leaf whose
+    young colour was fitted to its photo, :func:`fit_photo_contents`).
     """
     leaf = pig.leaf
     out = np.empty((pig.n, 3), np.float32)
-    _rgb_kernel(pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.vein,
-                np.float32(float(params["colour.chlorophyll"]) * leaf[0]),
-                np.float32(float(params["colour.carotenoid"]) * leaf[1]),
-                np.float32(float(params["colour.anthocyanin"]) * leaf[2]),
-                np.float32(params["colour.vein_pallor"]), ABSORPTION, BASE_REFLECTANCE,
-                SURFACE_REFLECTANCE, out)
+    if contents is None:
+        chl = float(params["colour.chlorophyll"]) * leaf[0]
+        car = float(params["colour.carotenoid"]) * leaf[1]
+        surface = SURFACE_REFLECTANCE
+    else:
+        chl, car = float(contents[0]), float(contents[1])
+        surface = np.float32(SURFACE_REFLECTANCE + float(contents[2]))
+    _rgb_kernel(pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.necrosis, pig.vein,
+                np.float32(chl), np.float32(car), np.float32(float(params["colour.anthocyanin"]) * leaf[2]),
+                np.float32(float(params["colour.necrosis"]) * chl),
+                np.float32(params["colour.vein_pallor"]), ABSORPTION, BASE_REFLECTANCE, surface, out)
     return out
+
+
+def fit_photo_contents(young: np.ndarray, pig0: PigmentState, params: Mapping[str, Any],
+                       weights: np.ndarray | None = None, select: np.ndarray | None = None) -> tuple[float, float, float]:
+    """Pigment contents that make the model's young leaf the photo's colour: (chlorophyll,
+    carotenoid, extra surface reflectance — hairs and wax that scatter white light, the
+    grey-green of a vine's underside; down to −0.03, no surface reflection at all).
+
+    Least squares in log reflectance against the mean photo colour of the particles
+    ``select`` (weights: their areas; ``young``: the photo's linear RGB at each particle of
+    the young state ``pig0``).  A dark green photo is a leaf with much chlorophyll (so it
+    turns bright yellow when the chlorophyll goes), a pale one with little.  The carotenoids
+    are the species' (colour.carotenoid × the leaf's factor: they set its autumn yellow, and
+    a camera's white balance in the blue should not become pigment); what the contents cannot
+    explain stays in the photo's own colour (the young colour is the photo's whatever the
+    fit).  Bounds: chlorophyll 0.02–4, surface −0.03–0.4."""
+    from scipy.optimize import least_squares
+
+    sel = np.ones(pig0.n, bool) if select is None else np.asarray(select, bool)
+    wt = np.ones(pig0.n) if weights is None else np.asarray(weights, float)
+    wt = wt[sel] / max(float(wt[sel].sum()), 1e-300)
+    target = np.log(np.maximum(wt @ np.asarray(young, float)[sel], 1e-4))
+    car = float(params["colour.carotenoid"]) * float(pig0.leaf[1])
+
+    def contents(x):
+        return x[0], car, x[1]
+
+    def resid(x):
+        rgb = pigments_to_rgb(pig0, params, contents(x)).astype(np.float64)[sel]
+        return np.log(np.maximum(wt @ rgb, 1e-6)) - target
+
+    x0 = (float(params["colour.chlorophyll"]), 0.0)
+    lo, hi = [0.02, -float(SURFACE_REFLECTANCE)], [4.0, 0.4]
+    r = least_squares(resid, x0, bounds=(lo, hi), x_scale=(1.0, 0.05), diff_step=1e-3)
+    return tuple(float(v) for v in contents(r.x))
 
 
 def tint_for_texture(pig: PigmentState, pig0: PigmentState, params: Mapping[str, Any]) -> np.ndarray:

@@ -64,6 +64,19 @@ def edge_factor(model: Model, beta: float, length: float) -> np.ndarray:
     return out
 
 
+def patch_factor(model: Model, amplitude: float) -> np.ndarray:
+    """(n,) relative evaporation of patchy hydraulic failure: exp(a · f) for the model's seeded
+    patch field f (``Model.particle_patch``, zero mean, unit spread; a = ``osmosis.patchiness``),
+    normalised per layer like :func:`edge_factor`; ones when a = 0 or the model has no field."""
+    f = model.particle_patch
+    if not amplitude or f is None:
+        return np.ones(model.particle_count)
+    g = np.exp(float(amplitude) * np.asarray(f, float))
+    lay, A = model.particle_layer.astype(np.int64), model.particle_area
+    mean = np.bincount(lay, A * g, minlength=2) / np.maximum(np.bincount(lay, A, minlength=2), 1e-300)
+    return g / mean[lay]
+
+
 class Osmosis:
     """Implicit conservative osmosis + evaporation (SPEC §6), both layers in one SPD system
     (diag(M) + Δt D K) cⁿ⁺¹ = M cⁿ − loss, c = w / M (water per dry mass).
@@ -124,6 +137,7 @@ class Osmosis:
         # diffusion (osmosis) and the veins' water work against it.
         self.loss_ref = self.model.particle_area * edge_factor(self.model, params["osmosis.edge_evaporation"],
                                                                params["osmosis.edge_length"])
+        self.loss_ref *= patch_factor(self.model, params["osmosis.patchiness"])
         self.dt = dt
         key = (D, dt, solver, through)
         if key != self.key:

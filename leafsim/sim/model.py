@@ -98,6 +98,12 @@ class Model:
     vol_idx (m,4) = (v, a, b, c), vol_rest0 (m,) = 6 × signed volume of tetrahedron at rest,
     vol_springs (m,3) the three T springs of the triangle, vol_colour_start.
 
+    Hydraulic patches
+    -----------------
+    particle_patch (n,) the seeded smooth patch field of :func:`leafsim.blade.patch_field`
+    (zero mean, unit spread): where it is high the blade loses water faster
+    (``osmosis.patchiness``); None for models made without it (zero).
+
     Veins for renderers
     -------------------
     vein_particles (k,) concatenated particle indices, vein_start (nv+1,), vein_order (nv,),
@@ -150,6 +156,7 @@ class Model:
     thickness: float
     spacing: float
     vein_edge_share: float
+    particle_patch: np.ndarray | None = None
 
     # ------------------------------------------------------------------ counts
     @property
