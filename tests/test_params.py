@@ -64,6 +64,13 @@ def test_markdown_lists_every_parameter():
         assert f"`{name}`" in md
 
 
+def test_docs_parameters_md_is_generated_from_the_declarations():
+    """docs/parameters.md is `leafsim params --markdown` (regenerate it when a parameter changes)."""
+    from leafsim import ROOT
+
+    assert (ROOT / "docs" / "parameters.md").read_text(encoding="utf-8") == markdown_table() + "\n"
+
+
 def test_integer_ranges_fit_an_int_slider():
     """The GUI's integer slider (imgui) takes ranges within ±(2³¹−1)/2 only (it aborts otherwise)."""
     for p in PARAMS.values():
