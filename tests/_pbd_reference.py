@@ -707,9 +707,6 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
                 if ch < tol and hits == 0:
                     break
             out[1] = hits
-        if ground:
-            ground_clamp(q, invm, pen)
-            ground_friction(q, q_old, pen, mu)
         if pbd:
             # no layer inversion: momentum-conserving passes (vertices resting on the ground stay),
             # then a V-only pass for anything neighbours undid
@@ -727,10 +724,11 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, par,
             add_delta(q, qa, dint)
             if conserve:
                 remove_rigid(q, q_old, invm, dint)
-            if ground:
-                for i in range(q.shape[0]):
-                    if q[i, 2] < 0.0:
-                        q[i, 2] = 0.0
+        if ground:  # (changed since the freeze, as in production: contact + friction after the removal)
+            ground_clamp(q, invm, pen)
+            ground_friction(q, q_old, pen, mu)
+            if pbd:
+                out[2] += uninvert(q, invm, vidx, 0.25 * thick, False, True)
         update_velocity(q, q_old, qd, h, keep)
         if pbd and ncont:
             contact_velocities(q, qd, invm, pairs, ncont, radius)

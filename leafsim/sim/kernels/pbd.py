@@ -685,11 +685,11 @@ def settle(q, invm, vidx, thick, ground, dint, out):
 def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
           pbd, ground, pen, mu, self_coll, contact, replace, hgt, thick, conserve, qa, dint, omega, out):
     """All ``substeps`` of one dynamics frame in one call (no Python between substeps or
-    iterations; SPEC §8 order).  Per substep: predict; iterate (:func:`project`: ground clamp —
-    external — then the internal constraints ``cons`` in projection order, self-contacts);
-    ground contact + friction; un-invert layers (``vidx`` in model order); with ``conserve``
-    remove the rigid part of the internal displacement (:func:`remove_rigid`; not with pinned
-    particles); velocity update with damping, inelastic self-contacts.  ``contact`` = (qrest,
+    iterations).  Per substep: predict; iterate (:func:`project`: ground clamp — external —
+    then the internal constraints ``cons`` in projection order, self-contacts); un-invert
+    layers (``vidx`` in model order); with ``conserve`` remove the rigid part of the internal
+    displacement (:func:`remove_rigid`; not with pinned particles); ground contact + friction;
+    velocity update with damping, inelastic self-contacts.  ``contact`` = (qrest,
     T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate) for :func:`update_contacts`.
     ``qa``/``dint`` (n, 3) scratch.  Writes (iterations, contact hits, uninverted) to ``out``
     (int64[3])."""
@@ -705,12 +705,19 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
                 ncont = update_contacts(q, qrest, T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate)
             its += project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius, out)
             internal_delta(q, qa, pen, dint)
-        if ground:
-            ground_contact(q, q_old, invm, pen, mu)
         if pbd:
             settle(q, invm, vidx, thick, ground, dint, out)
             if conserve:
                 remove_rigid(q, q_old, invm, dint)
+        # ground contact and friction last: friction anchors the contact particles against
+        # everything the substep did, the rigid-motion removal included (friction first, then
+        # removal, let a dried, strongly curled leaf crawl at a steady 5 mm/s for ever)
+        if ground:
+            ground_contact(q, q_old, invm, pen, mu)
+            if pbd:
+                # the clamp may push a layer through the other where the leaf lies upside down:
+                # one more momentum-conserving pass (particles resting on the ground stay put)
+                out[2] += uninvert(q, invm, vidx, 0.25 * thick, False, True, dint)
         update_velocity(q, q_old, qd, h, keep, ground and pbd)
         if pbd and ncont:
             contact_velocities(q, qd, invm, pairs, ncont, radius)
