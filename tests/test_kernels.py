@@ -12,7 +12,7 @@ import pytest
 
 import _pbd_reference as ref
 from _reference_dynamics import RefDynamics
-from leafsim.bench import build_bench_model
+from leafsim.bench import build_bench_model, folded_state as _folded
 from leafsim.params import ParamSet
 from leafsim.sim import effects
 from leafsim.sim.effects import Dynamics, projection_order
@@ -24,17 +24,6 @@ EFFECTS = {e: True for e in ("gravity", "pbd", "bending", "ground", "self_collis
 @pytest.fixture(scope="module")
 def tiny():
     return build_bench_model("tiny")
-
-
-def _folded(model, seed=1):
-    """A state with the right half folded over the left (self-contacts) and random curl."""
-    st = model.state()
-    q = st.particle_q
-    right = q[:, 0] > 0
-    q[right, 0] *= -1
-    q[right, 2] = -q[right, 2] + 3 * model.thickness + 0.3 * model.spacing
-    st.hinge_rest[:] = np.random.default_rng(seed).uniform(-0.2, 0.2, model.hinge_count)
-    return st
 
 
 def test_atan2_matches_libm():
