@@ -425,7 +425,7 @@ class Panels:
         if self.timing:
             imgui.text_disabled("frame: " + "  ".join(f"{k} {v:.1f}" for k, v in self.timing.items()) + " ms")
         h = s.history
-        imgui.text(f"water {s.total_water():.4g} mg ({100 * s.water_fraction():.1f} %)")
+        imgui.text(f"water {1e3 * s.total_water():.4g} g ({100 * s.water_fraction():.1f} %)")  # kg in the model
         if h["residual"]:
             imgui.text(f"residual {h['residual'][-1]:.3g}   kinetic {h['kinetic'][-1]:.3g} J")
         self._plots()
