@@ -26,7 +26,7 @@ class State:
     """Time-varying arrays of one leaf.
 
     particle_q : (n, 3) float64 positions [m];  particle_qd : (n, 3) velocities [m/s];
-    particle_water : (n,) water [mg];  spring_rest : (s,) current rest lengths [m];
+    particle_water : (n,) water [kg];  spring_rest : (s,) current rest lengths [m];
     hinge_plastic : (h,) plastic rest angle of the bending hinges [rad];
     time [s], frame; pigments : :class:`leafsim.sim.colour.PigmentState` or None (the
     :class:`~leafsim.sim.simulator.Simulator` gives every state it makes one).  Arrays are
