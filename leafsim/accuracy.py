@@ -40,6 +40,8 @@ DRY_WATER = 0.02
 WATER_TIMES = (0.25, 0.5, 0.75)
 #: metrics every point is judged on, with the tolerance of the "within 10 %" rule
 METRICS = ("position", "height", "margin_lift", "area_3d", "area_top", "water", "time_to_dry")
+METRIC_NAMES = {"position": "position", "height": "height", "margin_lift": "margin lift", "area_3d": "3D area",
+                "area_top": "top-down area", "water": "water", "time_to_dry": "time to dry"}
 
 
 @dataclass
@@ -107,9 +109,12 @@ def reference_setting(base: ParamSet, quick: bool = False) -> Setting:
 
 
 def run_setting(species, base: ParamSet, setting: Setting, t_end: float | None, probe, water_times=(), seed: int = 0,
-                builds: dict | None = None, t_max: float = 60.0) -> Run:
+                builds: dict | None = None, t_max: float = 60.0, perturb: tuple[int, float] | None = None) -> Run:
     """Dry the leaf under ``setting`` for ``t_end`` simulated seconds (None: until it is dry
-    and then SETTLE × that long, at most ``t_max``); measure it."""
+    and then SETTLE × that long, at most ``t_max``); measure it.  ``perturb = (seed, a)``
+    displaces every particle's start position by a random vector of components U(−a, a) m
+    (upwards only, so nothing starts below the ground): the same leaf, started a little less
+    than perfectly flat."""
     from .leaf import build_leaf
     from .sim.simulator import Simulator
 
@@ -121,6 +126,10 @@ def run_setting(species, base: ParamSet, setting: Setting, t_end: float | None, 
     model = builds[key]
     sim = Simulator(model, p, seed=seed)
     st = sim.state()
+    if perturb is not None:
+        kick = np.random.default_rng(perturb[0]).uniform(-perturb[1], perturb[1], st.particle_q.shape)
+        kick[:, 2] = np.abs(kick[:, 2])
+        st.particle_q[:] += kick
     dt = p["dynamics.dt"]
     n = int(math.ceil((t_end if t_end is not None else t_max) / dt - 1e-9))
     wanted = sorted(water_times)
@@ -171,9 +180,31 @@ def errors(run: Run, ref: Run, probe) -> dict:
     return out
 
 
+#: start-position perturbation of the sensitivity runs [m]: a hundredth of a blade's thickness
+PERTURB_M = 1e-6
+
+
+def sensitivity(runs: list[Run], base: Run, probe, amplitude: float = PERTURB_M) -> dict:
+    """How far the same setting lands when only the start is perturbed (``runs`` against the
+    unperturbed ``base``): per metric the median and the largest relative difference.  A
+    metric's error against the reference cannot be resolved below this floor -- a dried shape
+    that a micrometre at the start changes by X % is only defined to X %."""
+    errs = [errors(r, base, probe) for r in runs]
+    out = {"setting": base.setting.name, "runs": len(errs), "amplitude_m": amplitude}
+    for m in METRICS:
+        v = sorted(e[f"{m}_rel"] for e in errs)
+        out[m] = {"median": float(f"{np.median(v):.4g}"), "max": float(f"{v[-1]:.4g}")}
+    return out
+
+
 def study(species: str = "maple", quick: bool = False, seed: int = 0, config=None, settings=None,
-          progress: bool = True, base_overrides: dict | None = None, groups=None) -> dict:
-    """Run the reference and every setting; returns the report (plain data, JSON-ready)."""
+          progress: bool = True, base_overrides: dict | None = None, groups=None, floor: int = 0,
+          floor_reference: bool = False) -> dict:
+    """Run the reference and every setting; returns the report (plain data, JSON-ready).
+
+    ``floor`` > 0 also dries the default setting (and with ``floor_reference`` the reference)
+    that many more times from start positions perturbed by :data:`PERTURB_M`: the report's
+    ``floor`` says how much of each metric's error is the leaf's own sensitivity."""
     from .leaf import leaf_shape
     from .sim.metrics import Probe
     from .species import get_species
@@ -189,7 +220,7 @@ def study(species: str = "maple", quick: bool = False, seed: int = 0, config=Non
     ref_set = reference_setting(base, quick)
     settings = settings if settings is not None else default_sweeps(base, quick, groups)
     builds: dict = {}
-    bar = _progress(len(settings) + 1, progress)
+    bar = _progress(len(settings) + 1 + floor * (1 + bool(floor_reference)), progress)
     # water snapshots at fractions of the nominal drying time (water per area / evaporation per
     # area); the reference runs until it is dry and settled, every other run as long
     t_nom = _dry_time_estimate(base)
@@ -199,22 +230,98 @@ def study(species: str = "maple", quick: bool = False, seed: int = 0, config=Non
         raise LeafsimError(f"accuracy: the reference run of {species} did not dry within {4 * t_nom:.3g} s")
     t_end = ref.frames * base.with_overrides(ref_set.overrides)["dynamics.dt"]
     bar.update(1)
-    rows = []
+    rows, done = [], {}
     for s in settings:
         try:
             r = run_setting(sp, base, s, t_end, probe, times, seed, builds)
             e = errors(r, ref, probe)
+            done[s.name] = r
         except LeafsimError as exc:  # an unstable setting is a result too
             r, e = None, {"failed": str(exc)}
         rows.append(_row(s, r, e))
         bar.update(1)
+    floors = []
+    for name, s0 in (("default", next((s for s in settings if s.name == "default"), None)), ("reference", ref_set)):
+        if floor <= 0 or s0 is None or (name == "reference" and not floor_reference):
+            continue
+        r0 = ref if name == "reference" else done.get(name) or run_setting(sp, base, s0, t_end, probe, times, seed, builds)
+        pert = []
+        for k in range(floor):
+            pert.append(run_setting(sp, base, s0, t_end, probe, times, seed, builds, perturb=(1 + k, PERTURB_M)))
+            bar.update(1)
+        floors.append(sensitivity(pert, r0, probe))
     bar.close()
     report = {"species": species, "quick": quick, "seed": seed, "length_m": probe.length,
               "reference": _row(ref_set, ref, {}), "rows": rows,
               "base": {k: base[k] for k in ("mesh.spacing", "dynamics.substeps", "dynamics.iterations", "dynamics.dt",
                                             "dynamics.relaxation", "osmosis.every", "osmosis.solver")}}
     report["front"] = pareto_front(rows)
+    if floors:
+        report["floor"] = floors
     return report
+
+
+def floor_study(species: str = "maple", runs: int = 3, overrides: dict | None = None, seed: int = 0, config=None,
+                name: str = "default", amplitude: float = PERTURB_M) -> dict:
+    """The sensitivity floor alone, without the sweep: the leaf dried under ``overrides``
+    until dry and settled, then ``runs`` more times from perturbed starts for as long."""
+    from .leaf import leaf_shape
+    from .sim.metrics import Probe
+    from .species import get_species
+
+    sp = get_species(species, config)
+    base = sp.params
+    probe = Probe(leaf_shape(sp, base))
+    s0 = Setting(name, "floor", dict(overrides or {}))
+    t_nom = _dry_time_estimate(base)
+    times = [f * t_nom for f in WATER_TIMES]
+    builds: dict = {}
+    r0 = run_setting(sp, base, s0, None, probe, times, seed, builds, t_max=4.0 * t_nom)
+    t_end = r0.frames * base.with_overrides(s0.overrides)["dynamics.dt"]
+    pert = [run_setting(sp, base, s0, t_end, probe, times, seed, builds, perturb=(1 + k, amplitude)) for k in range(runs)]
+    out = sensitivity(pert, r0, probe, amplitude)
+    out.update({"species": species, "overrides": s0.overrides, "particles": r0.particles, "frames": r0.frames,
+                "each": [{m: float(f"{errors(r, r0, probe)[f'{m}_rel']:.4g}") for m in METRICS} for r in pert]})
+    return out
+
+
+def ladder_study(species: str, key: str, values, overrides: dict | None = None, seed: int = 0, config=None) -> dict:
+    """Successive differences along one setting: the leaf dried with ``key`` = each of
+    ``values`` (coarse to fine, e.g. substeps 20, 40, 80, 160), the others at the species'
+    values plus ``overrides``, all for as long as the first run took to dry and settle.  For
+    every step the relative difference of each metric from the next finer value (``step``),
+    and from the finest (``to_finest``); a converging setting shows the steps shrinking."""
+    from .leaf import leaf_shape
+    from .sim.metrics import Probe
+    from .species import get_species
+
+    sp = get_species(species, config)
+    base = sp.params.with_overrides(overrides or {})
+    probe = Probe(leaf_shape(sp, base))
+    t_nom = _dry_time_estimate(base)
+    times = [f * t_nom for f in WATER_TIMES]
+    builds: dict = {}
+    runs, t_end = [], None
+    for v in values:
+        s = Setting(f"{key}={v}", "ladder", {key: v})
+        r = run_setting(sp, base, s, t_end, probe, times, seed, builds, t_max=4.0 * t_nom)
+        if t_end is None:
+            t_end = r.frames * base.with_overrides(s.overrides)["dynamics.dt"]
+        runs.append(r)
+    rows = []
+    for i, r in enumerate(runs):
+        row = {"value": values[i], "particles": r.particles, "ms_frame": round(r.ms_frame, 3),
+               "ms_per_sim_s": round(r.ms_per_sim_s, 1), "margin_lift": round(r.end["margin_lift"], 5),
+               "area_3d": round(r.end["area_3d"], 5), "area_top": round(r.end["area_top"], 5)}
+        if i + 1 < len(runs):
+            e = errors(r, runs[i + 1], probe)
+            row["step"] = {m: float(f"{e[f'{m}_rel']:.4g}") for m in METRICS}
+        if i + 1 < len(runs):
+            e = errors(r, runs[-1], probe)
+            row["to_finest"] = {m: float(f"{e[f'{m}_rel']:.4g}") for m in METRICS}
+        rows.append(row)
+    return {"species": species, "key": key, "values": list(values), "overrides": dict(overrides or {}),
+            "frames": runs[0].frames, "rows": rows}
 
 
 def _row(s: Setting, r: Run | None, e: dict) -> dict:
@@ -299,6 +406,16 @@ def markdown(report: dict) -> str:
     lines += ["", "Errors against the reference; relative values in brackets (fields relative to the reference's "
               "own deformation or drying, scalars to the reference's value). ★: on the Pareto front of cost "
               f"(ms per simulated second) and worst relative error. Leaf length L = {L:.3g} m."]
+    if report.get("floor"):
+        fl = report["floor"]
+        lines += ["", "Sensitivity floor: the same setting dried again from start positions perturbed by "
+                  f"{1e6 * fl[0]['amplitude_m']:.3g} µm (relative difference from the unperturbed run, median (largest) "
+                  "over the perturbed runs):", "",
+                  "| setting | runs | " + " | ".join(METRIC_NAMES[m] for m in METRICS) + " |",
+                  "|---|---|" + "---|" * len(METRICS)]
+        for f in fl:
+            lines.append(f"| {f['setting']} | {f['runs']} | " + " | ".join(
+                f"{100 * f[m]['median']:.1f} % ({100 * f[m]['max']:.1f} %)" for m in METRICS) + " |")
     return "\n".join(lines)
 
 

@@ -125,6 +125,10 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--seed", type=int, default=0)
     ac.add_argument("--out", default=None, help="folder for accuracy.json, accuracy.md and accuracy_pareto.png")
     ac.add_argument("--quick", action="store_true", help="a coarse, fast-drying leaf and few settings (for tests)")
+    ac.add_argument("--floor", type=int, default=0, metavar="K",
+                    help="also dry the default setting K times from start positions perturbed by 1 µm: the "
+                         "sensitivity floor below which no error is resolved")
+    ac.add_argument("--floor-reference", action="store_true", help="measure the floor on the reference too (slow)")
     ac.add_argument("--json", action="store_true")
     _scene_export_parsers(sub)
     return ap
@@ -510,7 +514,10 @@ def cmd_accuracy(args):
         raise LeafsimError(f"--out {out}: exists and is not a folder")
     if out is not None and not out.parent.exists():
         raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
-    report = study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json)
+    if args.floor < 0:
+        raise LeafsimError(f"--floor {args.floor}: expected a count ≥ 0")
+    report = study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json,
+                   floor=args.floor, floor_reference=args.floor_reference)
     if out is not None:
         report["files"] = write_report(report, out)
     _emit(args, report, markdown(report))

@@ -8,7 +8,7 @@ from leafsim.cli import main
 
 def test_accuracy_quick_report(tmp_path, capsys):
     out = tmp_path / "acc"
-    assert main(["accuracy", "--quick", "--species", "oak", "--out", str(out), "--json"]) == 0
+    assert main(["accuracy", "--quick", "--species", "oak", "--out", str(out), "--json", "--floor", "1"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["species"] == "oak" and rep["quick"] is True
     ref = rep["reference"]
@@ -29,6 +29,13 @@ def test_accuracy_quick_report(tmp_path, capsys):
     assert rep["front"] == pareto_front(rep["rows"])
     cheapest = min(rep["rows"], key=lambda r: r["ms_per_sim_s"])
     assert cheapest["name"] in rep["front"]
+    # the sensitivity floor: the default dried again from a start perturbed by a micrometre
+    (fl,) = rep["floor"]
+    assert fl["setting"] == "default" and fl["runs"] == 1 and fl["amplitude_m"] == 1e-6
+    for m in METRICS:
+        assert 0 <= fl[m]["median"] <= fl[m]["max"] < 10
+    assert fl["position"]["max"] > 0  # the perturbation acts: the runs are not the same run
+    assert "Sensitivity floor" in (out / "accuracy.md").read_text()
     for f in ("accuracy.json", "accuracy.md", "accuracy_pareto.png"):
         assert (out / f).stat().st_size > 100
     assert (out / "accuracy_pareto.png").read_bytes()[:4] == b"\x89PNG"
@@ -39,3 +46,26 @@ def test_accuracy_bad_out(tmp_path, capsys):
     f.write_text("x")
     assert main(["accuracy", "--quick", "--out", str(f)]) == 2
     assert "not a folder" in capsys.readouterr().err
+
+
+def test_unperturbed_start_repeats_the_run_exactly():
+    """A perturbation of amplitude 0 is the same run to the last bit (so any floor measured
+    with a real perturbation is the leaf's sensitivity, not noise in the solver)."""
+    import numpy as np
+
+    from leafsim.accuracy import Setting, run_setting
+    from leafsim.leaf import leaf_shape
+    from leafsim.sim.metrics import Probe
+    from leafsim.species import get_species
+
+    sp = get_species("oak")
+    base = sp.params.with_overrides({"mesh.spacing": 0.08})
+    probe = Probe(leaf_shape(sp, base))
+    s = Setting("default", "default", {})
+    builds = {}
+    a = run_setting(sp, base, s, 0.1, probe, (), 0, builds)
+    b = run_setting(sp, base, s, 0.1, probe, (), 0, builds, perturb=(3, 0.0))
+    c = run_setting(sp, base, s, 0.1, probe, (), 0, builds, perturb=(3, 1e-6))
+    assert np.array_equal(a.end["q_own"], b.end["q_own"])
+    assert not np.array_equal(a.end["q_own"], c.end["q_own"])
+    assert np.isfinite(c.end["q_own"]).all()
