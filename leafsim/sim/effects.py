@@ -298,7 +298,9 @@ class Dynamics:
         self.dt = dt
         self.substeps = effective_substeps(params)
         self.h = dt / self.substeps
-        self.g = -params["dynamics.gravity"] if effects["gravity"] else 0.0
+        # mass scaling (inertia × M, gravity ÷ M: the weight and every static force unchanged)
+        self.mscale = float(params["dynamics.mass_scaling"])
+        self.g = (-params["dynamics.gravity"] if effects["gravity"] else 0.0) / self.mscale
         self.keep = math.exp(-params["dynamics.damping"] * self.h)
         self.iters = params["dynamics.iterations"]
         self.omega = params["dynamics.relaxation"]
@@ -326,7 +328,7 @@ class Dynamics:
         """This frame's inverse masses, spring records, hinge compliances and rest values in
         projection order."""
         m = self.model
-        np.divide(1.0, m.particle_cytosol + state.particle_water, out=self.invm)
+        np.divide(1.0 / self.mscale, m.particle_cytosol + state.particle_water, out=self.invm)
         if self.scene == "hanging":
             self.invm[m.particle_pinned] = 0.0
         kp.pack_springs(self.sperm, self.sij, self.invm, state.spring_rest, self.salpha, self.srec)
