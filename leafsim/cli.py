@@ -49,7 +49,9 @@ def _common(p: argparse.ArgumentParser, seed=True):
                    help="override a declared parameter, e.g. --set veins.main.kappa=4 (repeatable)")
     if seed:
         p.add_argument("--seed", type=_seed, default=0, help="random seed, a non-negative integer (default 0)")
-    p.add_argument("--quality", default=None, choices=("draft", "balanced", "reference"),
+    from .sim.presets import QUALITY
+
+    p.add_argument("--quality", default=None, choices=tuple(QUALITY),
                    help="mesh and solver settings from the accuracy study's front (see `leafsim params`); --set wins")
 
 

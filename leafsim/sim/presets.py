@@ -29,15 +29,17 @@ PRESETS = {"thesis": THESIS_PRESET}
 
 #: quality levels: points of the accuracy study's Pareto front (docs/accuracy.md).  "balanced"
 #: is the declared defaults; the measured error and cost of each are in configs/quality.json,
-#: written by scripts/accuracy_study.py from the same study.
+#: written by scripts/quality_table.py from one study (docs/accuracy/maple_mass_scaling).
+#: "draft" scales the inertia (dynamics.mass_scaling: mass × M at n substeps dries like n·√M
+#: substeps, motion √M slower): the balanced shape from a quarter of the substeps.
 _QUALITY_CHANGES = {
-    "draft": {"mesh.spacing": 0.0395},
+    "draft": {"dynamics.substeps": 5, "dynamics.mass_scaling": 16.0},
     "balanced": {},
     "reference": {"mesh.spacing": 0.0199, "dynamics.substeps": 40, "dynamics.iterations": 3, "dynamics.tolerance": 1e-6},
 }
 #: the parameters a quality level sets (every level sets all of them)
 QUALITY_KEYS = ("mesh.spacing", "dynamics.substeps", "dynamics.iterations", "dynamics.tolerance", "dynamics.dt",
-                "osmosis.every")
+                "dynamics.mass_scaling", "osmosis.every")
 QUALITY_FILE = "quality.json"
 
 
