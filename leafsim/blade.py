@@ -466,19 +466,23 @@ def _springs(E: _Edges, tri, rest, tri_area, nT: int, vp, vw) -> _Springs:
 
 
 def _dual_faces(E: _Edges, tri, rest) -> np.ndarray:
-    """Finite-volume face of each T edge: the barycentric dual, i.e. per adjacent triangle the
-    normal distance from the edge midpoint to the triangle centroid (equilateral: |e|/√3 in all)."""
+    """Finite-volume face of each T edge such that face / |e| is the P1 (cotangent) weight
+    ½ (cot α + cot β) of the angles facing the edge: the length of the edge's circumcentric
+    (Voronoi) dual.  The two-point flux D (c_j − c_i) face / |e| is then the consistent
+    piecewise-linear Laplacian (a linear field carries almost no net flux into a cell: 4–10 %
+    of one edge's flux on these meshes, from the few non-Delaunay triangles along the veins);
+    the barycentric face used before was not (a linear field's residual 60 %, the cell-wise
+    diffusivity of x² scattered from −280 % to +460 %).  Clamped at 0 (a boundary edge facing
+    an obtuse angle) so the operator stays an M-matrix and the water non-negative."""
     p = rest[:, :2]
-    a, b = p[E.ij[:E.n_edges, 0]], p[E.ij[:E.n_edges, 1]]
-    mid = 0.5 * (a + b)
-    t = b - a
-    nrm = np.column_stack([-t[:, 1], t[:, 0]]) / np.maximum(np.linalg.norm(t, axis=1), 1e-30)[:, None]
-    cen = p[tri].mean(1)
-    face = np.zeros(E.n_edges)
-    for k in range(3):
-        e = E.tri_edge[:, k]
-        np.add.at(face, e, np.abs(((cen - mid[e]) * nrm[e]).sum(1)))
-    return face
+    e_len = np.linalg.norm(p[E.ij[:E.n_edges, 1]] - p[E.ij[:E.n_edges, 0]], axis=1)
+    w = np.zeros(E.n_edges)
+    for k in range(3):  # tri_edge columns are the edges 01, 12, 20: opposite vertices 2, 0, 1
+        o, a, b = tri[:, (k + 2) % 3], tri[:, k], tri[:, (k + 1) % 3]
+        u, v = p[a] - p[o], p[b] - p[o]
+        cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+        np.add.at(w, E.tri_edge[:, k], 0.5 * (u * v).sum(1) / np.maximum(cross, 1e-300))
+    return np.maximum(w, 0.0) * e_len
 
 
 @dataclass
