@@ -84,6 +84,13 @@ def default_sweeps(base: ParamSet, quick: bool = False, groups=None) -> list[Set
         [(max(sub // 4, 1), it), (max(sub // 2, 1), it), (sub, 1), (max(sub // 2, 1), 2 * it), (2 * sub, it)]
     out += [Setting(f"{a}×{b}", "iterations", {"dynamics.substeps": a, "dynamics.iterations": b}, f"{a} substeps × {b} iterations")
             for a, b in grid if (a, b) != (sub, it)]
+    M = base["dynamics.mass_scaling"]
+    out += [Setting(f"mass×{m:g}", "mass", {"dynamics.mass_scaling": m}, f"inertia × {m:g}")
+            for m in ((1.0,) if quick else (1.0, 16.0, 256.0)) if m != M]
+    if not quick:
+        a = max(sub // 4, 1)
+        out.append(Setting(f"{a}×{it}, mass×256", "mass", {"dynamics.substeps": a, "dynamics.mass_scaling": 256.0},
+                           f"{a} substeps × {it} iterations, inertia × 256"))
     if not quick:
         out.append(Setting("tol 1e-3", "tolerance", {"dynamics.iterations": 6, "dynamics.tolerance": 1e-3},
                            "≤ 6 iterations, stop at 1e-3 L"))

@@ -28,7 +28,7 @@ class RefDynamics:
 
     def apply(self, st):
         m, d = self.m, self.d
-        np.divide(1.0, m.particle_cytosol + st.particle_water, out=self.invm)
+        np.divide(1.0 / d.mscale, m.particle_cytosol + st.particle_water, out=self.invm)
         if d.scene == "hanging":
             self.invm[m.particle_pinned] = 0.0
         ref.hinge_compliance(m.hinge_idx, st.particle_water, m.particle_water0, d.kbend, d.kdry, self.hgeom, self.hrod,

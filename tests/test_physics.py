@@ -41,12 +41,16 @@ def _free_leaf(**over):
     return build_blade(s, synthetic_veins(s), p, seed=2), p
 
 
-def test_free_leaf_without_gravity_neither_spins_nor_drifts():
+@pytest.mark.parametrize("mass_scaling, max_spin", [(1.0, 2.0), (64.0, 4.0)])
+def test_free_leaf_without_gravity_neither_spins_nor_drifts(mass_scaling, max_spin):
     """Internal forces carry no net momentum: a free, strongly curling leaf without gravity
     neither drifts nor spins while it dries (the evaporating water takes only its own small
     momentum away), and once dry it comes to rest: damping damps (issue: a dried leaf used to
-    spin at 37°/s for ever)."""
-    m, p = _free_leaf()
+    spin at 37°/s for ever).  Measured peak spin 0.13°/s with the real inertia, 2.8°/s with
+    the inertia × 64 (the default), whose damping rate is ÷ 8 (c/√M, the same damping ratio for
+    modes √M slower) so whatever spin the drying leaves decays 8 × slower (and does: 1e-4°/s
+    after 2500 frames)."""
+    m, p = _free_leaf(**{"dynamics.mass_scaling": mass_scaling})
     sim = Simulator(m, p)
     st_ = sim.state()
     spin, drift, ke = [], [], []
@@ -58,7 +62,7 @@ def test_free_leaf_without_gravity_neither_spins_nor_drifts():
             drift.append(np.linalg.norm(mom["momentum"]) / (m.particle_cytosol + st_.particle_water).sum())
             ke.append(mom["kinetic"])
     assert st_.particle_water.sum() < 1e-3 * m.particle_water0.sum()  # dry
-    assert max(spin) < 2.0 and max(drift) < 1e-3, (max(spin), max(drift))  # ° / s, m / s
+    assert max(spin) < max_spin and max(drift) < 1e-3, (max(spin), max(drift))  # ° / s, m / s
     assert spin[-1] < 1e-4 and drift[-1] < 1e-6
     assert max(ke) > 1e4 * ke[-1]  # it curled (internal motion), then came to rest
     assert mom["max_internal_speed"] < 1e-4
@@ -145,10 +149,12 @@ def test_random_physics_stays_bounded_and_momentum_free(sig_top, sig_bot, l_min,
 def test_refinement_converges():
     """Dried on the ground, the default physics on a small leaf: each √2 refinement of the mesh
     changes the margin lift and the top-down area less than the previous one did (substeps
-    scale with the mesh, h ∝ r²)."""
+    scale with the mesh, h ∝ r²).  Measured: margin lift 0.186, 0.171, 0.164 (steps 0.015,
+    0.007); with the real inertia (mass_scaling 1, constraints in XPBD's rigid regime) 0.184,
+    0.177, 0.147 — the step grew."""
     s = ellipse_shape()
     lifts, tops = [], []
-    for sp_ in (0.085, 0.06, 0.0425):
+    for sp_ in (0.06, 0.0425, 0.03):
         p = ParamSet({"mesh.spacing": sp_, "effects.colour": False, "osmosis.evaporation_top": 0.07,
                       "osmosis.evaporation_bottom": 0.0525})
         m = build_blade(s, synthetic_veins(s), p, seed=1)
@@ -161,7 +167,7 @@ def test_refinement_converges():
         lifts.append(f["margin_lift"])
         tops.append(f["area_top"])
     for x in (lifts, tops):
-        assert abs(x[2] - x[1]) <= abs(x[1] - x[0]) + 0.01, (lifts, tops)
+        assert abs(x[2] - x[1]) <= abs(x[1] - x[0]) + 0.002, (lifts, tops)
 
 
 def test_mass_scaling_is_the_same_drying_as_more_substeps():
@@ -175,7 +181,8 @@ def test_mass_scaling_is_the_same_drying_as_more_substeps():
     m = build_blade(s, synthetic_veins(s), ParamSet(base), seed=1)
     probe = Probe(s)
     out = {}
-    for name, ov in {"n": {"dynamics.substeps": 5}, "2n": {"dynamics.substeps": 10},
+    for name, ov in {"n": {"dynamics.substeps": 5, "dynamics.mass_scaling": 1.0},
+                     "2n": {"dynamics.substeps": 10, "dynamics.mass_scaling": 1.0},
                      "n, mass × 4": {"dynamics.substeps": 5, "dynamics.mass_scaling": 4.0}}.items():
         p = ParamSet({**base, **ov})
         sim = Simulator(m, p)
@@ -194,12 +201,17 @@ def test_mass_scaling_is_the_same_drying_as_more_substeps():
         0.25 * abs(out["n"]["margin_lift"] - out["2n"]["margin_lift"]) + 1e-3
 
 
-def test_dried_curled_leaf_on_the_ground_comes_to_rest_where_it_lies():
+@pytest.mark.parametrize("mass_scaling, settle", [(1.0, 0), (64.0, 1500)])
+def test_dried_curled_leaf_on_the_ground_comes_to_rest_where_it_lies(mass_scaling, settle):
     """A strongly curling leaf dried on the ground stops: it neither crawls nor jitters once
     dry (friction acts after the rigid-motion removal; the other order let a dried maple with
-    sigma_surface_top 0.45 crawl at a steady 5 mm/s, 0.36 L in 6000 frames)."""
+    sigma_surface_top 0.45 crawl at a steady 5 mm/s, 0.36 L in 6000 frames).  With the inertia
+    scaled × 64 (the default) the leaf moves 8 × slower, so it is given 8 × longer to tip over
+    onto its resting pose before it is watched; with the full damping rate instead of ÷ √M it
+    crept on, overdamped, at 0.6 mm/s after 3000 frames."""
     s = ellipse_shape()
     p = ParamSet({"mesh.spacing": 0.07, "dynamics.scene": "ground", "shrink.sigma_surface_top": 0.45,
+                  "dynamics.mass_scaling": mass_scaling,
                   "osmosis.evaporation_top": 0.1, "osmosis.evaporation_bottom": 0.1, "effects.colour": False})
     m = build_blade(s, synthetic_veins(s), p, seed=2)
     sim = Simulator(m, p)
@@ -212,6 +224,8 @@ def test_dried_curled_leaf_on_the_ground_comes_to_rest_where_it_lies():
     for _ in range(600):
         sim.step(st_)
     assert st_.particle_water.sum() < 1e-3 * m.particle_water0.sum()  # dry
+    for _ in range(settle):
+        sim.step(st_)
     c_dry = com()
     for _ in range(600):
         sim.step(st_)

@@ -301,7 +301,10 @@ class Dynamics:
         # mass scaling (inertia × M, gravity ÷ M: the weight and every static force unchanged)
         self.mscale = float(params["dynamics.mass_scaling"])
         self.g = (-params["dynamics.gravity"] if effects["gravity"] else 0.0) / self.mscale
-        self.keep = math.exp(-params["dynamics.damping"] * self.h)
+        # damping ÷ √M with the inertia × M: the scaled leaf moves exactly like the real one in
+        # √M-stretched time (the same damping ratio); at the full rate the slowed modes were
+        # overdamped ×√M more and a curled leaf took M times, not √M, longer to settle
+        self.keep = math.exp(-params["dynamics.damping"] / math.sqrt(self.mscale) * self.h)
         self.iters = params["dynamics.iterations"]
         self.omega = params["dynamics.relaxation"]
         self.tol = params["dynamics.tolerance"] * m.length

@@ -28,12 +28,12 @@ THESIS_PRESET = {
 PRESETS = {"thesis": THESIS_PRESET}
 
 #: quality levels: points of the accuracy study's Pareto front (docs/accuracy.md).  "balanced"
-#: is the declared defaults; the measured error and cost of each are in configs/quality.json,
-#: written by scripts/quality_table.py from one study (docs/accuracy/maple_mass_scaling).
-#: "draft" scales the inertia (dynamics.mass_scaling: mass × M at n substeps dries like n·√M
-#: substeps, motion √M slower): the balanced shape from a quarter of the substeps.
+#: is the declared defaults (20 substeps with the inertia scaled × 64, dynamics.mass_scaling:
+#: the drying shape of 160 substeps); the measured error and cost of each are in
+#: configs/quality.json, written by scripts/quality_table.py from one study (docs/accuracy/maple).
+#: "draft" takes a quarter of the substeps with the inertia × 256 (the same n √M).
 _QUALITY_CHANGES = {
-    "draft": {"dynamics.substeps": 5, "dynamics.mass_scaling": 16.0},
+    "draft": {"dynamics.substeps": 5, "dynamics.mass_scaling": 256.0},
     "balanced": {},
     "reference": {"mesh.spacing": 0.0199, "dynamics.substeps": 40, "dynamics.iterations": 3, "dynamics.tolerance": 1e-6},
 }
