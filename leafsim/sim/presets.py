@@ -31,10 +31,14 @@ PRESETS = {"thesis": THESIS_PRESET}
 #: is the declared defaults (20 substeps with the inertia scaled × 64, dynamics.mass_scaling:
 #: the drying shape of 160 substeps); the measured error and cost of each are in
 #: configs/quality.json, written by scripts/quality_table.py from one study (docs/accuracy/maple).
-#: "draft" takes a quarter of the substeps with the inertia × 256 (the same n √M).
+#: "draft" takes a quarter of the substeps with the inertia × 256 (the same n √M); "fine" is the
+#: fastest point within 10 % of the reference on every metric (the reference's mesh at the
+#: default substeps: maple 6 %, grapevine 7 %, oak 9 %, ≈ 3.5× the cost; against a reference
+#: refined once more it is 8 %, docs/accuracy/maple_fine_default.json).
 _QUALITY_CHANGES = {
     "draft": {"dynamics.substeps": 5, "dynamics.mass_scaling": 256.0},
     "balanced": {},
+    "fine": {"mesh.spacing": 0.0199},
     "reference": {"mesh.spacing": 0.0199, "dynamics.substeps": 40, "dynamics.iterations": 3, "dynamics.tolerance": 1e-6},
 }
 #: the parameters a quality level sets (every level sets all of them)
