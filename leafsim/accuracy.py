@@ -101,6 +101,13 @@ def default_sweeps(base: ParamSet, quick: bool = False, groups=None) -> list[Set
     if not quick:
         out += [Setting("osmosis cg 1e-4", "osmosis", {"osmosis.solver": "cg", "osmosis.tolerance": 1e-4}, "CG to 1e-4"),
                 Setting("osmosis jacobi 1e-3", "osmosis", {"osmosis.solver": "jacobi", "osmosis.tolerance": 1e-3}, "Jacobi to 1e-3")]
+    if not quick:  # every other quality level (leafsim --quality) measured against the same reference
+        from .sim.presets import QUALITY
+
+        for level, values in QUALITY.items():
+            changes = {k: v for k, v in values.items() if base[k] != v}
+            if changes and level != "reference":
+                out.append(Setting(f"quality {level}", "quality", changes, f"--quality {level}"))
     return [x for x in out if groups is None or x.group in groups or x.group == "default"]
 
 

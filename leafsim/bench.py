@@ -37,6 +37,15 @@ from .sim.model import Model
 SIZES = {"maple": 0.0158, "100k": 0.00385, "tiny": 0.05}
 #: passes of the spring race
 PASSES = 10
+#: the solver settings every bench job uses: 20 substeps per frame at any size (the count the
+#: bench's history was measured with; the default at the fine maple mesh is 40, and
+#: dynamics.substep_scaling would give a 100 k mesh ≈ 1000), mesh.spacing set to the model's
+BENCH_SETTINGS = {"dynamics.substeps": 20, "dynamics.substep_scaling": False}
+
+
+def bench_params(model: Model) -> ParamSet:
+    """The bench's parameters for ``model``: :data:`BENCH_SETTINGS` at the model's own spacing."""
+    return ParamSet({**BENCH_SETTINGS, "mesh.spacing": round(model.spacing / model.length, 6)})
 EFFECTS = {e: True for e in ("gravity", "pbd", "bending", "ground", "self_collision", "shrink")}
 
 
@@ -125,7 +134,7 @@ class SpringProblem:
         from .sim.effects import Dynamics
         from .sim.kernels import pbd as kp
 
-        params = params or ParamSet()
+        params = params or bench_params(model)
         self.model = model
         d = Dynamics(model)
         d.configure(params, EFFECTS)
@@ -319,7 +328,7 @@ def _stage_jobs(model, params):
 def frame_bench(model: Model, rounds: int = 20, params: ParamSet | None = None) -> dict:
     """Interleaved production frames (flat / folded leaf, with and without self-collision),
     per-kind passes and the other stages; returns stats per job and the derived ratios."""
-    params = params or ParamSet()
+    params = params or bench_params(model)
     noself = {**EFFECTS, "self_collision": False}
     jobs, dyn = {}, {}
     for name, eff, sfn in (("frame", EFFECTS, model.state), ("frame, no self-collision", noself, model.state),
@@ -369,7 +378,7 @@ def memory(model: Model, params: ParamSet | None = None) -> dict:
     with its factors, shrink), and this process's peak RSS so far."""
     from .sim.simulator import Simulator
 
-    sim = Simulator(model, params or ParamSet(), watchdog=False)
+    sim = Simulator(model, params or bench_params(model), watchdog=False)
     st = sim.state()
     sim.step(st)
     n = model.particle_count

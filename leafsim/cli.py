@@ -131,6 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also dry the default setting K times from start positions perturbed by 1 µm: the "
                          "sensitivity floor below which no error is resolved")
     ac.add_argument("--floor-reference", action="store_true", help="measure the floor on the reference too (slow)")
+    ac.add_argument("--groups", default=None, metavar="G,G",
+                    help="only these sweeps (mesh, iterations, mass, tolerance, dt, relaxation, osmosis, quality)")
     ac.add_argument("--json", action="store_true")
     _scene_export_parsers(sub)
     return ap
@@ -251,8 +253,11 @@ def cmd_params(args):
     rows = [{"name": p.name, "kind": p.kind, "default": p.default, "lo": p.lo, "hi": p.hi, "unit": p.unit,
              "group": p.group, "rebuild": p.rebuild, "choices": list(p.choices), "help": p.help} for p in PARAMS.values()]
     text = "\n".join(f"{r['name']:36s} {str(r['default']):>10s} {r['unit']:10s} {'rebuild' if r['rebuild'] else 'live':7s} {r['help']}" for r in rows)
-    quality = quality_table()
-    text += "\n\n--quality (measured by the accuracy study, docs/accuracy.md):\n" + "\n".join(
+    from .params import ParamSet
+    from .sim.presets import quality_of
+
+    quality, default = quality_table(), quality_of(ParamSet())
+    text += "\n\n--quality (measured by the accuracy study, docs/accuracy.md; the defaults are " + f"{default}):\n" + "\n".join(
         f"  {k:10s} {json.dumps(v['settings']):60s} " + (_quality_measured(v["measured"]) if v["measured"] else "not measured")
         for k, v in quality.items())
     _emit(args, {"params": rows, "quality": quality}, text)
@@ -518,8 +523,12 @@ def cmd_accuracy(args):
         raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
     if args.floor < 0:
         raise LeafsimError(f"--floor {args.floor}: expected a count ≥ 0")
+    groups = None if args.groups is None else [g.strip() for g in args.groups.split(",") if g.strip()]
+    known = {"mesh", "iterations", "mass", "tolerance", "dt", "relaxation", "osmosis", "quality"}
+    if groups is not None and (not groups or set(groups) - known):
+        raise LeafsimError(f"--groups {args.groups}: expected a comma list of {', '.join(sorted(known))}")
     report = study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json,
-                   floor=args.floor, floor_reference=args.floor_reference)
+                   floor=args.floor, floor_reference=args.floor_reference, groups=groups)
     if out is not None:
         report["files"] = write_report(report, out)
     _emit(args, report, markdown(report))

@@ -164,7 +164,7 @@ _f("veins.taper", 0.6, 0.0, 1.0, "", "How much a vein thins from its start to it
 
 # ---------------------------------------------------------------- mesh (rebuild)
 G = "Mesh"
-_f("mesh.spacing", 0.028, 0.002, 0.1, "× length", "Poisson-disk spacing r of surface particles, relative to the leaf length.", G, True, log=True)
+_f("mesh.spacing", 0.0199, 0.002, 0.1, "× length", "Poisson-disk spacing r of surface particles, relative to the leaf length.", G, True, log=True)
 _f("mesh.vein_spacing", 0.75, 0.3, 2.0, "× r", "Spacing of vein particles along veins relative to r.", G, True)
 _f("mesh.contour_spacing", 0.8, 0.3, 2.0, "× r", "Spacing of contour particles along the outline relative to r.", G, True)
 _f("mesh.contour_detail", 0.05, 0.0, 1.0, "× r", "Contour particles also sit on the margin's corners (tooth tips and notches) that stand out more than this × r from a straight edge; 0 = evenly spaced only (teeth smaller than the spacing are cut).", G, True)
@@ -209,7 +209,7 @@ G = "Dynamics"
 _f("dynamics.dt", 0.002, 1e-5, 0.1, "s", "Time step Δt.", G, False, log=True)
 _f("dynamics.gravity", 9.81, 0.0, 50.0, "m/s²", "Gravity magnitude (acts along −z).", G, False)
 _f("dynamics.damping", 25.0, 0.0, 1000.0, "1/s", "Velocity damping rate c (v ← v·e^(−c·Δt); air drag and internal friction of the tissue).", G, False, log=True)
-_i("dynamics.substeps", 20, 1, 200, "", "Dynamics substeps per frame at the default mesh spacing (small steps make stiff constraints converge far better than more iterations).", G, False)
+_i("dynamics.substeps", 40, 1, 200, "", "Dynamics substeps per frame at the default mesh spacing (small steps make stiff constraints converge far better than more iterations).", G, False)
 _b("dynamics.substep_scaling", True, "Scale the substeps with (default spacing / mesh.spacing)² so a finer mesh stays as converged (h ∝ r²; a coarse mesh gets fewer, at least 1).", G, False)
 _i("dynamics.iterations", 2, 1, 200, "", "Maximum constraint-projection iterations per substep.", G, False)
 _f("dynamics.mass_scaling", 64.0, 1.0, 4096.0, "", "Inertia × M with gravity ÷ M (weight and every static force unchanged; motion √M slower).  A constraint's XPBD regime depends on h²/(compliance · mass): scaling the mass by M is, for the quasi-static drying, the same as √M times more substeps at no cost.  64: the drying shape of 160 substeps from 20 (docs/accuracy.md); from ≈ 256 the slowed leaf lags behind its drying; 1 = real inertia (a falling or swinging leaf moves at its real speed).", G, False, log=True)

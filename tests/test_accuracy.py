@@ -4,6 +4,7 @@ import json
 
 from leafsim.accuracy import METRICS, pareto_front
 from leafsim.cli import main
+from leafsim.params import PARAMS
 
 
 def test_accuracy_quick_report(tmp_path, capsys):
@@ -24,7 +25,8 @@ def test_accuracy_quick_report(tmp_path, capsys):
         assert r["ms_frame"] > 0 and r["ms_per_sim_s"] > r["ms_frame"]  # Δt < 1 s
     # more substeps are closer to the reference than fewer (the reference has the most)
     rows = {r["name"]: r for r in rep["rows"]}
-    assert rows["40×2"]["position"] < rows["2×1"]["position"]
+    most = f"{2 * PARAMS['dynamics.substeps'].default}×{PARAMS['dynamics.iterations'].default}"
+    assert rows[most]["position"] < rows["2×1"]["position"]
     # the front is non-dominated and holds the cheapest run
     assert rep["front"] == pareto_front(rep["rows"])
     cheapest = min(rep["rows"], key=lambda r: r["ms_per_sim_s"])
@@ -46,6 +48,23 @@ def test_accuracy_bad_out(tmp_path, capsys):
     f.write_text("x")
     assert main(["accuracy", "--quick", "--out", str(f)]) == 2
     assert "not a folder" in capsys.readouterr().err
+    assert main(["accuracy", "--quick", "--groups", "mesh,speed"]) == 2
+    assert "--groups mesh,speed: expected a comma list of" in capsys.readouterr().err
+
+
+def test_study_measures_every_other_quality_level():
+    """The full study's "quality" sweep: one row per quality level other than the defaults and
+    the reference, with exactly the level's changes from the defaults."""
+    from leafsim.accuracy import default_sweeps
+    from leafsim.params import ParamSet
+    from leafsim.sim.presets import QUALITY, quality_of
+
+    base = ParamSet()
+    rows = [s for s in default_sweeps(base, groups=["quality"]) if s.group == "quality"]
+    expect = set(QUALITY) - {quality_of(base), "reference"}
+    assert {s.name for s in rows} == {f"quality {k}" for k in expect}
+    for s in rows:
+        assert quality_of(base.with_overrides(s.overrides)) == s.name.split()[1]
 
 
 def test_unperturbed_start_repeats_the_run_exactly():

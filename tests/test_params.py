@@ -81,7 +81,7 @@ def test_integer_ranges_fit_an_int_slider():
 def test_quality_levels_set_every_quality_key_and_are_recognised():
     from leafsim.sim.presets import QUALITY, QUALITY_KEYS, quality_of, quality_overrides, quality_table
 
-    assert quality_of(ParamSet()) == "balanced"  # the declared defaults are the balanced level
+    assert quality_of(ParamSet()) == "fine"  # the declared defaults are the fine level (within 10 %)
     for name in QUALITY:
         o = quality_overrides(name)
         assert set(o) == set(QUALITY_KEYS)

@@ -276,6 +276,7 @@ class Panels:
         error against the converged reference and its cost."""
         from imgui_bundle import imgui
 
+        from ..params import ParamSet
         from ..sim.presets import quality_of, quality_table
 
         table = self._quality = getattr(self, "_quality", None) or quality_table()
@@ -288,7 +289,7 @@ class Panels:
         lines = []
         for k, v in table.items():
             m = v["measured"]
-            lines.append(f"{k}: " + (f"worst error {100 * m['worst_rel']:.0f} % of the reference, "
+            lines.append(f"{k}{' (default)' if k == quality_of(ParamSet()) else ''}: " + (f"worst error {100 * m['worst_rel']:.0f} % of the reference, "
                                      f"{m['ms_per_sim_s']:.0f} ms per simulated second" if m else "not measured"))
         _tip("Mesh and solver settings from the accuracy study (docs/accuracy.md); measured on maple:\n" + "\n".join(lines))
 

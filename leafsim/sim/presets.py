@@ -27,19 +27,19 @@ THESIS_PRESET = {
 
 PRESETS = {"thesis": THESIS_PRESET}
 
-#: quality levels: points of the accuracy study's Pareto front (docs/accuracy.md).  "balanced"
-#: is the declared defaults (20 substeps with the inertia scaled × 64, dynamics.mass_scaling:
-#: the drying shape of 160 substeps); the measured error and cost of each are in
-#: configs/quality.json, written by scripts/quality_table.py from one study (docs/accuracy/maple).
-#: "draft" takes a quarter of the substeps with the inertia × 256 (the same n √M); "fine" is the
-#: fastest point within 10 % of the reference on every metric (the reference's mesh at the
-#: default substeps: maple 6 %, grapevine 7 %, oak 9 %, ≈ 3.5× the cost; against a reference
-#: refined once more it is 8 %, docs/accuracy/maple_fine_default.json).
+#: quality levels: points of the accuracy study's Pareto front (docs/accuracy.md).  "fine" is the
+#: declared defaults: the fastest point within 10 % of a converged reference on every metric
+#: (mesh 0.0199 L, 40 substeps with the inertia scaled × 64, dynamics.mass_scaling; against the
+#: reference one √2 refinement finer it is within 10 % for maple, grapevine and oak).  "balanced"
+#: is the previous default, a √2 coarser mesh (20 substeps from the scaling), ≈ 3.5× cheaper at
+#: ≈ 18 % worst; "draft" takes a quarter of balanced's substeps with the inertia × 256 (the same
+#: n √M).  The measured error and cost of each are in configs/quality.json, written by
+#: scripts/quality_table.py from one study (docs/accuracy/maple_default).
 _QUALITY_CHANGES = {
-    "draft": {"dynamics.substeps": 5, "dynamics.mass_scaling": 256.0},
-    "balanced": {},
-    "fine": {"mesh.spacing": 0.0199},
-    "reference": {"mesh.spacing": 0.0199, "dynamics.substeps": 40, "dynamics.iterations": 3, "dynamics.tolerance": 1e-6},
+    "draft": {"mesh.spacing": 0.028, "dynamics.substeps": 10, "dynamics.mass_scaling": 256.0},
+    "balanced": {"mesh.spacing": 0.028},
+    "fine": {},
+    "reference": {"mesh.spacing": 0.01413, "dynamics.substeps": 80, "dynamics.iterations": 3, "dynamics.tolerance": 1e-6},
 }
 #: the parameters a quality level sets (every level sets all of them)
 QUALITY_KEYS = ("mesh.spacing", "dynamics.substeps", "dynamics.iterations", "dynamics.tolerance", "dynamics.dt",
