@@ -10,8 +10,8 @@ p90 over the run's frames) and per simulated second.
 
 Sweeps (each around the defaults, one setting changed): mesh spacing (≈ √2 steps); substeps ×
 iterations and the iteration stop tolerance; Δt; the osmosis solve (direct, CG and Jacobi to a
-tolerance, solved every k-th frame); the hinges' over-relaxation.  float32 kernels do not
-exist yet (every kernel is float64), so there is no float32 row.
+tolerance, solved every k-th frame); the hinges' over-relaxation; the dynamics frame in
+float32 (``dynamics.precision``; osmosis, shrink and colour stay float64).
 
 Example
 -------
@@ -101,6 +101,8 @@ def default_sweeps(base: ParamSet, quick: bool = False, groups=None) -> list[Set
     if not quick:
         out += [Setting("osmosis cg 1e-4", "osmosis", {"osmosis.solver": "cg", "osmosis.tolerance": 1e-4}, "CG to 1e-4"),
                 Setting("osmosis jacobi 1e-3", "osmosis", {"osmosis.solver": "jacobi", "osmosis.tolerance": 1e-3}, "Jacobi to 1e-3")]
+    if not quick:
+        out.append(Setting("float32", "precision", {"dynamics.precision": "float32"}, "dynamics frame in float32"))
     if not quick:  # every other quality level (leafsim --quality) measured against the same reference
         from .sim.presets import QUALITY
 

@@ -323,6 +323,7 @@ class Dynamics:
         self.skip2 = (params["dynamics.collision_skip"] * m.spacing) ** 2
         self.cstate[1] = -1.0  # search again
         self.pbd = effects["pbd"]
+        self.f32 = params["dynamics.precision"] == "float32"
         self.bending = effects["bending"] and m.hinge_count > 0 and self.kbend > 0
         self.ground = effects["ground"] and self.scene == "ground"
         self.self_coll = effects["self_collision"]
@@ -358,15 +359,51 @@ class Dynamics:
         out[:] = 0
         out[1] = self.last_contacts
         out[2] = self.last_uninverted
+        q, qd, q_old, invm, pen, hgt, qa, dint = (state.particle_q, state.particle_qd, self.q_old, self.invm, self.pen,
+                                                  self.hgt, self.qa, self.dint)
+        if self.f32:  # the frame on float32 copies (the state stays float64 and holds their values)
+            w = self._f32_buffers()
+            cons = tuple(w.get(id(a), a) if a.dtype == np.float64 else a for a in cons)
+            for a in cons:
+                if a.dtype == np.float32:
+                    np.copyto(a, self._f64_of[id(a)], casting="same_kind")
+            contact = contact[:8] + (w["qc"], self.cstate)
+            np.copyto(w["q"], q, casting="same_kind")
+            np.copyto(w["qd"], qd, casting="same_kind")
+            np.copyto(w["invm"], invm, casting="same_kind")
+            q, qd, q_old, invm, pen, hgt, qa, dint = (w[k] for k in ("q", "qd", "q_old", "invm", "pen", "hgt", "qa", "dint"))
         # the whole frame (all substeps and iterations) in one numba call
-        kp.frame(state.particle_q, state.particle_qd, self.q_old, self.invm, self.g, self.h, self.substeps,
+        kp.frame(q, qd, q_old, invm, self.g, self.h, self.substeps,
                  self.keep, self.iters, self.tol, cons, m.vol_idx,
-                 self.pbd, self.ground, self.pen, self.mu, self.self_coll, contact,
-                 self.replace, self.hgt, m.thickness * shrunk, self.scene != "hanging",
-                 self.qa, self.dint, self.omega, out)
+                 self.pbd, self.ground, pen, self.mu, self.self_coll, contact,
+                 self.replace, hgt, m.thickness * shrunk, self.scene != "hanging",
+                 qa, dint, self.omega, out)
+        if self.f32:
+            state.particle_q[:] = q
+            state.particle_qd[:] = qd
         self.last_iterations = int(out[0])
         self.last_contacts = int(out[1])
         self.last_uninverted = int(out[2])
+
+
+    def _f32_buffers(self) -> dict:
+        """float32 twins of the frame's float arrays (made once): by name for the per-particle
+        ones, by ``id`` of the float64 array for the constraint records (``_f64_of`` maps back);
+        the contact list's positions ``qc`` persist between frames like the float64 ones."""
+        if getattr(self, "_w32", None) is None:
+            n = self.model.particle_count
+            w = {k: np.zeros((n, 3), np.float32) for k in ("q", "qd", "q_old", "qa", "dint")}
+            w.update(invm=np.zeros(n, np.float32), pen=np.zeros(n, np.float32), hgt=np.zeros(len(self.hgt), np.float32),
+                     qc=self.qc.astype(np.float32))
+            self._f64_of = {}
+            for a in (self.srec, self.slam, self.hrest, self.halpha, self.hlam, self.vrest, self.no_hinges[1],
+                      self.no_hinges[2], self.no_hinges[3]):
+                b = a.astype(np.float32)
+                w[id(a)] = b
+                self._f64_of[id(b)] = a
+            self._w32 = w
+            self.cstate[1] = -1.0  # the float32 list is searched afresh
+        return self._w32
 
 
 def projection_order(idx: np.ndarray, colour_start: np.ndarray) -> np.ndarray:
