@@ -3,6 +3,7 @@ physics; report margin lift, 3D and top-down area kept (resolution-independent p
 and save a top/side picture per species into docs/drying/.
 
     .venv/bin/python scripts/curl_report.py [--species a,b] [--scenes ground,free] [--json FILE]
+    .venv/bin/python scripts/curl_report.py --render docs/drying/curl.json   # the README tables
 """
 
 from __future__ import annotations
@@ -75,14 +76,50 @@ def _pictures(sp, p, model, st, path: Path) -> None:
     write_png_atomic(path, np.hstack(imgs), rgb=True)
 
 
+def _pct(x) -> str:
+    return f"{100 * x:.1f} %"
+
+
+def render(rows: list) -> str:
+    """The two markdown tables made from a report: README's (ground, with the free lift) and
+    docs/drying/README.md's (both scenes), plus the ranges the text quotes."""
+    by = {(r["species"], r["scene"]): r for r in rows}
+    keys = list(dict.fromkeys(r["species"] for r in rows))
+    out = ["| species | top-down area kept (ground) | 3D area kept (ground) | margin lift / L, ground | "
+           "margin lift / L, free | frames to dry | inverted |", "|---|---|---|---|---|---|---|"]
+    for k in keys:
+        g, f = by[(k, "ground")], by.get((k, "free"))
+        out.append(f"| {k} | {_pct(g['area_top'])} | {_pct(g['area_3d'])} | {_pct(g['margin_lift'])} | "
+                   f"{_pct(f['margin_lift']) if f else '—'} | {g['frames']} | {g['inverted']} |")
+    out += ["", "| species | particles | fresh mass | frames | time to dry (s) | ground: top-down area kept | ground: 3D "
+            "area kept | ground: margin lift / L | free: top-down | free: 3D | free: margin lift / L | inverted "
+            "(ground/free) | compute s (ground/free) |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for k in keys:
+        g, f = by[(k, "ground")], by.get((k, "free")) or {}
+        out.append(f"| {k} | {g['particles']} | {g.get('fresh_mass_g', float('nan')):.2f} g | {g['frames']} | "
+                   f"{g['time_to_dry']:.2f} | {_pct(g['area_top'])} | {_pct(g['area_3d'])} | {_pct(g['margin_lift'])} | "
+                   + (f"{_pct(f['area_top'])} | {_pct(f['area_3d'])} | {_pct(f['margin_lift'])} | " if f else "— | — | — | ")
+                   + f"{g['inverted']}/{f.get('inverted', '—')} | {g['seconds']:.0f}/{f.get('seconds', float('nan')):.0f} |")
+    ground = [by[(k, "ground")] for k in keys]
+    for m in ("area_top", "area_3d", "margin_lift"):
+        lo, hi = min(ground, key=lambda r: r[m]), max(ground, key=lambda r: r[m])
+        out.append(f"\n{m} (ground): {_pct(lo[m])} ({lo['species']}) … {_pct(hi[m])} ({hi['species']})")
+    out.append(f"\nsimulation seconds in all: {sum(r['seconds'] for r in rows):.0f}")
+    return "\n".join(out)
+
+
 def main():
     ap = argparse.ArgumentParser()
+    ap.add_argument("--render", default=None, metavar="JSON", help="print the markdown tables of a report and stop")
     ap.add_argument("--max-time", type=float, default=30.0, help="simulated seconds at most")
     ap.add_argument("--species", default=None)
     ap.add_argument("--scenes", default="ground,free")
     ap.add_argument("--json", default=None)
     ap.add_argument("--no-pictures", action="store_true")
     a = ap.parse_args()
+    if a.render:
+        print(render(json.loads(Path(a.render).read_text())))
+        return
     keys = a.species.split(",") if a.species else list(load_library())
     snap = None if a.no_pictures else ROOT / "docs" / "drying"
     if snap:
