@@ -11,8 +11,8 @@ another would each see a different load.
    vectorised-numpy Jacobi and — when installed (``pip install -e ".[peers]"``) — warp and
    Taichi on the CPU.  Every row reports the constraint residual max |C|/l after the passes
    (a kernel that does nothing cannot win) and how far its positions are from ours.
-2. **Frame**: the production dynamics frame (``dynamics.*`` defaults: substeps × iterations,
-   hinges, thickness, ground, self-collision) on a flat leaf at rest and on a folded leaf in
+2. **Frame**: the production dynamics frame (``dynamics.*`` defaults, but 20 substeps at every
+   size, :data:`BENCH_SETTINGS`; ≤ 2 iterations, hinges, thickness, ground, self-collision) on a flat leaf at rest and on a folded leaf in
    self-contact, each with and without self-collision (the contact share); the per-kind cost
    of one pass (ns per spring, hinge, volume); osmosis, shrink and the colour-only step.
 3. **Memory**: bytes per particle of the model, state and solver arrays, and the peak RSS.

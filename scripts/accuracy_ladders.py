@@ -4,6 +4,7 @@ starts) and substep ladders (successive differences as Δt/substeps halves), for
 
     .venv/bin/python scripts/accuracy_ladders.py [--species maple,grapevine] [--substeps 20,40,80,160]
         [--floor 2] [--set KEY=VALUE ...] [--tag NAME] [--out docs/accuracy]
+    .venv/bin/python scripts/accuracy_ladders.py --key dynamics.precision --values float32,float64 --tag precision
     .venv/bin/python scripts/accuracy_ladders.py --render docs/accuracy/ladders.json
 
 Each run is recorded in ``<out>/ladders.json`` (appended under its tag, so ablations such as
@@ -23,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from leafsim.accuracy import METRIC_NAMES, METRICS, floor_study, ladder_study  # noqa: E402
-from leafsim.params import parse_set_args  # noqa: E402
+from leafsim.params import PARAMS, parse_set_args  # noqa: E402
 
 SHOWN = ("position", "height", "margin_lift", "area_3d", "area_top")
 
@@ -57,7 +58,9 @@ def render(db: dict) -> str:
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--species", default="maple,grapevine")
-    ap.add_argument("--substeps", default="20,40,80,160")
+    ap.add_argument("--substeps", default="20,40,80,160", help="the values of --key (kept under this name)")
+    ap.add_argument("--key", default="dynamics.substeps", help="the setting the ladder walks (coarse to fine)")
+    ap.add_argument("--values", default=None, help="its values, coarse to fine (default: --substeps)")
     ap.add_argument("--floor", type=int, default=0, help="perturbed runs for the sensitivity floor (0: none)")
     ap.add_argument("--amplitude", type=float, default=1e-4, help="start perturbation [m]")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
@@ -72,9 +75,12 @@ def main():
     ov = parse_set_args(a.set)
     for sp in a.species.split(","):
         rec = {}
-        if a.substeps:
+        values = a.values or a.substeps
+        if values:
+            kind = PARAMS[a.key].kind
+            cast = int if kind == "int" else float if kind == "float" else str
             t0 = time.time()
-            rec["ladder"] = ladder_study(sp, "dynamics.substeps", [int(v) for v in a.substeps.split(",")], ov)
+            rec["ladder"] = ladder_study(sp, a.key, [cast(v) for v in values.split(",")], ov)
             rec["ladder"]["seconds"] = round(time.time() - t0, 1)
         if a.floor:
             rec["floor"] = floor_study(sp, a.floor, ov, amplitude=a.amplitude)

@@ -1,7 +1,7 @@
 """Write configs/quality.json (the measured error and cost of each `--quality` level) from an
 accuracy study's report whose rows include every level's settings.
 
-    .venv/bin/python scripts/quality_table.py [docs/accuracy/maple/accuracy.json]
+    .venv/bin/python scripts/quality_table.py [docs/accuracy/maple_default/accuracy.json]
 
 A level is matched to the study row whose overrides give the same values of every quality
 key (within 1 %: the study's reference mesh is the default spacing × 0.71); a level the study did not run is left out (shown as "not measured").
@@ -24,7 +24,7 @@ KEEP = ("particles", "ms_frame", "ms_per_sim_s", "worst_rel", "position_rel", "h
 
 
 def main():
-    src = Path(sys.argv[1] if len(sys.argv) > 1 else ROOT / "docs" / "accuracy" / "maple" / "accuracy.json")
+    src = Path(sys.argv[1] if len(sys.argv) > 1 else ROOT / "docs" / "accuracy" / "maple_default" / "accuracy.json").resolve()
     rep = json.loads(src.read_text())
     rows = [rep["reference"]] + rep["rows"]
     out = {"_about": f"Measured by the accuracy study in {src.relative_to(ROOT)} ({rep['species']}, seed {rep['seed']}) "
