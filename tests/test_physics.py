@@ -170,16 +170,21 @@ def test_refinement_converges():
         assert abs(x[2] - x[1]) <= abs(x[1] - x[0]) + 0.002, (lifts, tops)
 
 
+def _fast_drying_ellipse():
+    """(params, model, probe) of a coarse test ellipse without colour and with fast evaporation,
+    dry within 900 frames; one substep per frame at the default substeps."""
+    s = ellipse_shape()
+    base = {"mesh.spacing": 0.06, "effects.colour": False, "osmosis.evaporation_top": 0.07,
+            "osmosis.evaporation_bottom": 0.0525}
+    return base, build_blade(s, synthetic_veins(s), ParamSet(base), seed=1), Probe(s)
+
+
 def test_mass_scaling_is_the_same_drying_as_more_substeps():
     """An XPBD constraint's regime depends on h² / (compliance · mass): for the quasi-static
     drying, inertia × 4 (gravity ÷ 4: the same weight) at n substeps dries into the shape of 2n
     substeps, far closer to it than n substeps with the real mass (docs/accuracy.md measured
     5 × 2 at mass × 16 against 20 × 2: 2 % of the deformation)."""
-    s = ellipse_shape()
-    base = {"mesh.spacing": 0.06, "effects.colour": False, "osmosis.evaporation_top": 0.07,
-            "osmosis.evaporation_bottom": 0.0525}
-    m = build_blade(s, synthetic_veins(s), ParamSet(base), seed=1)
-    probe = Probe(s)
+    base, m, probe = _fast_drying_ellipse()
     out = {}
     # substeps at the default spacing; (0.0199 / 0.06)² scales 10 / 20 to n = 1 / 2n = 2 here
     for name, ov in {"n": {"dynamics.substeps": 10, "dynamics.mass_scaling": 1.0},
@@ -241,11 +246,7 @@ def test_float32_dynamics_runs_on_float32_copies():
     (this coarse leaf) the dried shape is the float64 one.  (With the default's 40 substeps a
     substep moves a particle by about a float32 ulp and the dried maple differs: measured in
     docs/accuracy.md, so float32 stays off.)"""
-    s = ellipse_shape()
-    base = {"mesh.spacing": 0.06, "effects.colour": False, "osmosis.evaporation_top": 0.07,
-            "osmosis.evaporation_bottom": 0.0525}
-    m = build_blade(s, synthetic_veins(s), ParamSet(base), seed=1)
-    probe = Probe(s)
+    base, m, probe = _fast_drying_ellipse()
     out = {}
     for prec in ("float64", "float32"):
         sim = Simulator(m, ParamSet({**base, "dynamics.precision": prec}))
