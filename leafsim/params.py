@@ -202,6 +202,7 @@ _f("shrink.sigma_surface_top", 0.16, 0.0, 3.0, "", "σ of surface springs in the
 _f("shrink.sigma_surface_bottom", 0.15, 0.0, 3.0, "", "σ of surface springs in the bottom layer T.", G, False)
 _f("shrink.sigma_vein", 0.05, 0.0, 3.0, "", "σ of vein springs.", G, False)
 _f("shrink.alpha", 1.0, 0.1, 4.0, "", "Exponent α of (1 − v_rel) in the shrink law.", G, False)
+_f("shrink.curl_anisotropy", 0.6, 0.0, 1.0, "", "Anisotropy β of the bilayer curl relative to the local main/lateral vein direction: hinges that bend the blade across a vein curl × (1 + β), along it × (1 − β), so lobes cup about their own veins (0: isotropic).", G, False)
 _f("shrink.l_min", 0.5, 0.1, 1.0, "× l⁰", "Rest lengths never go below l_min · l⁰ (≥ 0.1: tissue cannot shrink to nothing; at 0 a leaf collapsed to a point and never came to rest).", G, False)
 
 # ---------------------------------------------------------------- dynamics (live)

@@ -3,6 +3,7 @@ physics; report margin lift, 3D and top-down area kept (resolution-independent p
 and save a top/side picture per species into docs/drying/.
 
     .venv/bin/python scripts/curl_report.py [--species a,b] [--scenes ground,free] [--json FILE]
+        [--set KEY=VALUE ...] [--pictures DIR]
     .venv/bin/python scripts/curl_report.py --render docs/drying/curl.json   # the README tables
 """
 
@@ -23,15 +24,16 @@ from leafsim.leaf import build_leaf, load_photo_rgba  # noqa: E402
 from leafsim.sim.metrics import Probe  # noqa: E402
 from leafsim.sim.run import leaf_frame, shape_metrics  # noqa: E402
 from leafsim.sim.simulator import Simulator  # noqa: E402
+from leafsim.sim.veinframe import vein_frame_curl  # noqa: E402
 from leafsim.species import get_species, load_library  # noqa: E402
 
 #: dry below this water fraction, then settle this much longer
 DRY, SETTLE = 0.02, 1.15
 
 
-def dry(key: str, scene: str, max_time: float, snap_dir: Path | None) -> dict:
+def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides: dict | None = None) -> dict:
     sp = get_species(key)
-    p = sp.params.with_overrides({"dynamics.scene": scene})
+    p = sp.params.with_overrides({**(overrides or {}), "dynamics.scene": scene})
     shape, _, model = build_leaf(sp, p, 0)
     sim = Simulator(model, p, seed=0)
     st = sim.state()
@@ -52,6 +54,7 @@ def dry(key: str, scene: str, max_time: float, snap_dir: Path | None) -> dict:
            "time_to_dry": None if t_dry is None else round(t_dry, 3), "water_left": round(f["water"], 4),
            "margin_lift": round(f["margin_lift"], 4), "area_3d": round(f["area_3d"], 4),
            "area_top": round(f["area_top"], 4), "inverted": shape_metrics(model, st)["inverted"],
+           "vein_frame_curl": round(vein_frame_curl(model, st.particle_q), 4),
            "particles": model.particle_count, "fresh_mass_g": round(1e3 * float(model.particle_mass0.sum()), 3)}
     if snap_dir is not None:
         _pictures(sp, p, model, st, snap_dir / f"{key}_{scene}.png")
@@ -116,19 +119,27 @@ def main():
     ap.add_argument("--scenes", default="ground,free")
     ap.add_argument("--json", default=None)
     ap.add_argument("--no-pictures", action="store_true")
+    ap.add_argument("--pictures", default=str(ROOT / "docs" / "drying"), metavar="DIR",
+                    help="where the pictures go (default docs/drying)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a parameter over every species' own (experiments; repeatable)")
     a = ap.parse_args()
     if a.render:
         print(render(json.loads(Path(a.render).read_text())))
         return
     keys = a.species.split(",") if a.species else list(load_library())
-    snap = None if a.no_pictures else ROOT / "docs" / "drying"
+    snap = None if a.no_pictures else Path(a.pictures)
+    overrides = {}
+    for kv in a.set:
+        k, _, v = kv.partition("=")
+        overrides[k] = json.loads(v) if v[:1] in "-0123456789tf[" else v
     if snap:
         snap.mkdir(parents=True, exist_ok=True)
     rows = []
     print(f"{'species':16s} {'scene':7s} {'frames':>6s} {'t_dry':>6s} {'lift/L':>7s} {'3D':>6s} {'top':>6s} {'inv':>4s} {'s':>6s}")
     for k in keys:
         for sc in a.scenes.split(","):
-            r = dry(k, sc, a.max_time, snap)
+            r = dry(k, sc, a.max_time, snap, overrides)
             rows.append(r)
             print(f"{k:16s} {sc:7s} {r['frames']:6d} {r['time_to_dry'] or float('nan'):6.2f} {r['margin_lift']:7.3f} "
                   f"{r['area_3d']:6.3f} {r['area_top']:6.3f} {r['inverted']:4d} {r['seconds']:6.1f}", flush=True)

@@ -13,6 +13,7 @@ from scipy.sparse.linalg import splu
 from .kernels import osmosis as ko
 from .kernels import pbd as kp
 from .kernels import shrink as ks
+from .veinframe import hinge_alignment
 from .model import (
     LAYER_T, LAYER_V, SPRING_LINK, SPRING_SURFACE, SPRING_VEIN, Model, State,
 )
@@ -206,7 +207,9 @@ class Shrink:
         self.nT = nT
         self.tri_springs = np.ascontiguousarray(model.vol_springs[np.argsort(model.vol_idx[:, 0])])
         self.link_tri_springs = self.tri_springs[ij[:, 0] - nT]
-        # veins stay straight along their length: no bilayer curl on hinges that bend them
+        # veins stay straight along their length: no bilayer curl on hinges that bend them;
+        # elsewhere the curl is resolved in the local vein frame (veinframe.py)
+        self.hinge_align = hinge_alignment(model)
         self.hinge_curl = np.where(model.hinge_vein, 0.0, 1.0)
 
     def configure(self, params):
@@ -220,6 +223,8 @@ class Shrink:
         self.alpha = params["shrink.alpha"]
         self.l_min = params["shrink.l_min"]
         self.setw = min(params["dynamics.plasticity"] * params["dynamics.dt"], 1.0)
+        beta = params["shrink.curl_anisotropy"]
+        self.hinge_curl = np.where(self.model.hinge_vein, 0.0, 1.0 + beta * self.hinge_align)
 
     def apply(self, state: State):
         m = self.model
@@ -230,8 +235,8 @@ class Shrink:
             ks.hinge_targets(m.hinge_idx, m.hinge_spring_V, m.spring_ij, m.spring_rest0, self.sig_top, self.sig_bot,
                              self.alpha, self.l_min, m.particle_cytosol, state.particle_water, m.particle_water0,
                              m.particle_mass0, m.thickness, BILAYER_GAIN, self.setw, state.hinge_plastic, state.hinge_rest)
-            np.clip(state.hinge_rest, -HINGE_MAX_ANGLE, HINGE_MAX_ANGLE, out=state.hinge_rest)
             np.multiply(state.hinge_rest, self.hinge_curl, out=state.hinge_rest)
+            np.clip(state.hinge_rest, -HINGE_MAX_ANGLE, HINGE_MAX_ANGLE, out=state.hinge_rest)
             ks.dual_targets(m.hinge_spring_V, m.spring_ij, self.tri_springs, self.nT, m.spring_rest0,
                             state.hinge_rest, m.thickness, state.spring_rest)
         ks.link_targets(self.links, self.link_tri_springs, m.spring_rest0, state.spring_rest)
