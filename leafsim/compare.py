@@ -251,7 +251,7 @@ def vein_agreement(photo_rgb: np.ndarray, blade: np.ndarray, model_veins: np.nda
     vals = R[inner]
     thr = np.partition(vals, len(vals) - k)[len(vals) - k]
     pv = inner & (R >= thr) & (R > 0)
-    if float(R[pv].mean()) < 3.0 * max(float(np.median(vals)), 1e-9):
+    if not pv.any() or float(R[pv].mean()) < 3.0 * max(float(np.median(vals)), 1e-9):  # a blade without ridges
         return None
     tol = 0.015 * length_px
     d_photo = cv2.distanceTransform(np.where(pv, 0, 255).astype(np.uint8), cv2.DIST_L2, 5)

@@ -37,25 +37,28 @@ class Row:
     picture: np.ndarray | None = None
     mask: np.ndarray | None = None
     note: str = ""
+    veins: np.ndarray | None = None  # main + lateral vein lines in the comparison frame
+    scale_k: float = 1.0  # the grown-back leaf's length ÷ the photo-sized leaf's (senescent rows)
+    stage: dict | None = None  # frame, time, water left (when the state is not the leaf's own)
 
 
 class _Leaf:
     """One species' model, its view and renders in the comparison frame."""
 
-    def __init__(self, sp, params, seed, effects):
+    def __init__(self, sp, params, seed, effects, frame=None):
         from leafsim.leaf import build_leaf, species_photo_rgba
         from leafsim.render.topdown import TopDown
         from leafsim.sim.simulator import Simulator
         from leafsim.view import LeafView
 
-        self.sp, self.params = sp, params
+        self.sp, self.params, self.seed, self.effects = sp, params, seed, effects
         self.shape, self.veins, self.model = build_leaf(sp, params, seed)
         self.sim = Simulator(self.model, params, effects=effects, seed=seed)
         self.state0 = self.sim.state()
         photo = species_photo_rgba(sp, params) if sp.image is not None else None
         self.view = LeafView(self.model, photo, self.state0.pigments.copy(), photo_tint=False, photo_colour=sp.photo_colour)
         self.albedo = "detail" if photo is not None else "colours"
-        self.frame = C.frame_for(self.shape)
+        self.frame = C.frame_for(self.shape) if frame is None else frame
         self.td = TopDown(self.frame)
         self._mesh = None
 
@@ -89,9 +92,10 @@ def _reference(path, params, frame, length_m, base_px=None, apex_px=None):
     return C.reference(traced, to_leaf_shape(traced, length_m), frame)
 
 
-def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None):
-    """Run the leaf drying; returns (dried state, state at ``want_frame`` or None, best
-    match to ``target``'s colours (state, tv, frames sampled) or None)."""
+def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, last: int = MAX_FRAMES):
+    """Run the leaf drying (to ``DRY_LEFT`` of the water, at most frame ``last``); returns
+    (dried state, state at ``want_frame`` or None, best match to ``target``'s colours (state,
+    tv, frames sampled) or None)."""
     sim, state = leaf.sim, leaf.state0.copy()
     w0 = float(leaf.model.particle_water0.sum())
     at, best, tried = None, None, 0
@@ -108,7 +112,7 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None):
             if best is None or tv < best[1]:
                 best = (state.copy(), tv)
         dry = float(state.particle_water.sum()) <= DRY_LEFT * w0
-        if (dry or state.frame >= MAX_FRAMES) and (want_frame is None or state.frame >= want_frame):
+        if (dry or state.frame >= min(last, MAX_FRAMES)) and (want_frame is None or state.frame >= want_frame):
             break
         sim.step(state)
         if not np.isfinite(state.particle_q).all():
@@ -134,13 +138,16 @@ def run_compare(sp, params, seed=0, photo=None, stage=None, effects=None) -> dic
         own = _reference(ref_path, params, leaf.frame, sp.length_m, *given)
         rows = _rows(leaf, own, stage, photo is None)
         for r in rows:
-            r.picture, r.mask = leaf.picture(r.state)
-            r.metrics = C.compare_images(r.ref, r.picture, r.mask, leaf.vein_lines(r.state), sp.length_m * leaf.frame.scale)
+            if r.picture is None:
+                r.picture, r.mask = leaf.picture(r.state)
+                r.veins = leaf.vein_lines(r.state)
+            r.metrics = C.compare_images(r.ref, r.picture, r.mask, r.veins, sp.length_m * leaf.frame.scale)
     finally:
         leaf.release()
     report = {"species": sp.key, "seed": seed, "frame_px_per_m": round(leaf.frame.scale, 2),
               "seconds": round(time.perf_counter() - t0, 2),
-              "rows": [dict(kind=r.kind, reference=_rel(r.ref.path), stage=_stage_info(leaf, r.state), note=r.note, **r.metrics)
+              "rows": [dict(kind=r.kind, reference=_rel(r.ref.path), stage=r.stage or _stage_info(leaf, r.state), note=r.note,
+                           **({"grown_back": round(r.scale_k, 4)} if r.scale_k != 1.0 else {}), **r.metrics)
                        for r in rows]}
     report["_rows"] = rows
     return report
@@ -159,9 +166,75 @@ def _rows(leaf: _Leaf, own: C.Reference, stage, species_photo: bool) -> list[Row
         ref = own if sp.senescent.image == sp.image else _reference(sp.senescent.image, leaf.params, leaf.frame, sp.length_m,
                                                                   sp.senescent.base_px, sp.senescent.apex_px)
         _, _, best = _dry_run(leaf, None, ref)
-        rows.append(Row("senescent", ref, best[0], note=f"best of {best[2]} stages every {MATCH_EVERY} frames"
-                        + ("" if ref is own else "; another leaf of the species: its IoU is only indicative")))
+        note = f"best of {best[2]} stages every {MATCH_EVERY} frames"
+        if ref is own and sp.photo_stage == "senescent":
+            rows.append(_grown_back(leaf, ref, best, note))
+        else:
+            rows.append(Row("senescent", ref, best[0], note=note
+                            + ("" if ref is own else "; another leaf of the species: its IoU is only indicative")))
     return rows
+
+
+#: the grown-back run samples stages this many frames past the first run's match at most
+GROWN_BACK_MARGIN = 10 * MATCH_EVERY
+
+
+def _silhouette_px(leaf: _Leaf, state) -> int:
+    return int(leaf.picture(state)[1].sum())
+
+
+def _register(leaf: _Leaf, state, ref: C.Reference) -> float:
+    """Translate ``state`` in the table's plane so its top-down silhouette's centroid is the
+    photo blade's (a drying leaf creeps on the table as it shrinks; where it lies is no
+    property of its shape).  No rotation, no scaling.  Returns the distance moved [m]."""
+    _, mask = leaf.picture(state)
+    if not mask.any() or not ref.blade.any():
+        return 0.0
+    rm, cm = np.nonzero(mask)
+    rp, cp = np.nonzero(ref.blade)
+    dx = (cp.mean() - cm.mean()) / leaf.frame.scale
+    dy = -(rp.mean() - rm.mean()) / leaf.frame.scale  # image rows run down, y up
+    state.particle_q[:, 0] += dx
+    state.particle_q[:, 1] += dy
+    return float(np.hypot(dx, dy))
+
+
+def _grown_back(leaf: _Leaf, ref: C.Reference, best, note: str) -> Row:
+    """The senescent row when the species' own photo shows the aged leaf: the photographed
+    outline is the leaf *after* it shrank, so the fresh leaf was larger.  The first drying run
+    (built at the photo's size) gives the matched stage and the top-down area it kept, r; the
+    leaf is rebuilt 1/√r longer, translated so its area centroid is the photo-sized leaf's
+    (a rigid move of a free leaf), dried again and matched again (to at most
+    ``GROWN_BACK_MARGIN`` frames past the first match), then moved on the table so the
+    silhouettes' centroids coincide (:func:`_register`).  The row is that second match: its
+    size follows from the model's own shrinkage, not from fitting the photo."""
+    from dataclasses import replace
+
+    from leafsim.sim.model import LAYER_T
+
+    first, r = best[0], _silhouette_px(leaf, best[0]) / max(_silhouette_px(leaf, leaf.state0), 1)
+    k = 1.0 / np.sqrt(max(r, 1e-6))
+    big = _Leaf(replace(leaf.sp, length_m=leaf.sp.length_m * k), leaf.params, leaf.seed, leaf.effects, frame=leaf.frame)
+    try:
+        def centroid(lf):
+            t = lf.model.particle_layer == LAYER_T
+            a = lf.model.particle_area[t]
+            return (lf.state0.particle_q[t, :2] * a[:, None]).sum(0) / a.sum()
+
+        big.state0.particle_q[:, :2] += centroid(leaf) - centroid(big)
+        _, _, best2 = _dry_run(big, None, ref, last=first.frame + GROWN_BACK_MARGIN)
+        shift = _register(big, best2[0], ref)
+        picture, mask = big.picture(best2[0])
+        veins = big.vein_lines(best2[0])
+    finally:
+        big.release()
+    row = Row("senescent", ref, best2[0], note=f"{note}; grown back: the fresh leaf × {k:.3f} in length, so that at "
+              f"the matched stage it has the photo's size (first pass at photo size: frame {first.frame}, top-down area "
+              f"kept {r:.3f}); best of {best2[2]} stages of that run; moved {1e3 * shift:.2f} mm on the table "
+              f"to the photo's centroid")
+    row.picture, row.mask, row.veins, row.scale_k = picture, mask, veins, k
+    row.stage = _stage_info(big, best2[0])
+    return row
 
 
 def _rel(path) -> str:
