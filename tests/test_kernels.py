@@ -140,3 +140,92 @@ def test_residual_serial(tiny):
                   - st.spring_rest) / st.spring_rest
     assert kp.residual(st.particle_q, tiny.spring_ij, st.spring_rest) == pytest.approx(want.max())
     assert not math.isnan(kp.residual(st.particle_q, tiny.spring_ij[:0], st.spring_rest[:0]))
+
+
+# ----------------------------------------------------------------------------- chord hinges
+def _bent(m, radius):
+    """The flat rest blade rolled isometrically onto a cylinder of ``radius`` about the y axis
+    (x → arc length), the V layer carried along the normal: every hinge keeps its triangles."""
+    st = m.state()
+    q = st.particle_q
+    x, z = q[:, 0].copy(), q[:, 2].copy()
+    phi = x / radius
+    q[:, 0] = (radius - z) * np.sin(phi)
+    q[:, 2] = radius - (radius - z) * np.cos(phi)
+    return st
+
+
+def _chord_dynamics(m, state):
+    d = Dynamics(m)
+    d.configure(ParamSet({"dynamics.bending_model": "chord"}), EFFECTS)
+    hidx, hrest, halpha, _ = d.gather(state)
+    kp.pack_chord_hinges(state.particle_q, hidx, d.hs5, state.spring_rest, d.invm, hrest, halpha, d.hrec)
+    return d, hidx
+
+
+@pytest.mark.parametrize("radius", [0.02, -0.03])
+def test_chord_of_an_isometric_bend_is_two_sin_half_angle(tiny, radius):
+    """On a blade rolled onto a cylinder (up or down) the bend vector of every hinge measures
+    the dihedral angle: ±|v| = 2 sin(θ/2) with θ the exact signed angle, to the chord error of
+    the rolled mesh (its flat triangles on a curved surface: O((r/R)²))."""
+    m = tiny
+    st = _bent(m, radius)
+    d, hidx = _chord_dynamics(m, st)
+    q, rec = st.particle_q, d.hrec
+    th = kp.dihedral_angles(q, hidx.astype(np.int64))
+    v = sum(rec[:, k:k + 1] * q[hidx[:, k]] for k in range(4))
+    sign = np.sign((v * rec[:, 12:15]).sum(1))
+    chord = sign * np.linalg.norm(v, axis=1)
+    assert np.abs(th).max() > 0.1  # really bent
+    assert np.sign(th[np.abs(th) > 1e-3]).tolist() == sign[np.abs(th) > 1e-3].tolist()
+    assert np.abs(chord - 2 * np.sin(th / 2)).max() < 0.02 * np.abs(th).max()
+
+
+@pytest.mark.parametrize("start, target", [(0.0, 0.3), (0.0, -0.3), (1.0, 0.2), (-0.5, 0.4)])
+def test_chord_hinge_with_springs_reaches_its_rest_angle(start, target):
+    """One hinge (wings c, d on edge a–b) held by rigid springs on its five edges: Gauss–Seidel
+    passes of springs + the chord hinge bring the dihedral angle to θ₀ from flat (the normal
+    fallback, either sign) and from folds of either sign, and keep the edges' lengths."""
+    a, b = np.array([0.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+
+    def wing(side, th):  # a wing at height 0.8 off the edge, rotated by th about it
+        return np.array([side * 0.8 * math.cos(th), 0.4, 0.8 * math.sin(th)])
+
+    q = np.array([wing(-1, start / 2), wing(1, start / 2), a, b]) * 0.01  # 1 cm hinge
+    th0 = float(kp.dihedral_angles(q, np.array([[0, 1, 2, 3]]))[0])
+    assert abs(th0 - start) < 1e-9
+    flat = np.array([wing(-1, 0), wing(1, 0), a, b]) * 0.01
+    edges = np.array([[2, 3], [2, 0], [3, 0], [2, 1], [3, 1]], np.uint32)
+    rest = np.linalg.norm(flat[edges[:, 0]] - flat[edges[:, 1]], axis=1)
+    invm = np.ones(4)
+    srec = np.column_stack([rest, np.zeros(5), np.full(5, 0.5), np.ones(5), np.ones(5)])
+    hidx = np.array([[0, 1, 2, 3]], np.uint32)
+    rec = np.zeros((1, 15))
+    kp.pack_chord_hinges(q, hidx, np.arange(5).reshape(1, 5), rest, invm, np.array([target]), np.zeros(1), rec)
+    lam, slam = np.zeros(1), np.zeros(5)
+    for _ in range(60):
+        kp.spring_pass(q, edges, srec, slam, 0, 5)
+        kp.chord_hinge_pass(q, hidx, rec, lam, 1.0, 0, 1)
+    th = float(kp.dihedral_angles(q, np.array([[0, 1, 2, 3]]))[0])
+    assert th == pytest.approx(target, abs=2e-3)
+    assert np.abs(np.linalg.norm(q[edges[:, 0]] - q[edges[:, 1]], axis=1) - rest).max() < 1e-3 * rest.min()
+
+
+def test_chord_frame_runs_and_agrees_with_angle_frame_on_small_bends(tiny):
+    """A drying-like frame on a gently curled blade: the chord and angle hinges give nearly
+    the same positions (their constraints agree to second order about θ₀)."""
+    m = tiny
+    out = {}
+    for model in ("angle", "chord"):
+        p = ParamSet({"dynamics.bending_model": model})
+        d = Dynamics(m)
+        d.configure(p, EFFECTS)
+        st = _bent(m, 0.2)
+        st.hinge_rest[:] = 0.02
+        for _ in range(20):
+            d.apply(st)
+        assert np.isfinite(st.particle_q).all()
+        out[model] = st.particle_q.copy()
+    moved = np.abs(out["angle"] - _bent(m, 0.2).particle_q).max()
+    assert moved > 0.05 * m.spacing
+    assert np.abs(out["chord"] - out["angle"]).max() < 0.1 * moved
