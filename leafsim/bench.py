@@ -16,7 +16,9 @@ another would each see a different load.
    self-contact, each with and without self-collision (the contact share), and with chord
    hinges (``dynamics.bending_model``); the per-kind cost of one pass (ns per spring, angle
    hinge, chord hinge, volume); osmosis, shrink and the colour-only step.
-3. **Memory**: bytes per particle of the model, state and solver arrays, and the peak RSS.
+3. **Parallel vs serial**: every parallel kernel against its serial twin on a quiet machine
+   and with one CPU-bound process per core running (:func:`parallel_vs_serial`), p90 ratios.
+4. **Memory**: bytes per particle of the model, state and solver arrays, and the peak RSS.
 
 Example
 -------
@@ -264,6 +266,72 @@ def spring_race(model: Model, rounds: int = 30, peers: bool = True, numpy: bool 
     return rows
 
 
+# ----------------------------------------------------------------------------- parallel vs serial
+class _Busy:
+    """``n`` processes spinning on the CPU while the block runs: the bench's own, reproducible
+    "machine under load" (the project's machines are shared; a parallel path must not lose
+    when another job holds a core)."""
+
+    def __init__(self, n: int):
+        self.n, self.procs = n, []
+
+    def __enter__(self):
+        import subprocess
+        import sys
+
+        self.procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(self.n)]
+        time.sleep(0.3)
+        return self
+
+    def __exit__(self, *exc):
+        for p in self.procs:
+            p.kill()
+        for p in self.procs:
+            p.wait()
+        return False
+
+
+def parallel_vs_serial(model: Model, rounds: int = 30, busy: int | None = None) -> list[dict]:
+    """Every parallel kernel against its serial twin, interleaved, on a quiet machine and with
+    ``busy`` CPU-bound processes running (default: one per core): 10 spring passes (the
+    coloured fork/join per colour and the 2-block domain split against the serial sweep) and
+    the shrink step (``prange`` over springs against the serial loop).  Rows: job, load,
+    median / p90 ms, and p90 ÷ the serial twin's p90."""
+    from .sim.effects import Shrink
+    from .sim.kernels import shrink as ks
+
+    prob = SpringProblem(model)
+    cons = spring_contenders(prob, peers=False, numpy=False, parallel=True)
+    cons.pop("ceiling (f32, serial)")
+    st = model.state()
+    st.particle_water[:] *= np.linspace(0.6, 1.0, model.particle_count)
+    sh = Shrink(model)
+    sh.configure(bench_params(model))
+    m = model
+
+    def shrink(fn):
+        return lambda: fn(m.spring_ij, m.spring_rest0, sh.sigma, sh.alpha, sh.l_min, m.particle_cytosol,
+                          st.particle_water, m.particle_mass0, st.spring_rest)
+
+    jobs = {f"springs ×10: {k}": (c.reset, c.run) for k, c in cons.items()}
+    jobs["shrink: serial"] = (_nothing, shrink(ks.shrink_springs))
+    jobs["shrink: parallel (prange)"] = (_nothing, shrink(ks.shrink_springs_par))
+    twin = {k: ("springs ×10: ours (f64, serial)" if k.startswith("springs") else "shrink: serial") for k in jobs}
+    busy = (os.cpu_count() or 2) if busy is None else busy
+    rows = []
+    for n_busy in (0, busy):
+        if n_busy:
+            with _Busy(n_busy):
+                load, ms = _load(), interleaved(jobs, rounds)
+        else:
+            load, ms = _load(), interleaved(jobs, rounds)
+        st_ = {k: _stats(v) for k, v in ms.items()}
+        for k, v in st_.items():
+            rows.append({"job": k, "busy": n_busy, "load": load, **v,
+                         "p90_vs_serial": v["p90_ms"] / st_[twin[k]]["p90_ms"]})
+    return rows
+
+
 # ----------------------------------------------------------------------------- frame
 def _frame_job(model, params, effects, state_fn):
     """(reset, run, dynamics) of one production frame on the state ``state_fn()`` (reset to
@@ -451,6 +519,8 @@ def run_bench(sizes=("maple", "100k"), rounds: int = 30, peers: bool = True, mem
              "volumes": model.vol_count, "build_s": build_s}
         r["race"] = spring_race(model, rounds=max(7, rounds // 3) if big else rounds, peers=peers, parallel=parallel)
         r["frame"] = frame_bench(model, rounds=max(5, rounds // 6) if big else rounds)
+        if parallel:
+            r["parallel"] = parallel_vs_serial(model, rounds=max(7, rounds // 3) if big else rounds)
         if mem:
             r["memory"] = memory_subprocess(s) if big else memory(model)
         res[str(s)] = r
@@ -470,6 +540,12 @@ def format_bench(res: dict) -> str:
             lines.append(f"  {row['contender']:28s} {row['median_ms']:10.3f} {row['p90_ms']:9.3f} {row['ratio']:6.2f} "
                          f"{row['ns_per_spring']:9.2f} {row['residual']:9.2e} {row['agree']:8.1e}")
         lines.append(f"  (residual before the passes {r['race'][0]['residual0']:.2e})")
+        if "parallel" in r:
+            lines.append(f"  parallel vs serial, quiet and with {max(x['busy'] for x in r['parallel'])} busy processes:")
+            lines.append(f"  {'job':44s} {'busy':>4s} {'load':>5s} {'median ms':>10s} {'p90 ms':>9s} {'p90 ÷ serial':>12s}")
+            for x in r["parallel"]:
+                lines.append(f"  {x['job']:44s} {x['busy']:4d} {x['load']:5.1f} {x['median_ms']:10.3f} {x['p90_ms']:9.3f} "
+                             f"{x['p90_vs_serial']:12.2f}")
         f = r["frame"]
         lines.append(f"  frame ({f['substeps']} substeps × ≤ {f['iterations']} iterations; 1-min load {f['load']:.1f}):")
         for k, v in f["ms"].items():

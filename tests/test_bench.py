@@ -5,6 +5,7 @@ frame and memory reports have their shape.  No timing assertions."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from leafsim import bench
@@ -54,3 +55,35 @@ def test_frame_and_memory_report(tiny):
                                         "race": bench.spring_race(tiny, rounds=1, peers=False, parallel=False),
                                         "frame": f, "memory": m}})
     assert "ceiling (f32, serial)" in text and "hinge" in text
+
+
+def test_parallel_vs_serial_rows_under_load(tiny):
+    """Every parallel kernel is timed with its serial twin quietly and with a busy process
+    running; the ratios are p90 ÷ the twin's p90 (1 for the twin itself), and the parallel
+    shrink writes the serial shrink's rest lengths."""
+    from leafsim.sim.effects import Shrink
+    from leafsim.sim.kernels import shrink as ks
+
+    rows = bench.parallel_vs_serial(tiny, rounds=2, busy=1)
+    jobs = {r["job"] for r in rows}
+    assert {"springs ×10: ours (f64, serial)", "springs ×10: 2-block parallel", "springs ×10: coloured parallel (before)",
+            "shrink: serial", "shrink: parallel (prange)"} <= jobs
+    assert {r["busy"] for r in rows} == {0, 1}
+    for r in rows:
+        assert r["median_ms"] > 0 and r["p90_ms"] >= r["median_ms"] * 0.999
+        if r["job"] in ("springs ×10: ours (f64, serial)", "shrink: serial"):
+            assert r["p90_vs_serial"] == 1.0
+    st = tiny.state()
+    st.particle_water[:] *= np.linspace(0.6, 1.0, tiny.particle_count)
+    sh = Shrink(tiny)
+    sh.configure(bench.bench_params(tiny))
+    a, b = np.zeros(tiny.spring_count), np.zeros(tiny.spring_count)
+    for fn, out in ((ks.shrink_springs, a), (ks.shrink_springs_par, b)):
+        fn(tiny.spring_ij, tiny.spring_rest0, sh.sigma, sh.alpha, sh.l_min, tiny.particle_cytosol, st.particle_water,
+           tiny.particle_mass0, out)
+    assert np.array_equal(a, b) and (a < tiny.spring_rest0).any()
+    text = bench.format_bench({"tiny": {"particles": tiny.particle_count, "springs": tiny.spring_count,
+                                        "hinges": tiny.hinge_count, "volumes": tiny.vol_count,
+                                        "race": bench.spring_race(tiny, rounds=1, peers=False, parallel=False),
+                                        "frame": bench.frame_bench(tiny, rounds=1), "parallel": rows}})
+    assert "busy processes" in text and "p90 ÷ serial" in text
