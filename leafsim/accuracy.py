@@ -11,9 +11,7 @@ p90 over the run's frames) and per simulated second.
 Sweeps (each around the defaults, one setting changed): mesh spacing (≈ √2 steps); substeps ×
 iterations and the iteration stop tolerance; Δt; the osmosis solve (direct, CG and Jacobi to a
 tolerance, solved every k-th frame); the hinges' over-relaxation; the dynamics frame in
-float32 (``dynamics.precision``; osmosis, shrink and colour stay float64); the bending hinges
-as the other constraint (``dynamics.bending_model``: angle or chord; the reference always
-bends by the exact angle).
+float32 (``dynamics.precision``; osmosis, shrink and colour stay float64).
 
 Example
 -------
@@ -105,8 +103,6 @@ def default_sweeps(base: ParamSet, quick: bool = False, groups=None) -> list[Set
                 Setting("osmosis jacobi 1e-3", "osmosis", {"osmosis.solver": "jacobi", "osmosis.tolerance": 1e-3}, "Jacobi to 1e-3")]
     if not quick:
         out.append(Setting("float32", "precision", {"dynamics.precision": "float32"}, "dynamics frame in float32"))
-        other = "chord" if base["dynamics.bending_model"] == "angle" else "angle"
-        out.append(Setting(f"{other} hinges", "bending", {"dynamics.bending_model": other}, f"bending hinges as the {other}"))
     if not quick:  # every other quality level (leafsim --quality) measured against the same reference
         from .sim.presets import QUALITY
 
@@ -124,8 +120,7 @@ def reference_setting(base: ParamSet, quick: bool = False) -> Setting:
     f = 0.8 if quick else 0.71
     sub = base["dynamics.substeps"] * 2
     return Setting("reference", "reference", {"mesh.spacing": round(s0 * f, 5), "dynamics.substeps": sub,
-                                             "dynamics.iterations": 3, "dynamics.tolerance": 1e-6,
-                                             "dynamics.bending_model": "angle"},
+                                             "dynamics.iterations": 3, "dynamics.tolerance": 1e-6},
                    f"r = {s0 * f:.4g} L, {sub} substeps at r₀ (scaled) × ≤ 3 iterations")
 
 

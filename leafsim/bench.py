@@ -13,9 +13,8 @@ another would each see a different load.
    (a kernel that does nothing cannot win) and how far its positions are from ours.
 2. **Frame**: the production dynamics frame (``dynamics.*`` defaults, but 20 substeps at every
    size, :data:`BENCH_SETTINGS`; ≤ 2 iterations, hinges, thickness, ground, self-collision) on a flat leaf at rest and on a folded leaf in
-   self-contact, each with and without self-collision (the contact share), and with chord
-   hinges (``dynamics.bending_model``); the per-kind cost of one pass (ns per spring, angle
-   hinge, chord hinge, volume); osmosis, shrink and the colour-only step.
+   self-contact, each with and without self-collision (the contact share); the per-kind cost
+   of one pass (ns per spring, hinge, volume); osmosis, shrink and the colour-only step.
 3. **Parallel vs serial**: every parallel kernel against its serial twin on a quiet machine
    and with one CPU-bound process per core running (:func:`parallel_vs_serial`), p90 ratios.
 4. **Memory**: bytes per particle of the model, state and solver arrays, and the peak RSS.
@@ -378,14 +377,7 @@ def _pass_jobs(model, params):
         for _ in range(PASSES):
             kp.volume_pass(q, d.invm, d.vidx, d.vrest, 0, V)
 
-    kp.pack_chord_hinges(st.particle_q, hidx, d.hs5, st.spring_rest, d.invm, hrest, halpha, d.hrec)
-
-    def chords():
-        for _ in range(PASSES):
-            kp.chord_hinge_pass(q, hidx, d.hrec, hlam, 1.0, 0, H)
-
-    return {"springs ×10": (reset, springs), "hinges ×10": (reset, hinges), "chord hinges ×10": (reset, chords),
-            "volumes ×10": (reset, volumes)}
+    return {"springs ×10": (reset, springs), "hinges ×10": (reset, hinges), "volumes ×10": (reset, volumes)}
 
 
 def _stage_jobs(model, params):
@@ -407,13 +399,10 @@ def frame_bench(model: Model, rounds: int = 20, params: ParamSet | None = None) 
     params = params or bench_params(model)
     noself = {**EFFECTS, "self_collision": False}
     jobs, dyn = {}, {}
-    chord = params.with_overrides({"dynamics.bending_model": "chord"})
-    for name, eff, sfn, p in (("frame", EFFECTS, model.state, params),
-                              ("frame, no self-collision", noself, model.state, params),
-                              ("frame, chord hinges", EFFECTS, model.state, chord),
-                              ("frame folded", EFFECTS, lambda: folded_state(model), params),
-                              ("frame folded, no self-collision", noself, lambda: folded_state(model), params)):
-        reset, run, d = _frame_job(model, p, eff, sfn)
+    for name, eff, sfn in (("frame", EFFECTS, model.state), ("frame, no self-collision", noself, model.state),
+                           ("frame folded", EFFECTS, lambda: folded_state(model)),
+                           ("frame folded, no self-collision", noself, lambda: folded_state(model))):
+        reset, run, d = _frame_job(model, params, eff, sfn)
         if sfn is model.state:
             reset = _nothing  # the flat leaf keeps lying on the ground: no reset needed
         jobs[name], dyn[name] = (reset, run), d
@@ -423,11 +412,9 @@ def frame_bench(model: Model, rounds: int = 20, params: ParamSet | None = None) 
     ms = {k: _stats(v) for k, v in interleaved(jobs, rounds).items()}
     med = {k: v["median_ms"] for k, v in ms.items()}
     ns = {k: med[f"{k}s ×10"] * 1e6 / PASSES / c for k, c in
-          (("spring", model.spring_count), ("hinge", model.hinge_count), ("chord hinge", model.hinge_count),
-           ("volume", model.vol_count))}
+          (("spring", model.spring_count), ("hinge", model.hinge_count), ("volume", model.vol_count))}
     d = dyn["frame"]
     return {"ms": ms, "load": load, "ns_per": ns, "hinge_vs_spring": ns["hinge"] / ns["spring"],
-            "chord_vs_spring": ns["chord hinge"] / ns["spring"],
             "volume_vs_spring": ns["volume"] / ns["spring"],
             "contact_share": max(0.0, 1.0 - med["frame, no self-collision"] / med["frame"]),
             "contact_share_folded": max(0.0, 1.0 - med["frame folded, no self-collision"] / med["frame folded"]),
@@ -550,9 +537,8 @@ def format_bench(res: dict) -> str:
         lines.append(f"  frame ({f['substeps']} substeps × ≤ {f['iterations']} iterations; 1-min load {f['load']:.1f}):")
         for k, v in f["ms"].items():
             lines.append(f"  {k:34s} {v['median_ms']:9.3f} ms  p90 {v['p90_ms']:9.3f}")
-        lines.append(f"  ns per spring / hinge / chord hinge / volume: {f['ns_per']['spring']:.1f} / "
-                     f"{f['ns_per']['hinge']:.1f} / {f['ns_per']['chord hinge']:.1f} / {f['ns_per']['volume']:.1f}; "
-                     f"hinge {f['hinge_vs_spring']:.2f}× a spring, chord hinge {f['chord_vs_spring']:.2f}×, volume "
+        lines.append(f"  ns per spring / hinge / volume: {f['ns_per']['spring']:.1f} / {f['ns_per']['hinge']:.1f} / "
+                     f"{f['ns_per']['volume']:.1f}; hinge {f['hinge_vs_spring']:.2f}× a spring, volume "
                      f"{f['volume_vs_spring']:.2f}×")
         lines.append(f"  self-collision share of a frame: flat {100 * f['contact_share']:.1f} %, folded "
                      f"{100 * f['contact_share_folded']:.1f} %; full step (osmosis + shrink + frame) "

@@ -132,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "sensitivity floor below which no error is resolved")
     ac.add_argument("--floor-reference", action="store_true", help="measure the floor on the reference too (slow)")
     ac.add_argument("--groups", default=None, metavar="G,G",
-                    help="only these sweeps (mesh, iterations, mass, tolerance, dt, relaxation, osmosis, precision, bending, quality)")
+                    help="only these sweeps (mesh, iterations, mass, tolerance, dt, relaxation, osmosis, precision, quality)")
     ac.add_argument("--json", action="store_true")
     _scene_export_parsers(sub)
     return ap
@@ -524,7 +524,7 @@ def cmd_accuracy(args):
     if args.floor < 0:
         raise LeafsimError(f"--floor {args.floor}: expected a count ≥ 0")
     groups = None if args.groups is None else [g.strip() for g in args.groups.split(",") if g.strip()]
-    known = {"mesh", "iterations", "mass", "tolerance", "dt", "relaxation", "osmosis", "precision", "bending", "quality"}
+    known = {"mesh", "iterations", "mass", "tolerance", "dt", "relaxation", "osmosis", "precision", "quality"}
     if groups is not None and (not groups or set(groups) - known):
         raise LeafsimError(f"--groups {args.groups}: expected a comma list of {', '.join(sorted(known))}")
     report = study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json,

@@ -271,10 +271,6 @@ class Dynamics:
         self.vidx = model.vol_idx[self.vperm].astype(np.uint32)
         self.vrest = np.zeros(model.vol_count)
         self.no_hinges = (np.zeros((0, 4), np.uint32), np.zeros(0), np.zeros(0), np.zeros(0))
-        # chord hinges (dynamics.bending_model): each hinge's five T springs, its frame record
-        self.hs5 = hinge_springs5(model)[self.hperm] if model.hinge_count else np.zeros((0, 5), np.int64)
-        self.hrec = np.zeros((model.hinge_count, 15))
-        self.no_hrec = np.zeros((0, 15))
         self.hgt = np.zeros(model.vol_count)
         self.qa = np.zeros((n, 3))
         self.dint = np.zeros((n, 3))
@@ -333,7 +329,6 @@ class Dynamics:
         self.cstate[1] = -1.0  # search again
         self.pbd = effects["pbd"]
         self.f32 = params["dynamics.precision"] == "float32"
-        self.chord = params["dynamics.bending_model"] == "chord"
         self.bending = effects["bending"] and m.hinge_count > 0 and self.kbend > 0
         self.ground = effects["ground"] and self.scene == "ground"
         self.self_coll = effects["self_collision"]
@@ -362,11 +357,7 @@ class Dynamics:
         # hold a strongly shrunken leaf apart against its own springs)
         shrunk = max(float(np.mean(state.spring_rest[self.T_springs] / m.spring_rest0[self.T_springs])), 0.1)
         radius = self.radius * shrunk
-        hrec = self.no_hrec
-        if self.chord and len(hidx):
-            kp.pack_chord_hinges(state.particle_q, hidx, self.hs5, state.spring_rest, self.invm, hrest, halpha, self.hrec)
-            hrec = self.hrec
-        cons = (self.sij, self.srec, self.slam, hidx, hrest, halpha, hlam, self.vidx, self.vrest, hrec)
+        cons = (self.sij, self.srec, self.slam, hidx, hrest, halpha, hlam, self.vidx, self.vrest)
         contact = (m.particle_rest, self.T_idx, radius, CONTACT_SKIN * radius, self.skip2, self.table, self.nxt,
                    self.pairs, self.qc, self.cstate)
         out = self.out
@@ -411,33 +402,13 @@ class Dynamics:
                      qc=self.qc.astype(np.float32))
             self._f64_of = {}
             for a in (self.srec, self.slam, self.hrest, self.halpha, self.hlam, self.vrest, self.no_hinges[1],
-                      self.no_hinges[2], self.no_hinges[3], self.hrec, self.no_hrec):
+                      self.no_hinges[2], self.no_hinges[3]):
                 b = a.astype(np.float32)
                 w[id(a)] = b
                 self._f64_of[id(b)] = a
             self._w32 = w
             self.cstate[1] = -1.0  # the float32 list is searched afresh
         return self._w32
-
-
-def hinge_springs5(model: Model) -> np.ndarray:
-    """(h, 5) indices of every hinge's T springs a–b, a–c, b–c, a–d, b–d (hinge = c, d; a–b):
-    the rest triangles of a chord hinge."""
-    ij = model.spring_ij
-    T = np.flatnonzero(model.spring_layer == 0)
-    n = np.int64(model.particle_count)
-    key = np.minimum(ij[T, 0], ij[T, 1]).astype(np.int64) * n + np.maximum(ij[T, 0], ij[T, 1])
-    order = np.argsort(key)
-    ks = key[order]
-    c, d, a, b = (model.hinge_idx[:, k].astype(np.int64) for k in range(4))
-    out = np.empty((model.hinge_count, 5), np.int64)
-    for k, (u, v) in enumerate(((a, b), (a, c), (b, c), (a, d), (b, d))):
-        kk = np.minimum(u, v) * n + np.maximum(u, v)
-        pos = np.minimum(np.searchsorted(ks, kk), len(ks) - 1)
-        if not (ks[pos] == kk).all():
-            raise ValueError("hinge_springs5: a hinge triangle edge has no T spring")
-        out[:, k] = T[order[pos]]
-    return out
 
 
 def projection_order(idx: np.ndarray, colour_start: np.ndarray) -> np.ndarray:

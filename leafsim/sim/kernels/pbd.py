@@ -175,103 +175,6 @@ def hinge_pass(q, invm, hidx, hrest, halpha, hlam, omega, lo, hi):
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
-def pack_chord_hinges(q, hidx, hs5, srest, invm, hrest, halpha, rec):
-    """The per-hinge record (h, 15) of one frame for :func:`chord_hinge_pass`, from the rest
-    lengths ``srest`` of each hinge's five T springs hs5 = (a–b, a–c, b–c, a–d, b–d) (hidx =
-    c, d; a–b) and the positions ``q`` at the frame's start: the weights c₁…c₄ of the bend
-    vector v = Σ cᵢ xᵢ = (x_c − p_c)/h_c + (x_d − p_d)/h_d (p the wing's foot on the edge, h
-    its height, both of the rest triangles), wᵢ cᵢ, the target 2 sin(θ₀/2), the compliance ×
-    cos²(θ₀/2) (the chord's stiffness at θ₀ equals the angle's), 1 / (Σ wᵢ cᵢ² + α̃), the
-    squared step limit (half the rest edge over the largest wᵢ cᵢ) and the unit normal
-    n₁/|n₁| + n₂/|n₂| (the side of θ > 0)."""
-    for e in range(hidx.shape[0]):
-        lab = srest[hs5[e, 0]]
-        l2 = lab * lab
-        c1 = 0.0; c2 = 0.0; c3 = 0.0; c4 = 0.0
-        ok = l2 > 0.0
-        for w in range(2):
-            la = srest[hs5[e, 1 + 2 * w]]
-            lb = srest[hs5[e, 2 + 2 * w]]
-            t = (la * la + l2 - lb * lb) / (2.0 * l2) if ok else 0.0
-            h2 = la * la - t * t * l2
-            if h2 <= 1e-30 * l2:
-                ok = False
-                continue
-            ih = 1.0 / math.sqrt(h2)
-            if w == 0:
-                c1 = ih
-            else:
-                c2 = ih
-            c3 -= (1.0 - t) * ih
-            c4 -= t * ih
-        w1 = invm[hidx[e, 0]]; w2 = invm[hidx[e, 1]]; w3 = invm[hidx[e, 2]]; w4 = invm[hidx[e, 3]]
-        ch = math.cos(0.5 * hrest[e])
-        al = halpha[e] * ch * ch
-        W = w1 * c1 * c1 + w2 * c2 * c2 + w3 * c3 * c3 + w4 * c4 * c4
-        rec[e, 0] = c1; rec[e, 1] = c2; rec[e, 2] = c3; rec[e, 3] = c4
-        rec[e, 4] = w1 * c1; rec[e, 5] = w2 * c2; rec[e, 6] = w3 * c3; rec[e, 7] = w4 * c4
-        rec[e, 8] = 2.0 * math.sin(0.5 * hrest[e])
-        rec[e, 9] = al
-        rec[e, 10] = 1.0 / (W + al) if ok and W + al > 0.0 else 0.0
-        gm = max(max(abs(w1 * c1), abs(w2 * c2)), max(abs(w3 * c3), abs(w4 * c4)))
-        rec[e, 11] = 0.25 * l2 / (gm * gm) if gm > 0.0 else 0.0
-        # the hinge's normal at the frame's start (n₁/|n₁| + n₂/|n₂|, the +θ side): signs the bend
-        i1 = hidx[e, 0]; i2 = hidx[e, 1]; i3 = hidx[e, 2]; i4 = hidx[e, 3]
-        ex = q[i4, 0] - q[i3, 0]; ey = q[i4, 1] - q[i3, 1]; ez = q[i4, 2] - q[i3, 2]
-        ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
-        cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
-        n1x = ey * az - ez * ay; n1y = ez * ax - ex * az; n1z = ex * ay - ey * ax
-        n2x = cy * ez - cz * ey; n2y = cz * ex - cx * ez; n2z = cx * ey - cy * ex
-        f1 = 1.0 / max(math.sqrt(n1x * n1x + n1y * n1y + n1z * n1z), 1e-300)
-        f2 = 1.0 / max(math.sqrt(n2x * n2x + n2y * n2y + n2z * n2z), 1e-300)
-        nx = n1x * f1 + n2x * f2; ny = n1y * f1 + n2y * f2; nz = n1z * f1 + n2z * f2
-        f = 1.0 / max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
-        rec[e, 12] = nx * f; rec[e, 13] = ny * f; rec[e, 14] = nz * f
-
-
-@njit(cache=True, nogil=True, fastmath=FASTMATH)
-def chord_hinge_pass(q, hidx, rec, hlam, omega, lo, hi):
-    """Bending hinges lo…hi as the *chord* of the dihedral angle (``dynamics.bending_model``
-    = chord): with the bend vector v = Σ cᵢ xᵢ (weights of the rest triangles,
-    :func:`pack_chord_hinges`), |v| = 2 |sin(θ/2)| while the two triangles keep their rest
-    shape, signed by the side of the hinge's normal at the frame's start n (v·n > 0: θ > 0);
-    C = ±|v| − 2 sin(θ₀/2), ∇ᵢC = cᵢ (±v̂), so the denominator is one per frame.  One square
-    root and one division per hinge (the angle: one atan2, one square root and four
-    divisions, twice the arithmetic); a flat hinge (v = 0) moves along n."""
-    big2 = 0.0
-    for e in range(lo, hi):
-        i1 = hidx[e, 0]; i2 = hidx[e, 1]; i3 = hidx[e, 2]; i4 = hidx[e, 3]
-        c1 = rec[e, 0]; c2 = rec[e, 1]; c3 = rec[e, 2]; c4 = rec[e, 3]
-        vx = c1 * q[i1, 0] + c2 * q[i2, 0] + c3 * q[i3, 0] + c4 * q[i4, 0]
-        vy = c1 * q[i1, 1] + c2 * q[i2, 1] + c3 * q[i3, 1] + c4 * q[i4, 1]
-        vz = c1 * q[i1, 2] + c2 * q[i2, 2] + c3 * q[i3, 2] + c4 * q[i4, 2]
-        sg = vx * rec[e, 12] + vy * rec[e, 13] + vz * rec[e, 14]
-        v2 = vx * vx + vy * vy + vz * vz
-        if v2 > 1e-12:
-            vn = math.sqrt(v2)
-            f = 1.0 / vn if sg >= 0.0 else -1.0 / vn
-            gx = vx * f; gy = vy * f; gz = vz * f
-            C = vn if sg >= 0.0 else -vn
-        else:
-            gx = rec[e, 12]; gy = rec[e, 13]; gz = rec[e, 14]
-            C = 0.0
-        C -= rec[e, 8]
-        dl = omega * (-C - rec[e, 9] * hlam[e]) * rec[e, 10]
-        if dl * dl > rec[e, 11]:
-            dl = math.copysign(math.sqrt(rec[e, 11]), dl)
-        hlam[e] += dl
-        f1 = rec[e, 4] * dl; f2 = rec[e, 5] * dl; f3 = rec[e, 6] * dl; f4 = rec[e, 7] * dl
-        q[i1, 0] += f1 * gx; q[i1, 1] += f1 * gy; q[i1, 2] += f1 * gz
-        q[i2, 0] += f2 * gx; q[i2, 1] += f2 * gy; q[i2, 2] += f2 * gz
-        q[i3, 0] += f3 * gx; q[i3, 1] += f3 * gy; q[i3, 2] += f3 * gz
-        q[i4, 0] += f4 * gx; q[i4, 1] += f4 * gy; q[i4, 2] += f4 * gz
-        ch2 = max(f1 * f1, f2 * f2)
-        if ch2 > big2:
-            big2 = ch2
-    return math.sqrt(big2)
-
-
-@njit(cache=True, nogil=True, fastmath=FASTMATH)
 def volume_pass(q, invm, vidx, vrest, lo, hi):
     """Thickness constraints lo…hi: 6 × the volume of tetrahedron (v, a, b, c) = det, which
     keeps V on the top side; the step is limited to half the triangle's edge scale (compared
@@ -312,15 +215,11 @@ def volume_pass(q, invm, vidx, vrest, lo, hi):
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
-def iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, vrest, hrec):
-    """One Gauss–Seidel pass over all constraints: springs, hinges (as chords when ``hrec``
-    holds their records, else as angles), thickness (each kind in colour order).  Returns the
-    largest |Δx| of the pass."""
+def iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, vrest):
+    """One Gauss–Seidel pass over all constraints: springs, hinges, thickness (each kind in
+    colour order).  Returns the largest |Δx| of the pass."""
     big = spring_pass(q, ij, srec, slam, 0, ij.shape[0])
-    if hrec.shape[0] == hidx.shape[0] and hrec.shape[0] > 0:
-        big = max(big, chord_hinge_pass(q, hidx, hrec, hlam, omega, 0, hidx.shape[0]))
-    else:
-        big = max(big, hinge_pass(q, invm, hidx, hrest, halpha, hlam, omega, 0, hidx.shape[0]))
+    big = max(big, hinge_pass(q, invm, hidx, hrest, halpha, hlam, omega, 0, hidx.shape[0]))
     return max(big, volume_pass(q, invm, vidx, vrest, 0, vidx.shape[0]))
 
 
@@ -746,10 +645,9 @@ def clamp_ground(q):
 def project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius, out):
     """The substep's Gauss–Seidel iterations: (ground clamp, springs, hinges, volumes,
     self-contacts) until the largest change < ``tol`` with no contact hit, at most ``iters``.
-    ``cons`` = (ij, srec, slam, hidx, hrest, halpha, hlam, vidx, vrest, hrec) (``hrec``: the
-    chord hinges' records, or (0, 15) for angle hinges).  Writes the contact hits of the last
-    iteration to out[1]; returns the iterations run."""
-    ij, srec, slam, hidx, hrest, halpha, hlam, vidx, vrest, hrec = cons
+    ``cons`` = (ij, srec, slam, hidx, hrest, halpha, hlam, vidx, vrest).  Writes the contact
+    hits of the last iteration to out[1]; returns the iterations run."""
+    ij, srec, slam, hidx, hrest, halpha, hlam, vidx, vrest = cons
     slam[:] = 0.0
     hlam[:] = 0.0
     it = 0
@@ -758,7 +656,7 @@ def project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius,
         it += 1
         if ground:
             ground_clamp(q, invm, pen)
-        ch = iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, vrest, hrec)
+        ch = iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, vrest)
         if ncont:
             hits = project_contacts(q, invm, pairs, ncont, radius)
         if ch < tol and hits == 0:
