@@ -18,6 +18,8 @@ def _stage(r) -> str:
     s = r["stage"]
     if r["kind"] == "young":
         return f"{s['frame']}, {100 * s['water']:.1f} %"
+    if "grown_back" in r:  # the note's first pass, then the grown-back run's match
+        return f"{s['frame']}, {100 * s['water']:.1f} % (grown back × {r['grown_back']:.3f})"
     return f"{s['frame']}, {100 * s['water']:.1f} % ({r['note'].replace(' stages every 50 frames', '')})"
 
 
@@ -50,7 +52,8 @@ def render(folder: Path) -> str:
         for r in rep["rows"]:
             if k == "aspen" and r["kind"] == "senescent" or r["kind"] == "young" and k in ("aspen_senescent", "hornbeam"):
                 continue
-            st = "—" if r["kind"] == "young" else f"frame {r['stage']['frame']}, {100 * r['stage']['water']:.0f} % water"
+            st = "—" if r["kind"] == "young" else f"frame {r['stage']['frame']}, {100 * r['stage']['water']:.0f} % water" + (
+                f", grown back × {r['grown_back']:.3f}" if "grown_back" in r else "")
             out.append(f"| {k} | {r['kind']} | {st} | {r['iou']:.4f} | {r['margin_ratio']:.3f} | {r['colour_tv']:.3f} | "
                        f"{r['mean_delta_e']:.1f} |")
     return "\n".join(out)

@@ -95,12 +95,13 @@ def render(rows: list) -> str:
         out.append(f"| {k} | {_pct(g['area_top'])} | {_pct(g['area_3d'])} | {_pct(g['margin_lift'])} | "
                    f"{_pct(f['margin_lift']) if f else '—'} | {g['frames']} | {g['inverted']} |")
     out += ["", "| species | particles | fresh mass | frames | time to dry (s) | ground: top-down area kept | ground: 3D "
-            "area kept | ground: margin lift / L | free: top-down | free: 3D | free: margin lift / L | inverted "
-            "(ground/free) | compute s (ground/free) |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "area kept | ground: margin lift / L | ground: vein-frame curl | free: top-down | free: 3D | free: margin lift / L | "
+            "inverted (ground/free) | compute s (ground/free) |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for k in keys:
         g, f = by[(k, "ground")], by.get((k, "free")) or {}
         out.append(f"| {k} | {g['particles']} | {g.get('fresh_mass_g', float('nan')):.2f} g | {g['frames']} | "
                    f"{g['time_to_dry']:.2f} | {_pct(g['area_top'])} | {_pct(g['area_3d'])} | {_pct(g['margin_lift'])} | "
+                   + (f"{g['vein_frame_curl']:+.3f} | " if "vein_frame_curl" in g else "— | ")
                    + (f"{_pct(f['area_top'])} | {_pct(f['area_3d'])} | {_pct(f['margin_lift'])} | " if f else "— | — | — | ")
                    + f"{g['inverted']}/{f.get('inverted', '—')} | {g['seconds']:.0f}/{f.get('seconds', float('nan')):.0f} |")
     ground = [by[(k, "ground")] for k in keys]

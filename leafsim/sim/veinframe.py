@@ -8,10 +8,9 @@ own main vein instead of the whole leaf rolling into one tube (docs/method.md §
 
 The direction field is the orientation tensor of the main and lateral vein segments near a
 point, weighted by segment length × vein width × a Gaussian of the distance whose width is
-the distance to the nearest such vein plus ``BLEND`` × the leaf length (so it follows the nearest vein
-closely and blends smoothly where two veins meet); the blend length is a fraction of the
-leaf's length, not of the mesh spacing, so the field — and the curl — converge under
-refinement.  Its principal direction is t and its
+the distance to the nearest such vein plus ``BLEND`` × the leaf length: it follows the
+nearest vein closely and blends smoothly where two veins meet, and as a length of the leaf
+(not of the mesh) it converges under refinement.  Its principal direction is t and its
 coherence c = (λ₁ − λ₂) / (λ₁ + λ₂) ∈ [0, 1] (0 where the veins nearby disagree).
 """
 
