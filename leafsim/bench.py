@@ -556,9 +556,26 @@ def main(json_out: bool = False, quick: bool = False) -> int:
     """CLI entry (``leafsim bench``): ``quick`` = maple size only, few rounds, no peers and no
     parallel contenders (under a minute); otherwise maple and 100k with the peers that are installed (several
     minutes).  Prints the tables, or the raw result dict as JSON with ``json_out``."""
+    import contextlib
     import json
+    import sys
 
-    res = run_bench(("maple",), rounds=8, peers=False, parallel=False) if quick else run_bench(("maple", "100k"), rounds=30)
+    def bench():
+        return run_bench(("maple",), rounds=8, peers=False, parallel=False) if quick else run_bench(("maple", "100k"), rounds=30)
+
+    if json_out:  # the peers print banners on stdout (from Python and C): keep stdout pure JSON
+        sys.stdout.flush()
+        saved = os.dup(1)
+        os.dup2(2, 1)
+        try:
+            with contextlib.redirect_stdout(sys.stderr):
+                res = bench()
+        finally:
+            sys.stdout.flush()
+            os.dup2(saved, 1)
+            os.close(saved)
+    else:
+        res = bench()
     print(json.dumps(res, indent=1, sort_keys=True) if json_out else format_bench(res))
     return 0
 

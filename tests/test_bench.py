@@ -87,3 +87,21 @@ def test_parallel_vs_serial_rows_under_load(tiny):
                                         "race": bench.spring_race(tiny, rounds=1, peers=False, parallel=False),
                                         "frame": bench.frame_bench(tiny, rounds=1), "parallel": rows}})
     assert "busy processes" in text and "p90 ÷ serial" in text
+
+
+def test_json_output_stays_pure_when_contenders_print(monkeypatch, capfd):
+    """`leafsim bench --json`: banners the peers print while they load (from Python or straight
+    to file descriptor 1) go to stderr, so stdout parses as JSON."""
+    import json
+    import os
+
+    def noisy(*a, **k):
+        print("Warp 1.19.0 initialized:")
+        os.write(1, b"[Taichi] Starting on arch=x64\n")
+        return {"tiny": {"particles": 1}}
+
+    monkeypatch.setattr(bench, "run_bench", noisy)
+    assert bench.main(json_out=True, quick=True) == 0
+    out, err = capfd.readouterr()
+    assert json.loads(out) == {"tiny": {"particles": 1}}
+    assert "Warp" in err and "Taichi" in err
