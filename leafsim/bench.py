@@ -278,8 +278,13 @@ class _Busy:
         import subprocess
         import sys
 
-        self.procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(self.n)]
-        time.sleep(0.3)
+        try:
+            for _ in range(self.n):
+                self.procs.append(subprocess.Popen([sys.executable, "-c", "while True: pass"]))
+            time.sleep(0.3)
+        except BaseException:  # a failed start or Ctrl-C: no burner outlives the bench
+            self.__exit__()
+            raise
         return self
 
     def __exit__(self, *exc):
@@ -287,6 +292,7 @@ class _Busy:
             p.kill()
         for p in self.procs:
             p.wait()
+        self.procs = []
         return False
 
 
@@ -295,7 +301,8 @@ def parallel_vs_serial(model: Model, rounds: int = 30, busy: int | None = None) 
     ``busy`` CPU-bound processes running (default: one per core): 10 spring passes (the
     coloured fork/join per colour and the 2-block domain split against the serial sweep) and
     the shrink step (``prange`` over springs against the serial loop).  Rows: job, load,
-    median / p90 ms, and p90 ÷ the serial twin's p90."""
+    median / p90 ms, and p90 ÷ the serial twin's p90 (load: the 1-minute load average at the
+    end of the block, which lags the burners)."""
     from .sim.effects import Shrink
     from .sim.kernels import shrink as ks
 
@@ -321,9 +328,11 @@ def parallel_vs_serial(model: Model, rounds: int = 30, busy: int | None = None) 
     for n_busy in (0, busy):
         if n_busy:
             with _Busy(n_busy):
-                load, ms = _load(), interleaved(jobs, rounds)
+                ms = interleaved(jobs, rounds)
+                load = _load()
         else:
-            load, ms = _load(), interleaved(jobs, rounds)
+            ms = interleaved(jobs, rounds)
+            load = _load()
         st_ = {k: _stats(v) for k, v in ms.items()}
         for k, v in st_.items():
             rows.append({"job": k, "busy": n_busy, "load": load, **v,
@@ -552,6 +561,16 @@ def format_bench(res: dict) -> str:
     return "\n".join(lines)
 
 
+def _c_flush() -> None:
+    """fflush(NULL): write out the C library's stdio buffers (text a C extension printf'd)."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # no C library handle on this platform: nothing to flush
+        pass
+
+
 def main(json_out: bool = False, quick: bool = False) -> int:
     """CLI entry (``leafsim bench``): ``quick`` = maple size only, few rounds, no peers and no
     parallel contenders (under a minute); otherwise maple and 100k with the peers that are installed (several
@@ -565,6 +584,7 @@ def main(json_out: bool = False, quick: bool = False) -> int:
 
     if json_out:  # the peers print banners on stdout (from Python and C): keep stdout pure JSON
         sys.stdout.flush()
+        _c_flush()
         saved = os.dup(1)
         os.dup2(2, 1)
         try:
@@ -572,6 +592,7 @@ def main(json_out: bool = False, quick: bool = False) -> int:
                 res = bench()
         finally:
             sys.stdout.flush()
+            _c_flush()  # C stdio buffers what the peers printf'd: out to stderr before fd 1 returns
             os.dup2(saved, 1)
             os.close(saved)
     else:

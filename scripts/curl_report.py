@@ -133,7 +133,10 @@ def main():
     overrides = {}
     for kv in a.set:
         k, _, v = kv.partition("=")
-        overrides[k] = json.loads(v) if v[:1] in "-0123456789tf[" else v
+        try:
+            overrides[k] = json.loads(v)
+        except ValueError:  # a choice such as free, a bare word: the text itself
+            overrides[k] = v
     if snap:
         snap.mkdir(parents=True, exist_ok=True)
     rows = []

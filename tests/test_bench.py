@@ -95,13 +95,16 @@ def test_json_output_stays_pure_when_contenders_print(monkeypatch, capfd):
     import json
     import os
 
+    import ctypes
+
     def noisy(*a, **k):
         print("Warp 1.19.0 initialized:")
         os.write(1, b"[Taichi] Starting on arch=x64\n")
+        ctypes.CDLL(None).printf(b"C stdio banner\n")  # buffered by the C library, not by Python
         return {"tiny": {"particles": 1}}
 
     monkeypatch.setattr(bench, "run_bench", noisy)
     assert bench.main(json_out=True, quick=True) == 0
     out, err = capfd.readouterr()
     assert json.loads(out) == {"tiny": {"particles": 1}}
-    assert "Warp" in err and "Taichi" in err
+    assert "Warp" in err and "Taichi" in err and "C stdio banner" in err

@@ -167,9 +167,9 @@ def _rows(leaf: _Leaf, own: C.Reference, stage, species_photo: bool) -> list[Row
                                                                   sp.senescent.base_px, sp.senescent.apex_px)
         _, _, best = _dry_run(leaf, None, ref)
         note = f"best of {best[2]} stages every {MATCH_EVERY} frames"
-        if ref is own and sp.photo_stage == "senescent":
+        if ref is own and sp.photo_stage == "senescent" and 0.3 < _kept(leaf, best[0]) < 1.0:
             rows.append(_grown_back(leaf, ref, best, note))
-        else:
+        else:  # (a leaf that did not shrink, or lost its silhouette, is compared as it is)
             rows.append(Row("senescent", ref, best[0], note=note
                             + ("" if ref is own else "; another leaf of the species: its IoU is only indicative")))
     return rows
@@ -181,6 +181,11 @@ GROWN_BACK_MARGIN = 10 * MATCH_EVERY
 
 def _silhouette_px(leaf: _Leaf, state) -> int:
     return int(leaf.picture(state)[1].sum())
+
+
+def _kept(leaf: _Leaf, state) -> float:
+    """Top-down area of ``state``'s silhouette ÷ the fresh leaf's."""
+    return _silhouette_px(leaf, state) / max(_silhouette_px(leaf, leaf.state0), 1)
 
 
 def _register(leaf: _Leaf, state, ref: C.Reference) -> float:
@@ -212,8 +217,8 @@ def _grown_back(leaf: _Leaf, ref: C.Reference, best, note: str) -> Row:
 
     from leafsim.sim.model import LAYER_T
 
-    first, r = best[0], _silhouette_px(leaf, best[0]) / max(_silhouette_px(leaf, leaf.state0), 1)
-    k = 1.0 / np.sqrt(max(r, 1e-6))
+    first, r = best[0], _kept(leaf, best[0])
+    k = 1.0 / np.sqrt(r)
     big = _Leaf(replace(leaf.sp, length_m=leaf.sp.length_m * k), leaf.params, leaf.seed, leaf.effects, frame=leaf.frame)
     try:
         def centroid(lf):
