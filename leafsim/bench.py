@@ -359,14 +359,17 @@ def _frame_job(model, params, effects, state_fn):
 
 
 def _pass_jobs(model, params):
-    """10 passes of each constraint kind (production kernels) on a perturbed folded leaf."""
+    """10 passes of each constraint kind on a perturbed folded leaf: the production kernels
+    (springs one at a time, hinges and volumes in SIMD blocks) and the one-at-a-time hinge and
+    volume kernels they replaced (bit-identical results)."""
     from .sim.effects import Dynamics
+    from .sim.kernels import blocked as kb
     from .sim.kernels import pbd as kp
 
     d = Dynamics(model)
     d.configure(params, EFFECTS)
     st = folded_state(model)
-    hidx, hrest, halpha, hlam = d.gather(st)
+    d.gather(st)
     q0 = st.particle_q + np.random.default_rng(3).normal(0, 0.02 * model.spacing, st.particle_q.shape)
     q = q0.copy()
     S, H, V = model.spring_count, model.hinge_count, model.vol_count
@@ -374,19 +377,18 @@ def _pass_jobs(model, params):
     def reset():
         q[:] = q0
 
-    def springs():
-        for _ in range(PASSES):
-            kp.spring_pass(q, d.sij, d.srec, d.slam, 0, S)
+    def passes(one):
+        def run():
+            for _ in range(PASSES):
+                one()
+        return run
 
-    def hinges():
-        for _ in range(PASSES):
-            kp.hinge_pass(q, d.invm, hidx, hrest, halpha, hlam, 1.0, 0, H)
-
-    def volumes():
-        for _ in range(PASSES):
-            kp.volume_pass(q, d.invm, d.vidx, d.vrest, 0, V)
-
-    return {"springs ×10": (reset, springs), "hinges ×10": (reset, hinges), "volumes ×10": (reset, volumes)}
+    return {"springs ×10": (reset, passes(lambda: kp.spring_pass(q, d.sij, d.srec, d.slam, 0, S))),
+            "hinges ×10": (reset, passes(lambda: kb.hinges_blocked(q, d.hidx, d.hrec, d.hlam, 1.0, d.hblocks, d.blockbuf))),
+            "volumes ×10": (reset, passes(lambda: kb.volumes_blocked(q, d.vidx, d.vrec, d.vblocks, d.blockbuf))),
+            "hinges ×10, one at a time": (reset, passes(
+                lambda: kp.hinge_pass(q, d.invm, d.hidx, d.hrest, d.halpha, d.hlam, 1.0, 0, H))),
+            "volumes ×10, one at a time": (reset, passes(lambda: kp.volume_pass(q, d.invm, d.vidx, d.vrest, 0, V)))}
 
 
 def _stage_jobs(model, params):
@@ -420,11 +422,16 @@ def frame_bench(model: Model, rounds: int = 20, params: ParamSet | None = None) 
     load = _load()
     ms = {k: _stats(v) for k, v in interleaved(jobs, rounds).items()}
     med = {k: v["median_ms"] for k, v in ms.items()}
-    ns = {k: med[f"{k}s ×10"] * 1e6 / PASSES / c for k, c in
-          (("spring", model.spring_count), ("hinge", model.hinge_count), ("volume", model.vol_count))}
+    ns = {k: med[job] * 1e6 / PASSES / c for k, job, c in
+          (("spring", "springs ×10", model.spring_count), ("hinge", "hinges ×10", model.hinge_count),
+           ("volume", "volumes ×10", model.vol_count),
+           ("hinge, one at a time", "hinges ×10, one at a time", model.hinge_count),
+           ("volume, one at a time", "volumes ×10, one at a time", model.vol_count))}
     d = dyn["frame"]
     return {"ms": ms, "load": load, "ns_per": ns, "hinge_vs_spring": ns["hinge"] / ns["spring"],
             "volume_vs_spring": ns["volume"] / ns["spring"],
+            "hinge_vs_spring_one_at_a_time": ns["hinge, one at a time"] / ns["spring"],
+            "volume_vs_spring_one_at_a_time": ns["volume, one at a time"] / ns["spring"],
             "contact_share": max(0.0, 1.0 - med["frame, no self-collision"] / med["frame"]),
             "contact_share_folded": max(0.0, 1.0 - med["frame folded, no self-collision"] / med["frame folded"]),
             "contact_searches": d.contact_searches, "substeps": d.substeps, "iterations": d.iters,
@@ -548,7 +555,9 @@ def format_bench(res: dict) -> str:
             lines.append(f"  {k:34s} {v['median_ms']:9.3f} ms  p90 {v['p90_ms']:9.3f}")
         lines.append(f"  ns per spring / hinge / volume: {f['ns_per']['spring']:.1f} / {f['ns_per']['hinge']:.1f} / "
                      f"{f['ns_per']['volume']:.1f}; hinge {f['hinge_vs_spring']:.2f}× a spring, volume "
-                     f"{f['volume_vs_spring']:.2f}×")
+                     f"{f['volume_vs_spring']:.2f}× (one at a time: {f['ns_per']['hinge, one at a time']:.1f} / "
+                     f"{f['ns_per']['volume, one at a time']:.1f} ns, {f['hinge_vs_spring_one_at_a_time']:.2f}× / "
+                     f"{f['volume_vs_spring_one_at_a_time']:.2f}×)")
         lines.append(f"  self-collision share of a frame: flat {100 * f['contact_share']:.1f} %, folded "
                      f"{100 * f['contact_share_folded']:.1f} %; full step (osmosis + shrink + frame) "
                      f"{f['full_step_ms']:.2f} ms")

@@ -27,6 +27,7 @@ from _reference_dynamics import RefDynamics  # noqa: E402
 from leafsim.bench import EFFECTS, PASSES, build_bench_model, folded_state, interleaved  # noqa: E402
 from leafsim.params import ParamSet  # noqa: E402
 from leafsim.sim.effects import Dynamics  # noqa: E402
+from leafsim.sim.kernels import blocked as kb  # noqa: E402
 from leafsim.sim.kernels import pbd as kp  # noqa: E402
 
 
@@ -53,9 +54,9 @@ def _kind_jobs(m, p):
     d = Dynamics(m)
     d.configure(p, EFFECTS)
     st = folded_state(m)
-    hidx, hrest, halpha, hlam = d.gather(st)
-    halpha_m = np.empty_like(halpha)
-    halpha_m[d.hperm] = halpha
+    d.gather(st)
+    halpha_m = np.empty_like(d.halpha)
+    halpha_m[d.hperm] = d.halpha
     q0 = st.particle_q + np.random.default_rng(3).normal(0, 0.02 * m.spacing, st.particle_q.shape)
     q = q0.copy()
     e = np.zeros(1, np.int64)
@@ -78,9 +79,9 @@ def _kind_jobs(m, p):
                 if kind == "spring":
                     kp.spring_pass(q, d.sij, d.srec, lam_s, 0, S)
                 elif kind == "hinge":
-                    kp.hinge_pass(q, d.invm, hidx, hrest, halpha, lam_h, 1.0, 0, H)
+                    kb.hinges_blocked(q, d.hidx, d.hrec, lam_h, 1.0, d.hblocks, d.blockbuf)
                 else:
-                    kp.volume_pass(q, d.invm, d.vidx, d.vrest, 0, V)
+                    kb.volumes_blocked(q, d.vidx, d.vrec, d.vblocks, d.blockbuf)
         return run
 
     return {"before spring": (reset, old(m.spring_colour_start, e, e)), "after spring": (reset, new("spring")),

@@ -45,8 +45,11 @@ def test_peers_raced_when_installed(race):
 
 def test_frame_and_memory_report(tiny):
     f = bench.frame_bench(tiny, rounds=1)
-    for k in ("frame", "frame folded", "springs ×10", "hinges ×10", "volumes ×10", "osmosis", "shrink"):
+    for k in ("frame", "frame folded", "springs ×10", "hinges ×10", "volumes ×10", "hinges ×10, one at a time",
+              "volumes ×10, one at a time", "osmosis", "shrink"):
         assert f["ms"][k]["median_ms"] > 0
+    for k in ("hinge_vs_spring", "volume_vs_spring", "hinge_vs_spring_one_at_a_time", "volume_vs_spring_one_at_a_time"):
+        assert f[k] > 0
     assert 0.0 <= f["contact_share"] <= 1.0 and 0.0 <= f["contact_share_folded"] <= 1.0
     m = bench.memory(tiny)
     assert m["bytes_per_particle_total"] > 0 and m["peak_rss_mb"] > 0

@@ -4,6 +4,7 @@ failure isolation, level of detail and placement."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -143,8 +144,12 @@ def test_a_leaf_that_blows_up_fails_alone_and_leaves_no_files(tmp_path, monkeypa
     monkeypatch.setattr(Simulator, "step", exploding)
     job = type(job)(**{**job.__dict__, "stop": {"kind": "frames", "value": 200, "max_frames": 200}})
     res = run_leaf(job, tmp_path / "out")
-    assert res["ok"] is False and res["name"] == "chestnut-000" and "blew up" in res["error"]
-    assert "frame 31" in res["error"] or "by frame 64" in res["error"]  # a kernel trips, or the NaN check
+    assert res["ok"] is False and res["name"] == "chestnut-000"
+    # a kernel trips ("blew up at frame 31"), the watchdog's NaN check (every few frames) or the
+    # scene's own (every FINITE_CHECK_EVERY frames)
+    err = res["error"]
+    assert "blew up" in err or "NaN/Inf" in err
+    assert int(re.search(r"frame (\d+)", err).group(1)) <= 64
     assert not (tmp_path / "out" / "leaves" / "chestnut-000").exists()
 
 

@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from .kernels import blocked as kb
 from .kernels import osmosis as ko
 from .kernels import pbd as kp
 from .kernels import shrink as ks
@@ -22,13 +23,14 @@ from .model import (
 #: (measured by ``leafsim bench``: equal at 5.4 k particles, parallel 1-2 % faster at 83 k on this
 #: 2-core box; fork/join per colour dominates on small meshes)
 PARALLEL_MIN_PARTICLES = 30000
-#: self-contact candidates are searched at (1 + this) × the contact radius and kept until a
-#: particle has moved half of what is left of that skin (Verlet list).  The results do not
-#: depend on it (canonical pair order); measured on the bench's folded maple frame (skins 0.5 /
-#: 1 / 1.5 / 2 / 3): 14 / 9 / 7 / 5 / 3 searches per frame, 27 / 323 / 1091 / 1957 / 4342 pairs,
-#: contact share 15.2 / 12.1 / 12.7 / 11.6 / 11.5 %; at 100 k every skin ≤ 1.5 searches every
-#: substep (16–20 %).  1.0 takes most of the gain with few pairs to check.
-CONTACT_SKIN = 1.0
+#: self-contact candidates are searched (spatial hash) at (1 + this) × the contact radius and
+#: kept until the particles have moved against each other by what is left of that skin; the
+#: projections walk only the near list filtered from it (:data:`CONTACT_NEAR_SKIN`).  The
+#: results do not depend on either skin (canonical pair order; tests/test_kernels.py).
+#: Measured on the bench's folded leaf: docs/performance.md.
+CONTACT_SKIN = 3.0
+#: the near list holds the searched pairs closer than (1.05 + this) × the contact radius
+CONTACT_NEAR_SKIN = 0.25
 #: below this many unknowns the factor-once direct osmosis solve is used (measured: direct 1.2 ms vs
 #: PCG 3.2 ms vs pyamg 14 ms at 5.4 k; 20 ms vs 106 ms vs 576 ms at 83 k; factor 0.03 s / 0.55 s)
 DIRECT_MAX_UNKNOWNS = 300000
@@ -253,8 +255,10 @@ class Dynamics:
     The kernels see every constraint in *projection order*: the model's colour order, sorted by
     particle inside each colour (no two constraints of one colour share a particle, so this
     changes no result and keeps the particle accesses nearly sequential), with uint32 indices.
-    Per frame the springs are packed into one record each (rest length, compliance, 1/W and
-    both inverse masses) and the hinges' and volumes' rest values gathered into that order."""
+    Per frame every constraint gets a record in that order (springs: rest length, compliance,
+    1/W and both inverse masses; hinges: rest angle, compliance and four inverse masses;
+    volumes: rest volume and four inverse masses), and the hinges and volumes are projected in
+    SIMD blocks of one colour (:mod:`.kernels.blocked`)."""
 
     def __init__(self, model: Model):
         self.model = model
@@ -270,10 +274,15 @@ class Dynamics:
         self.hidx = model.hinge_idx[self.hperm].astype(np.uint32)
         self.hrest = np.zeros(model.hinge_count)
         self.hlam = np.zeros(model.hinge_count)
+        self.hrec = np.zeros((6, model.hinge_count))
+        self.hblocks = kb.block_starts(model.hinge_colour_start)
         self.vperm = projection_order(model.vol_idx, model.vol_colour_start)
         self.vidx = model.vol_idx[self.vperm].astype(np.uint32)
         self.vrest = np.zeros(model.vol_count)
-        self.no_hinges = (np.zeros((0, 4), np.uint32), np.zeros(0), np.zeros(0), np.zeros(0))
+        self.vrec = np.zeros((5, model.vol_count))
+        self.vblocks = kb.block_starts(model.vol_colour_start)
+        self.blockbuf = kb.block_buffer()
+        self.no_hinges = (np.zeros((0, 4), np.uint32), np.zeros((6, 0)), np.zeros(0), np.zeros(1, np.int64))
         self.hgt = np.zeros(model.vol_count)
         self.qa = np.zeros((n, 3))
         self.dint = np.zeros((n, 3))
@@ -288,9 +297,16 @@ class Dynamics:
         self.table = np.zeros(1 << max(2 * len(T) - 1, 1).bit_length(), np.int64)
         self.out = np.zeros(3, np.int64)
         self.nxt = np.zeros(len(T), np.int64)
-        self.pairs = np.zeros((8 * len(T) + 16, 2), np.int64)
-        self.qc = np.zeros((len(T), 3))  # T positions at the last contact search (Verlet skin)
-        self.cstate = np.array([0.0, -1.0, 0.0])  # search radius, pairs (−1: none), searches made
+        # the contact lists (kp.update_contacts): searched pairs and the near ones, with the T
+        # positions (and rest positions) at the search and at the filtering, in T order (ascending,
+        # as kp.find_contacts needs); the lists grow when a search fills them
+        self.pairs = np.zeros((16 * len(T) + 16, 2), np.int64)
+        self.near = np.zeros_like(self.pairs)
+        self.qc = np.zeros((len(T), 5))
+        self.qn = np.zeros((len(T), 3))
+        # search radius, search pairs (−1: none), searches, near reach, near pairs (−1: none),
+        # filterings, search list overflowed
+        self.cstate = np.array([0.0, -1.0, 0.0, 0.0, -1.0, 0.0, 0.0])
         self.last_iterations = 0
         self.last_contacts = 0
         self.last_uninverted = 0
@@ -336,33 +352,43 @@ class Dynamics:
         self.ground = effects["ground"] and self.scene == "ground"
         self.self_coll = effects["self_collision"]
 
-    def gather(self, state):
-        """This frame's inverse masses, spring records, hinge compliances and rest values in
-        projection order."""
+    def gather(self, state) -> tuple:
+        """This frame's inverse masses and constraint records in projection order (springs:
+        :func:`~.kernels.pbd.pack_springs`; hinges, from their compliances and rest angles:
+        :func:`~.kernels.blocked.pack_hinges`; volumes: :func:`~.kernels.blocked.pack_volumes`).
+        Returns the constraint tuple ``cons`` of :func:`~.kernels.pbd.iteration`."""
         m = self.model
         np.divide(1.0 / self.mscale, m.particle_cytosol + state.particle_water, out=self.invm)
         if self.scene == "hanging":
             self.invm[m.particle_pinned] = 0.0
         kp.pack_springs(self.sperm, self.sij, self.invm, state.spring_rest, self.salpha, self.srec)
         np.take(state.vol_rest, self.vperm, out=self.vrest)
-        if not (self.pbd and self.bending):
-            return self.no_hinges
-        kp.hinge_compliance(self.hidx, state.particle_water, m.particle_water0, self.kbend, self.kdry, self.hgeom,
-                            self.hrod, 1.0 / (self.h * self.h), self.halpha)
-        np.take(state.hinge_rest, self.hperm, out=self.hrest)
-        return self.hidx, self.hrest, self.halpha, self.hlam
+        kb.pack_volumes(self.vidx, self.invm, self.vrest, self.vrec)
+        if self.pbd and self.bending:
+            kp.hinge_compliance(self.hidx, state.particle_water, m.particle_water0, self.kbend, self.kdry, self.hgeom,
+                                self.hrod, 1.0 / (self.h * self.h), self.halpha)
+            np.take(state.hinge_rest, self.hperm, out=self.hrest)
+            kb.pack_hinges(self.hidx, self.invm, self.hrest, self.halpha, self.hrec)
+            hinges = (self.hidx, self.hrec, self.hlam, self.hblocks)
+        else:
+            hinges = self.no_hinges
+        return (self.sij, self.srec, self.slam) + hinges + (self.vidx, self.vrec, self.vblocks, self.blockbuf)
 
     def apply(self, state: State):
         m = self.model
-        hidx, hrest, halpha, hlam = self.gather(state)
+        cons = self.gather(state)
         # contacts and the un-inversion keep to the tissue's size: as it shrinks (in the plane and
         # through the thickness) so do the contact radius and the thickness (fixed values would
         # hold a strongly shrunken leaf apart against its own springs)
         shrunk = max(float(np.mean(state.spring_rest[self.T_springs] / m.spring_rest0[self.T_springs])), 0.1)
         radius = self.radius * shrunk
-        cons = (self.sij, self.srec, self.slam, hidx, hrest, halpha, hlam, self.vidx, self.vrest)
-        contact = (m.particle_rest, self.T_idx, radius, CONTACT_SKIN * radius, self.skip2, self.table, self.nxt,
-                   self.pairs, self.qc, self.cstate)
+        if self.cstate[6]:  # the last search filled the list: a longer one, searched afresh
+            self.pairs = np.zeros((2 * len(self.pairs), 2), np.int64)
+            self.near = np.zeros_like(self.pairs)
+            self.cstate[1] = -1.0
+            self.cstate[6] = 0.0
+        contact = (m.particle_rest, self.T_idx, radius, CONTACT_SKIN * radius, CONTACT_NEAR_SKIN * radius, self.skip2,
+                   self.table, self.nxt, self.pairs, self.qc, self.near, self.qn, self.cstate)
         out = self.out
         out[:] = 0
         out[1] = self.last_contacts
@@ -375,7 +401,7 @@ class Dynamics:
             for a in cons:
                 if a.dtype == np.float32:
                     np.copyto(a, self._f64_of[id(a)], casting="same_kind")
-            contact = contact[:8] + (w["qc"], self.cstate)
+            contact = contact[:9] + (w["qc"], self.near, w["qn"], self.cstate)
             np.copyto(w["q"], q, casting="same_kind")
             np.copyto(w["qd"], qd, casting="same_kind")
             np.copyto(w["invm"], invm, casting="same_kind")
@@ -397,15 +423,16 @@ class Dynamics:
     def _f32_buffers(self) -> dict:
         """float32 twins of the frame's float arrays (made once): by name for the per-particle
         ones, by ``id`` of the float64 array for the constraint records (``_f64_of`` maps back);
-        the contact list's positions ``qc`` persist between frames like the float64 ones."""
+        the contact lists' positions ``qc`` and ``qn`` persist between frames like the float64
+        ones."""
         if getattr(self, "_w32", None) is None:
             n = self.model.particle_count
             w = {k: np.zeros((n, 3), np.float32) for k in ("q", "qd", "q_old", "qa", "dint")}
             w.update(invm=np.zeros(n, np.float32), pen=np.zeros(n, np.float32), hgt=np.zeros(len(self.hgt), np.float32),
-                     qc=self.qc.astype(np.float32))
+                     qc=self.qc.astype(np.float32), qn=self.qn.astype(np.float32))
             self._f64_of = {}
-            for a in (self.srec, self.slam, self.hrest, self.halpha, self.hlam, self.vrest, self.no_hinges[1],
-                      self.no_hinges[2], self.no_hinges[3]):
+            for a in (self.srec, self.slam, self.hrec, self.hlam, self.vrec, self.blockbuf, self.no_hinges[1],
+                      self.no_hinges[2]):
                 b = a.astype(np.float32)
                 w[id(a)] = b
                 self._f64_of[id(b)] = a

@@ -19,6 +19,8 @@ import numpy as np
 from numba import njit
 
 from . import FASTMATH
+from .blocked import hinges_blocked, volumes_blocked
+from .scalar import atan2_, hinge_pass, spring_pass, volume_pass  # noqa: F401  (the reference kernels, re-exported)
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
@@ -38,12 +40,9 @@ def predict(q, qd, q_old, qa, dint, invm, gz, dt):
 
 
 # ---------------------------------------------------------------- projection passes
-# One Gauss–Seidel sweep over constraints lo…hi of one kind, in storage order (colour by
-# colour), each returning the largest |Δx| it made.  Written as plain loops in one function on
-# purpose (measured in docs/performance.md): the former ``inline="always"`` helpers that took
-# the arrays as arguments left 6 NRT_incref + 6 NRT_decref (atomic) calls around every hinge
-# in the generated code, and returned 17-tuples through the stack.  Indices are stored as
-# uint32, so no negative-index wrap-around code is emitted either.
+# One Gauss–Seidel sweep over all constraints of one kind, in storage order (colour by
+# colour), each returning the largest |Δx| it made: springs one at a time
+# (:mod:`.scalar`), hinges and volumes in blocks of one colour (:mod:`.blocked`, SIMD).
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
 def pack_springs(perm, ij, invm, rest, salpha, rec):
@@ -63,164 +62,16 @@ def pack_springs(perm, ij, invm, rest, salpha, rec):
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
-def spring_pass(q, ij, rec, lam, lo, hi):
-    """XPBD distance constraints lo…hi (records of :func:`pack_springs`): one sqrt and one
-    division each."""
-    big = 0.0
-    for s in range(lo, hi):
-        a = ij[s, 0]
-        b = ij[s, 1]
-        dx = q[a, 0] - q[b, 0]
-        dy = q[a, 1] - q[b, 1]
-        dz = q[a, 2] - q[b, 2]
-        d = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if d < 1e-12:
-            continue
-        wa = rec[s, 3]
-        wb = rec[s, 4]
-        dl = (rec[s, 0] - d - rec[s, 1] * lam[s]) * rec[s, 2]
-        lam[s] += dl
-        f = dl / d
-        q[a, 0] += wa * f * dx; q[a, 1] += wa * f * dy; q[a, 2] += wa * f * dz
-        q[b, 0] -= wb * f * dx; q[b, 1] -= wb * f * dy; q[b, 2] -= wb * f * dz
-        ch = abs(dl) * max(wa, wb)
-        if ch > big:
-            big = ch
-    return big
-
-
-@njit(inline="always", fastmath=FASTMATH)
-def atan2_(y, x):
-    """atan2 without the libm call: Cephes' atan (rational P4/Q5 after reducing to
-    |t| ≤ tan π/8; relative error 1.9e-16) with atan2's quadrants.  Agrees with ``math.atan2``
-    to 4.5e-16 rad (tests/test_kernels.py); written with selects, so no branch to mispredict."""
-    ay = abs(y)
-    ax = abs(x)
-    t = min(ay, ax) / max(max(ay, ax), 1e-300)
-    hi = t > 0.41421356237309503
-    t = (t - 1.0) / (t + 1.0) if hi else t
-    z = t * t
-    p = (((-8.750608600031904122785e-1 * z - 1.615753718733365076637e1) * z - 7.500855792314704667340e1) * z
-         - 1.228866684490136173410e2) * z - 6.485021904942025371773e1
-    r = ((((z + 2.485846490142306297962e1) * z + 1.650270098316988542046e2) * z + 4.328810604912902668951e2) * z
-         + 4.853903996359136964868e2) * z + 1.945506571482613964425e2
-    a = t * z * p / r + t + (0.7853981633974483 + 3.061616997868383e-17 if hi else 0.0)
-    a = 1.5707963267948966 - a if ay > ax else a
-    a = math.pi - a if x < 0.0 else a
-    return a if y >= 0.0 else -a
-
-
-@njit(cache=True, nogil=True, fastmath=FASTMATH)
-def hinge_pass(q, invm, hidx, hrest, halpha, hlam, omega, lo, hi):
-    """Bending hinges lo…hi, hidx = (x1, x2; x3–x4): signed dihedral angle θ (cup, wings up,
-    > 0) and its gradients u1…u4 (Bridson et al. 2003), XPBD step over-relaxed by ``omega``,
-    never moving a vertex by more than half the edge length (degenerate hinges).
-
-    With e = x4 − x3, a = x1 − x3, c = x2 − x4 the normals are n1 = e × a, n2 = c × e, and
-    (n2 × n1)·e = |e|² (n2·a), so θ = atan2(|e| n2·a, n1·n2) (no |n1| |n2|: both arguments
-    share that positive factor); u4 = −(u1 + u2 + u3) (translation invariance); the step limit
-    compares squares.  Same values as the textbook form to round-off, in about 60 % of the
-    operations: one atan2 (inline), one square root and four divisions per hinge."""
-    big2 = 0.0
-    for e in range(lo, hi):
-        i1 = hidx[e, 0]; i2 = hidx[e, 1]; i3 = hidx[e, 2]; i4 = hidx[e, 3]
-        ex = q[i4, 0] - q[i3, 0]; ey = q[i4, 1] - q[i3, 1]; ez = q[i4, 2] - q[i3, 2]
-        ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
-        cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
-        n1x = ey * az - ez * ay; n1y = ez * ax - ex * az; n1z = ex * ay - ey * ax
-        n2x = cy * ez - cz * ey; n2y = cz * ex - cx * ez; n2z = cx * ey - cy * ex
-        el2 = ex * ex + ey * ey + ez * ez
-        l1 = n1x * n1x + n1y * n1y + n1z * n1z
-        l2 = n2x * n2x + n2y * n2y + n2z * n2z
-        if el2 < 1e-24 or l1 < 1e-30 or l2 < 1e-30:
-            continue
-        el = math.sqrt(el2)
-        C = atan2_(el * (n2x * ax + n2y * ay + n2z * az), n1x * n2x + n1y * n2y + n1z * n2z) - hrest[e]
-        if C > math.pi:
-            C -= 2 * math.pi
-        elif C < -math.pi:
-            C += 2 * math.pi
-        il1 = 1.0 / l1
-        il2 = 1.0 / l2
-        iel = 1.0 / el
-        g1 = el * il1
-        g2 = el * il2
-        p1 = (ax * ex + ay * ey + az * ez - el2) * iel * il1  # (x1 − x4)·e / |e| / |n1|²
-        p2 = (cx * ex + cy * ey + cz * ez) * iel * il2  # (x2 − x4)·e / |e| / |n2|²
-        u3x = p1 * n1x + p2 * n2x; u3y = p1 * n1y + p2 * n2y; u3z = p1 * n1z + p2 * n2z
-        u4x = -(g1 * n1x + g2 * n2x + u3x); u4y = -(g1 * n1y + g2 * n2y + u3y); u4z = -(g1 * n1z + g2 * n2z + u3z)
-        w1 = invm[i1]; w2 = invm[i2]; w3 = invm[i3]; w4 = invm[i4]
-        s1 = el2 * il1  # |u1|²
-        s2 = el2 * il2
-        s3 = u3x * u3x + u3y * u3y + u3z * u3z
-        s4 = u4x * u4x + u4y * u4y + u4z * u4z
-        W = w1 * s1 + w2 * s2 + w3 * s3 + w4 * s4 + halpha[e]
-        if W <= 0.0:
-            continue
-        dl = omega * (-C - halpha[e] * hlam[e]) / W
-        m12 = max(w1 * w1 * s1, w2 * w2 * s2)
-        gm2 = max(m12, max(w3 * w3 * s3, w4 * w4 * s4))
-        if dl * dl * gm2 > 0.25 * el2:
-            dl = math.copysign(0.5 * el / math.sqrt(gm2), dl)
-        hlam[e] += dl
-        f1 = w1 * dl * g1; f2 = w2 * dl * g2; f3 = w3 * dl; f4 = w4 * dl
-        q[i1, 0] += f1 * n1x; q[i1, 1] += f1 * n1y; q[i1, 2] += f1 * n1z
-        q[i2, 0] += f2 * n2x; q[i2, 1] += f2 * n2y; q[i2, 2] += f2 * n2z
-        q[i3, 0] += f3 * u3x; q[i3, 1] += f3 * u3y; q[i3, 2] += f3 * u3z
-        q[i4, 0] += f4 * u4x; q[i4, 1] += f4 * u4y; q[i4, 2] += f4 * u4z
-        ch2 = dl * dl * m12  # the change², compared squared: one square root per pass
-        if ch2 > big2:
-            big2 = ch2
-    return math.sqrt(big2)
-
-
-@njit(cache=True, nogil=True, fastmath=FASTMATH)
-def volume_pass(q, invm, vidx, vrest, lo, hi):
-    """Thickness constraints lo…hi: 6 × the volume of tetrahedron (v, a, b, c) = det, which
-    keeps V on the top side; the step is limited to half the triangle's edge scale (compared
-    in squares: one square root and one division per tetrahedron)."""
-    big2 = 0.0
-    for t in range(lo, hi):
-        iv = vidx[t, 0]; ia = vidx[t, 1]; ib = vidx[t, 2]; ic = vidx[t, 3]
-        bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
-        cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
-        vx = q[iv, 0] - q[ia, 0]; vy = q[iv, 1] - q[ia, 1]; vz = q[iv, 2] - q[ia, 2]
-        gvx = by * cz - bz * cy; gvy = bz * cx - bx * cz; gvz = bx * cy - by * cx
-        gbx = cy * vz - cz * vy; gby = cz * vx - cx * vz; gbz = cx * vy - cy * vx
-        gcx = vy * bz - vz * by; gcy = vz * bx - vx * bz; gcz = vx * by - vy * bx
-        gax = -(gvx + gbx + gcx); gay = -(gvy + gby + gcy); gaz = -(gvz + gbz + gcz)
-        C = vx * gvx + vy * gvy + vz * gvz - vrest[t]
-        wv = invm[iv]; wa = invm[ia]; wb = invm[ib]; wc = invm[ic]
-        sv = gvx * gvx + gvy * gvy + gvz * gvz
-        sa = gax * gax + gay * gay + gaz * gaz
-        sb = gbx * gbx + gby * gby + gbz * gbz
-        sc = gcx * gcx + gcy * gcy + gcz * gcz
-        W = wv * sv + wa * sa + wb * sb + wc * sc
-        if W <= 1e-300:
-            continue
-        dl = -C / W
-        gm2 = max(max(wv * wv * sv, wa * wa * sa), max(wb * wb * sb, wc * wc * sc))
-        lim2 = 0.25 * math.sqrt((bx * bx + by * by + bz * bz) * (cx * cx + cy * cy + cz * cz))
-        if dl * dl * gm2 > lim2:
-            dl = math.copysign(math.sqrt(lim2 / gm2), dl)
-        fv = wv * dl; fa = wa * dl; fb = wb * dl; fc = wc * dl
-        q[iv, 0] += fv * gvx; q[iv, 1] += fv * gvy; q[iv, 2] += fv * gvz
-        q[ia, 0] += fa * gax; q[ia, 1] += fa * gay; q[ia, 2] += fa * gaz
-        q[ib, 0] += fb * gbx; q[ib, 1] += fb * gby; q[ib, 2] += fb * gbz
-        q[ic, 0] += fc * gcx; q[ic, 1] += fc * gcy; q[ic, 2] += fc * gcz
-        ch2 = dl * dl * wv * wv * sv
-        if ch2 > big2:
-            big2 = ch2
-    return math.sqrt(big2)
-
-
-@njit(cache=True, nogil=True, fastmath=FASTMATH)
-def iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, vrest):
+def iteration(q, cons, omega):
     """One Gauss–Seidel pass over all constraints: springs, hinges, thickness (each kind in
-    colour order).  Returns the largest |Δx| of the pass."""
+    colour order).  ``cons`` = (ij, srec, slam, hidx, hrec, hlam, hblocks, vidx, vrec, vblocks,
+    B): projection-order indices, per-frame records (:func:`pack_springs`,
+    :func:`~.blocked.pack_hinges`, :func:`~.blocked.pack_volumes`), multipliers, block offsets
+    and the block buffer.  Returns the largest |Δx| of the pass."""
+    ij, srec, slam, hidx, hrec, hlam, hblocks, vidx, vrec, vblocks, B = cons
     big = spring_pass(q, ij, srec, slam, 0, ij.shape[0])
-    big = max(big, hinge_pass(q, invm, hidx, hrest, halpha, hlam, omega, 0, hidx.shape[0]))
-    return max(big, volume_pass(q, invm, vidx, vrest, 0, vidx.shape[0]))
+    big = max(big, hinges_blocked(q, hidx, hrec, hlam, omega, hblocks, B))
+    return max(big, volumes_blocked(q, vidx, vrec, vblocks, B))
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
@@ -388,12 +239,17 @@ def canonical_pairs(pairs, g0, n):
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
-def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
-    """Candidate self-contact pairs (found once per substep with a spatial hash): layer-T
-    particles closer than ``search`` whose rest distance² > ``skip2``.  Cells are 2 × search
-    wide, so each particle visits only the 2 × 2 × 2 cells on its side of its own cell (a
-    neighbour closer than ``search`` cannot lie farther away) instead of 27.  Writes up to
-    len(pairs) pairs; returns the count."""
+def find_contacts(q, rest, idx, search, skip2, table, nxt, qc, pairs):
+    """Candidate self-contact pairs (spatial hash): layer-T particles closer than ``search``
+    whose rest distance² > ``skip2``, in canonical order (by i, then j).  ``idx`` must be
+    ascending.  Cells are 2 × search wide, so each particle visits only the 2 × 2 × 2 cells on
+    its side of its own cell (a neighbour closer than ``search`` cannot lie farther away)
+    instead of 27.  ``qc`` (|idx|, 5) receives each particle's position and rest position at
+    the search, compact in ``idx`` order: the walk reads them there (one array, no
+    indirection) and :func:`contacts_stale` measures the motion since the search from them.
+    Every bucket's chain holds its particles in descending k, so a particle's walk stops at the
+    first k' ≤ k: pairs with j ≤ i are never looked at (idx ascending: j > i ⟺ k' > k).
+    Writes up to len(pairs) pairs; returns the count."""
     nt = table.shape[0]
     mask = nt - 1
     pow2 = (nt & mask) == 0  # power-of-two table: bit mask instead of a signed 64-bit modulo
@@ -401,8 +257,10 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     inv = 0.5 / search
     for k in range(idx.shape[0]):
         i = idx[k]
-        h = (int(math.floor(q[i, 0] * inv)) * 73856093 ^ int(math.floor(q[i, 1] * inv)) * 19349663
-             ^ int(math.floor(q[i, 2] * inv)) * 83492791)
+        x = q[i, 0]; y = q[i, 1]; z = q[i, 2]
+        qc[k, 0] = x; qc[k, 1] = y; qc[k, 2] = z; qc[k, 3] = rest[i, 0]; qc[k, 4] = rest[i, 1]
+        h = (int(math.floor(x * inv)) * 73856093 ^ int(math.floor(y * inv)) * 19349663
+             ^ int(math.floor(z * inv)) * 83492791)
         h = (h & mask) if pow2 else h % nt
         nxt[k] = table[h]
         table[h] = k
@@ -412,9 +270,10 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
     for k in range(idx.shape[0]):
         i = idx[k]
         g0 = n
-        gx = q[i, 0] * inv
-        gy = q[i, 1] * inv
-        gz = q[i, 2] * inv
+        x = qc[k, 0]; y = qc[k, 1]; z = qc[k, 2]; rx = qc[k, 3]; ry = qc[k, 4]
+        gx = x * inv
+        gy = y * inv
+        gz = z * inv
         cx = math.floor(gx)
         cy = math.floor(gy)
         cz = math.floor(gz)
@@ -427,27 +286,20 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, pairs):
                     h = (ox * 73856093 ^ oy * 19349663 ^ oz * 83492791)
                     h = (h & mask) if pow2 else h % nt
                     m = table[h]
-                    while m >= 0:
-                        j = idx[m]
-                        if j > i and n < cap:
-                            dx = q[i, 0] - q[j, 0]
-                            dy = q[i, 1] - q[j, 1]
-                            dz = q[i, 2] - q[j, 2]
-                            if dx * dx + dy * dy + dz * dz < s2:
-                                ex = rest[i, 0] - rest[j, 0]
-                                ey = rest[i, 1] - rest[j, 1]
-                                if ex * ex + ey * ey > skip2:
-                                    dup = False
-                                    # the cell walk can meet a pair twice through hash collisions
-                                    for t in range(max(0, n - 8), n):
-                                        if pairs[t, 0] == i and pairs[t, 1] == j:
-                                            dup = True
-                                    if not dup:
-                                        pairs[n, 0] = i
-                                        pairs[n, 1] = j
-                                        n += 1
+                    while m > k:
+                        dx = x - qc[m, 0]
+                        dy = y - qc[m, 1]
+                        dz = z - qc[m, 2]
+                        if dx * dx + dy * dy + dz * dz < s2:
+                            ex = rx - qc[m, 3]
+                            ey = ry - qc[m, 4]
+                            if ex * ex + ey * ey > skip2 and n < cap:
+                                pairs[n, 0] = i
+                                pairs[n, 1] = idx[m]
+                                n += 1
                         m = nxt[m]
-        # canonical order (by i, then j): the projections then do not depend on the cell walk,
+        # canonical order (by i, then j), repeats dropped (two of the 8 cells can share a bucket,
+        # so a chain can be walked twice): the projections then do not depend on the cell walk,
         # so a list searched at another moment (a resumed run, another skin) projects the pairs
         # that touch in the same order and gives bit-identical results
         n = canonical_pairs(pairs, g0, n)
@@ -588,40 +440,104 @@ def remove_rigid(q, q_old, invm, dint):
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
 def contacts_stale(q, idx, qc, limit):
-    """True when a particle of ``idx`` moved more than ``limit`` from ``qc`` (its position at
-    the last contact search), or ``limit`` ≤ 0."""
+    """True unless every pair of ``idx`` particles is still within 2 × ``limit`` of the
+    distance it had at the last contact search (positions ``qc``), or ``limit`` ≤ 0.
+
+    A common translation c moves no pair: |Δᵢ − Δⱼ| = |(Δᵢ − c) − (Δⱼ − c)| ≤ d₁ + d₂ for
+    the motions Δ since the search and d₁ ≥ d₂ the two largest |Δ − c|.  With c the centre of
+    the motions' bounding box, a leaf that falls or drifts as a whole is not searched again;
+    d₁ + d₂ ≤ 2 × ``limit`` is the same guarantee as every |Δᵢ| ≤ ``limit``."""
     if limit <= 0.0:
         return True
-    l2 = limit * limit
-    for k in range(idx.shape[0]):
+    n = idx.shape[0]
+    if n == 0:
+        return False
+    lo0 = hi0 = q[idx[0], 0] - qc[0, 0]
+    lo1 = hi1 = q[idx[0], 1] - qc[0, 1]
+    lo2 = hi2 = q[idx[0], 2] - qc[0, 2]
+    for k in range(1, n):
         i = idx[k]
         dx = q[i, 0] - qc[k, 0]
         dy = q[i, 1] - qc[k, 1]
         dz = q[i, 2] - qc[k, 2]
-        if dx * dx + dy * dy + dz * dz > l2:
-            return True
-    return False
+        lo0 = min(lo0, dx); hi0 = max(hi0, dx)
+        lo1 = min(lo1, dy); hi1 = max(hi1, dy)
+        lo2 = min(lo2, dz); hi2 = max(hi2, dz)
+    c0 = 0.5 * (lo0 + hi0); c1 = 0.5 * (lo1 + hi1); c2 = 0.5 * (lo2 + hi2)
+    d1 = 0.0
+    d2 = 0.0
+    for k in range(n):
+        i = idx[k]
+        dx = q[i, 0] - qc[k, 0] - c0
+        dy = q[i, 1] - qc[k, 1] - c1
+        dz = q[i, 2] - qc[k, 2] - c2
+        r2 = dx * dx + dy * dy + dz * dz
+        if r2 > d2:
+            if r2 > d1:
+                d2 = d1
+                d1 = r2
+            else:
+                d2 = r2
+    return math.sqrt(d1) + math.sqrt(d2) > 2.0 * limit
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
-def update_contacts(q, qrest, idx, radius, skin, skip2, table, nxt, pairs, qc, cstate):
-    """Self-contact candidates with a Verlet skin: the spatial hash is searched at radius +
-    ``skin`` and kept until some particle has moved more than half of what is left of the skin
-    (the search radius less the 1.05 × ``radius`` the contact velocities look at), so every
-    pair that can touch since the search is in the list and nothing is searched while nothing
-    moves.  ``cstate`` float64[2] = (search radius of the list, pairs in it; −1 = none);
-    ``qc`` (|idx|, 3) the positions at the search.  Returns the number of pairs."""
-    if cstate[1] >= 0.0 and not contacts_stale(q, idx, qc, 0.5 * (cstate[0] - 1.05 * radius)):
-        return int(cstate[1])
-    search = radius + skin
-    n = find_contacts(q, qrest, idx, search, skip2, table, nxt, pairs)
+def near_pairs(q, pairs, n, reach, idx, near, qn):
+    """The pairs of ``pairs[:n]`` closer than ``reach`` now, in the same (canonical) order,
+    into ``near``; ``qn`` (|idx|, 3) ← the ``idx`` particles' positions.  Returns the count."""
+    r2 = reach * reach
+    m = 0
+    for k in range(n):
+        i = pairs[k, 0]
+        j = pairs[k, 1]
+        dx = q[i, 0] - q[j, 0]
+        dy = q[i, 1] - q[j, 1]
+        dz = q[i, 2] - q[j, 2]
+        if dx * dx + dy * dy + dz * dz < r2:
+            near[m, 0] = i
+            near[m, 1] = j
+            m += 1
     for k in range(idx.shape[0]):
         i = idx[k]
-        qc[k, 0] = q[i, 0]; qc[k, 1] = q[i, 1]; qc[k, 2] = q[i, 2]
-    cstate[0] = search
-    cstate[1] = n
-    cstate[2] += 1.0
-    return n
+        qn[k, 0] = q[i, 0]; qn[k, 1] = q[i, 1]; qn[k, 2] = q[i, 2]
+    return m
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def update_contacts(q, qrest, idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn, cstate):
+    """Self-contact candidates in two Verlet lists; returns the pairs in the near list.
+
+    The *search list* ``pairs`` holds every pair closer than radius + ``skin`` at its
+    spatial-hash search (:func:`find_contacts`, positions ``qc``).  The *near list* ``near``
+    holds those of them closer than 1.05 × ``radius`` + ``skin2`` at its filtering
+    (:func:`near_pairs`, positions ``qn``): the projections and contact velocities walk only
+    it.  Each list is kept until the particles have moved against each other by more than
+    the margin it was made with (:func:`contacts_stale`): the near list while the motion since
+    its filtering stays below ``skin2``, the search list while the motion since its search
+    stays below its radius less the near list's reach.  So at every substep the near list
+    holds every pair within 1.05 × ``radius`` (all the contacts and the contact velocities
+    can meet), a wide search skin costs no projections, and the hash is searched only when
+    the leaf has really moved.  The near list keeps the canonical order, so the results do
+    not depend on when either list was made.
+
+    ``cstate`` float64[7] = (search radius, search pairs (−1 = none), searches made, near
+    reach, near pairs (−1 = none), filterings made, 1 if the search list overflowed)."""
+    reach = 1.05 * radius + skin2
+    if cstate[1] >= 0.0 and cstate[4] >= 0.0 and not contacts_stale(q, idx, qn, 0.5 * (cstate[3] - 1.05 * radius)):
+        return int(cstate[4])
+    if cstate[1] < 0.0 or contacts_stale(q, idx, qc, 0.5 * (cstate[0] - reach)):
+        search = radius + skin
+        n = find_contacts(q, qrest, idx, search, skip2, table, nxt, qc, pairs)
+        cstate[0] = search
+        cstate[1] = n
+        cstate[2] += 1.0
+        if n >= pairs.shape[0]:
+            cstate[6] = 1.0
+    m = near_pairs(q, pairs, int(cstate[1]), reach, idx, near, qn)
+    cstate[3] = reach
+    cstate[4] = m
+    cstate[5] += 1.0
+    return m
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
@@ -645,9 +561,10 @@ def clamp_ground(q):
 def project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius, out):
     """The substep's Gauss–Seidel iterations: (ground clamp, springs, hinges, volumes,
     self-contacts) until the largest change < ``tol`` with no contact hit, at most ``iters``.
-    ``cons`` = (ij, srec, slam, hidx, hrest, halpha, hlam, vidx, vrest).  Writes the contact
-    hits of the last iteration to out[1]; returns the iterations run."""
-    ij, srec, slam, hidx, hrest, halpha, hlam, vidx, vrest = cons
+    ``cons``: see :func:`iteration`.  Writes the contact hits of the last iteration to out[1];
+    returns the iterations run."""
+    slam = cons[2]
+    hlam = cons[5]
     slam[:] = 0.0
     hlam[:] = 0.0
     it = 0
@@ -656,7 +573,7 @@ def project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius,
         it += 1
         if ground:
             ground_clamp(q, invm, pen)
-        ch = iteration(q, invm, ij, srec, slam, hidx, hrest, halpha, hlam, omega, vidx, vrest)
+        ch = iteration(q, cons, omega)
         if ncont:
             hits = project_contacts(q, invm, pairs, ncont, radius)
         if ch < tol and hits == 0:
@@ -693,7 +610,7 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
     T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate) for :func:`update_contacts`.
     ``qa``/``dint`` (n, 3) scratch.  Writes (iterations, contact hits, uninverted) to ``out``
     (int64[3])."""
-    qrest, T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate = contact
+    qrest, T_idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn, cstate = contact
     its = 0
     for _ in range(substeps):
         predict(q, qd, q_old, qa, dint, invm, gz, h)
@@ -702,8 +619,9 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
         ncont = 0
         if pbd:
             if self_coll:
-                ncont = update_contacts(q, qrest, T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate)
-            its += project(q, invm, cons, omega, iters, tol, ground, pen, pairs, ncont, radius, out)
+                ncont = update_contacts(q, qrest, T_idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn,
+                                        cstate)
+            its += project(q, invm, cons, omega, iters, tol, ground, pen, near, ncont, radius, out)
             internal_delta(q, qa, pen, dint)
         if pbd:
             settle(q, invm, vidx, thick, ground, dint, out)
@@ -720,7 +638,7 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
                 out[2] += uninvert(q, invm, vidx, 0.25 * thick, False, True, dint)
         update_velocity(q, q_old, qd, h, keep, ground and pbd)
         if pbd and ncont:
-            contact_velocities(q, qd, invm, pairs, ncont, radius)
+            contact_velocities(q, qd, invm, near, ncont, radius)
         if replace:
             voronoi_replace(q, vidx, hgt, 0.25 * thick)
             if ground:
