@@ -45,7 +45,7 @@ def test_projection_order_keeps_colours(tiny):
         assert sorted(perm) == list(range(len(idx)))
         for a, b in zip(cs[:-1], cs[1:]):
             assert set(perm[a:b]) == set(range(a, b))  # the same constraints in every colour
-            key = idx[perm[a:b]].min(axis=1)
+            key = idx[perm[a:b]].max(axis=1)
             assert (np.diff(key) >= 0).all()
 
 

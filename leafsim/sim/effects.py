@@ -443,8 +443,11 @@ class Dynamics:
 
 def projection_order(idx: np.ndarray, colour_start: np.ndarray) -> np.ndarray:
     """Permutation of constraints ``idx`` (k, p) that keeps the colour order ``colour_start``
-    and sorts each colour by its smallest particle index."""
-    key = idx.min(axis=1) if len(idx) else np.zeros(0, np.int64)
+    and sorts each colour by its largest particle index (no two constraints of a colour share a
+    particle, so the order inside a colour changes no result).  Measured at 100 k particles,
+    interleaved: springs 9.9 → 9.0 ns and hinges 24.7 → 23.0 ns against the smallest index
+    (the largest-index particles are then visited in order; no difference on the maple leaf)."""
+    key = idx.max(axis=1) if len(idx) else np.zeros(0, np.int64)
     parts = [a + np.argsort(key[a:b], kind="stable") for a, b in zip(colour_start[:-1], colour_start[1:])]
     return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, np.int64)
 

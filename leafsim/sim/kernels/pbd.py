@@ -1,14 +1,16 @@
-"""XPBD kernels: prediction, Gauss–Seidel projection of distance, bending (signed dihedral) and
-thickness (tetrahedron volume) constraints, ground contact with friction, self-collision
-(spatial-hash candidates kept with a Verlet skin, projected inside the iteration loop),
+"""XPBD frame: prediction, Gauss–Seidel projection of distance, bending (signed dihedral) and
+thickness (tetrahedron volume) constraints (the passes themselves: :mod:`.scalar` springs,
+:mod:`.blocked` hinges and volumes), ground contact with friction, self-collision
+(spatial-hash candidates kept in two Verlet lists, projected inside the iteration loop),
 velocity update and Voronoi re-placement.
 
 Everything runs on one thread: on the shared 2-core machines this project runs on, the former
 graph-coloured ``prange`` kernels (one fork/join per colour per pass) were 13–36× slower than
 serial under load, and a parallel path must never lose (measured in ``leafsim bench``,
-docs/performance.md).  Constraints are stored in colour order and, inside one colour, sorted
-by particle (no two constraints of one colour share a particle, so that order changes no
-result and makes the particle accesses nearly sequential).
+docs/performance.md); the speed comes from SIMD inside one thread instead.  Constraints are
+stored in colour order and, inside one colour, sorted by particle (no two constraints of one
+colour share a particle, so that order changes no result and makes the particle accesses
+nearly sequential).
 """
 
 from __future__ import annotations
