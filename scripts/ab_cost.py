@@ -8,7 +8,13 @@ are bit-identical (a SHA-256 of the final positions).
 
     git worktree add /tmp/before <commit>
     python scripts/ab_cost.py --before /tmp/before --after . --species maple \\
-        --quality fine,balanced,draft --rounds 3 --json docs/accuracy/ab_cost.json
+        --quality fine,balanced,draft --rounds 3 --json docs/accuracy/ab_cost.json \\
+        --errors docs/accuracy/maple_curl_anisotropy/accuracy.json --plot docs/accuracy/ab_front.png
+
+With ``--errors`` (a ``leafsim accuracy`` report whose rows include the quality levels) and
+bit-identical results, the errors are the study's and only the cost moves: ``--plot`` draws the
+accuracy front (worst relative error against ms per simulated second) before and after, the
+default level marked.  ``--replot`` redraws from a saved ``--json`` without running anything.
 """
 
 from __future__ import annotations
@@ -50,6 +56,48 @@ def run_once(tree: Path, species: str, quality: str) -> dict:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
+def _study_errors(path: Path) -> dict:
+    """Quality level → worst relative error of a ``leafsim accuracy`` report (its default row is
+    the default level, ``fine``)."""
+    rows = json.loads(Path(path).read_text())["rows"]
+    out = {}
+    for r in rows:
+        if r["name"] == "default":
+            out["fine"] = r["worst_rel"]
+        elif r["name"].startswith("quality "):
+            out[r["name"].split(" ", 1)[1]] = r["worst_rel"]
+    return out
+
+
+def plot_front(rows: list[dict], errors: dict, species: str, png: Path) -> None:
+    """Worst relative error against ms per simulated second, before and after, default marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    for key, colour, label in (("before", "0.55", "before"), ("after", "tab:blue", "after")):
+        pts = sorted((x[f"{key}_ms_per_sim_s"], 100 * errors[x["quality"]], x["quality"]) for x in rows
+                     if x["quality"] in errors)
+        ax.plot([p[0] for p in pts], [p[1] for p in pts], "o--", color=colour, label=label)
+        for c, e, name in pts:
+            ax.annotate(name, (c, e), fontsize=7, xytext=(4, 3), textcoords="offset points", color=colour)
+            if name == "fine":
+                ax.scatter([c], [e], marker="*", s=240, color="crimson" if key == "after" else "0.55", zorder=4,
+                           label="default (fine), after" if key == "after" else None)
+    ax.set_xscale("log")
+    ax.set_xlabel("ms of one core per simulated second (whole drying, median frame)")
+    ax.set_ylabel("worst relative error against the reference [%]")
+    ax.set_title(f"{species}: accuracy front before and after (same errors: bit-identical results)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--before", type=Path, required=True)
@@ -58,7 +106,14 @@ def main(argv=None) -> int:
     ap.add_argument("--quality", default="fine,balanced,draft")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--errors", type=Path, default=None, help="a leafsim accuracy report (accuracy.json)")
+    ap.add_argument("--plot", type=Path, default=None, help="PNG of the front before and after (needs --errors)")
+    ap.add_argument("--replot", type=Path, default=None, help="a saved --json to plot from, running nothing")
     a = ap.parse_args(argv)
+    if a.replot:
+        saved = json.loads(a.replot.read_text())
+        plot_front(saved["rows"], _study_errors(a.errors), saved["species"], a.plot)
+        return 0
     trees = {"before": a.before, "after": a.after}
     levels = a.quality.split(",")
     for name, tree in trees.items():  # compile (and fill numba's cache) outside the timed rounds
@@ -92,6 +147,8 @@ def main(argv=None) -> int:
     if a.json:
         a.json.parent.mkdir(parents=True, exist_ok=True)
         a.json.write_text(json.dumps({"species": a.species, "rows": rows, "load": os.getloadavg()[0]}, indent=1))
+    if a.plot and a.errors:
+        plot_front(rows, _study_errors(a.errors), a.species, a.plot)
     return 0
 
 

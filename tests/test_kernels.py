@@ -165,7 +165,7 @@ def test_contact_list_grows_when_a_search_fills_it(tiny):
     searched afresh, before the next frame."""
     d = Dynamics(tiny)
     d.configure(ParamSet(), EFFECTS)
-    d.pairs = np.zeros((3, 2), np.int64)
+    d.pairs = np.zeros((3, 2), np.int32)
     d.near = np.zeros_like(d.pairs)
     st = _folded(tiny)
     d.apply(st)

@@ -253,8 +253,9 @@ class Dynamics:
     friction, self-collision, damping and the Voronoi-layer handling (SPEC §8).
 
     The kernels see every constraint in *projection order*: the model's colour order, sorted by
-    particle inside each colour (no two constraints of one colour share a particle, so this
-    changes no result and keeps the particle accesses nearly sequential), with uint32 indices.
+    largest particle index inside each colour (no two constraints of one colour share a
+    particle, so this changes no result and keeps the particle accesses nearly sequential),
+    with uint32 indices.
     Per frame every constraint gets a record in that order (springs: rest length, compliance,
     1/W and both inverse masses; hinges: rest angle, compliance and four inverse masses;
     volumes: rest volume and four inverse masses), and the hinges and volumes are projected in
@@ -299,8 +300,9 @@ class Dynamics:
         self.nxt = np.zeros(len(T), np.int64)
         # the contact lists (kp.update_contacts): searched pairs and the near ones, with the T
         # positions (and rest positions) at the search and at the filtering, in T order (ascending,
-        # as kp.find_contacts needs); the lists grow when a search fills them
-        self.pairs = np.zeros((16 * len(T) + 16, 2), np.int64)
+        # as kp.find_contacts needs); the lists double when a search fills them (the folded bench
+        # leaf needs 2.3 pairs per T particle)
+        self.pairs = np.zeros((4 * len(T) + 64, 2), np.int32)
         self.near = np.zeros_like(self.pairs)
         self.qc = np.zeros((len(T), 5))
         self.qn = np.zeros((len(T), 3))
@@ -383,7 +385,7 @@ class Dynamics:
         shrunk = max(float(np.mean(state.spring_rest[self.T_springs] / m.spring_rest0[self.T_springs])), 0.1)
         radius = self.radius * shrunk
         if self.cstate[6]:  # the last search filled the list: a longer one, searched afresh
-            self.pairs = np.zeros((2 * len(self.pairs), 2), np.int64)
+            self.pairs = np.zeros((2 * len(self.pairs), 2), np.int32)
             self.near = np.zeros_like(self.pairs)
             self.cstate[1] = -1.0
             self.cstate[6] = 0.0

@@ -1,5 +1,5 @@
 """Parallel spring sweeps that ``leafsim bench`` races against the production (serial) one;
-not used by the simulation.  Both call the production :func:`~leafsim.sim.kernels.pbd.spring_pass`
+not used by the simulation.  Both call the production :func:`~leafsim.sim.kernels.scalar.spring_pass`
 on sub-ranges, so they differ from it only in how the work is split over threads:
 
 * :func:`coloured_passes` — the former design: every colour split over the threads, one
@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .pbd import spring_pass
+from .scalar import spring_pass
 
 
 @njit(cache=True, nogil=True, parallel=True)

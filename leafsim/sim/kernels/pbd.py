@@ -8,9 +8,9 @@ Everything runs on one thread: on the shared 2-core machines this project runs o
 graph-coloured ``prange`` kernels (one fork/join per colour per pass) were 13–36× slower than
 serial under load, and a parallel path must never lose (measured in ``leafsim bench``,
 docs/performance.md); the speed comes from SIMD inside one thread instead.  Constraints are
-stored in colour order and, inside one colour, sorted by particle (no two constraints of one
-colour share a particle, so that order changes no result and makes the particle accesses
-nearly sequential).
+stored in colour order and, inside one colour, sorted by largest particle index (no two
+constraints of one colour share a particle, so that order changes no result and makes the
+particle accesses nearly sequential).
 """
 
 from __future__ import annotations
