@@ -161,23 +161,34 @@ def test_contact_staleness_ignores_a_common_translation(tiny):
 
 
 def test_contact_list_grows_when_a_search_fills_it(tiny):
-    """A search list too short for the pairs found is flagged and replaced by a longer one,
-    searched afresh, before the next frame."""
-    d = Dynamics(tiny)
-    d.configure(ParamSet(), EFFECTS)
-    d.pairs = np.zeros((3, 2), np.int32)
-    d.near = np.zeros_like(d.pairs)
-    st = _folded(tiny)
-    d.apply(st)
-    assert d.cstate[6] == 1.0
-    lengths = [len(d.pairs)]
-    for _ in range(20):
-        d.apply(st)
-        lengths.append(len(d.pairs))
-        if not d.cstate[6]:
-            break
-    assert all(b in (a, 2 * a) for a, b in zip(lengths, lengths[1:])) and lengths[-1] > 3
-    assert len(d.pairs) > int(d.cstate[1]) > 3  # long enough now, and it holds every pair found
+    """A search that fills its list is searched again at the near reach (so no contact of that
+    substep is missed: the frames are bit-identical to a run with room to spare), flagged, and
+    the list doubled before the next frame until it holds every pair found."""
+    m = tiny
+    runs = []
+    for cap in (None, "small"):
+        d = Dynamics(m)
+        d.configure(ParamSet(), EFFECTS)
+        if cap:
+            d.pairs = np.zeros((near_max + 1, 2), np.int32)
+            d.near = np.zeros_like(d.pairs)
+        st, qs, lengths, flagged, most = _folded(m), [], [len(d.pairs)], 0, 0
+        for _ in range(8):
+            d.apply(st)
+            most = max(most, int(d.cstate[4]))
+            flagged += int(d.cstate[6])
+            lengths.append(len(d.pairs))
+            qs.append((st.particle_q.copy(), st.particle_qd.copy()))
+        if cap is None:
+            near_max = most  # (near lists are filtered every few substeps; this bounds the frames' ends)
+            assert int(d.cstate[1]) > 2 * (near_max + 1)  # the wide search needs more room than the near list
+        runs.append((qs, lengths, flagged, int(d.out[1])))
+    (qa, _, _, ha), (qb, lengths, flagged, hb) = runs
+    assert flagged > 0 and lengths[-1] > lengths[0]
+    assert all(y in (x, 2 * x) for x, y in zip(lengths, lengths[1:]))
+    assert ha == hb
+    for (xa, va), (xb, vb) in zip(qa, qb):
+        assert np.array_equal(xa, xb) and np.array_equal(va, vb)
 
 
 def test_residual_serial(tiny):

@@ -523,18 +523,25 @@ def update_contacts(q, qrest, idx, radius, skin, skin2, skip2, table, nxt, pairs
     not depend on when either list was made.
 
     ``cstate`` float64[7] = (search radius, search pairs (−1 = none), searches made, near
-    reach, near pairs (−1 = none), filterings made, 1 if the search list overflowed)."""
+    reach, near pairs (−1 = none), filterings made, 1 if a search filled the list: it was
+    searched again at the near reach, and the caller should give it more room)."""
     reach = 1.05 * radius + skin2
     if cstate[1] >= 0.0 and cstate[4] >= 0.0 and not contacts_stale(q, idx, qn, 0.5 * (cstate[3] - 1.05 * radius)):
         return int(cstate[4])
     if cstate[1] < 0.0 or contacts_stale(q, idx, qc, 0.5 * (cstate[0] - reach)):
         search = radius + skin
         n = find_contacts(q, qrest, idx, search, skip2, table, nxt, qc, pairs)
-        cstate[0] = search
-        cstate[1] = n
         cstate[2] += 1.0
         if n >= pairs.shape[0]:
+            # the list is full, so pairs may be missing: search again at the near reach only
+            # (a list valid for this substep, searched afresh at the next) and have the caller
+            # double the list before the next frame
             cstate[6] = 1.0
+            search = reach
+            n = find_contacts(q, qrest, idx, search, skip2, table, nxt, qc, pairs)
+            cstate[2] += 1.0
+        cstate[0] = search
+        cstate[1] = n
     m = near_pairs(q, pairs, int(cstate[1]), reach, idx, near, qn)
     cstate[3] = reach
     cstate[4] = m
