@@ -21,6 +21,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
+import leafsim  # noqa: E402,F401  (first: it keys numba's cache to the kernel sources)
 import _pbd_reference as ref  # noqa: E402
 from _reference_dynamics import RefDynamics  # noqa: E402
 

@@ -10,6 +10,11 @@ import time
 
 import pytest
 
+# leafsim first: it points numba's cache at a folder keyed to the kernel sources, which only
+# works before anything imports numba (the reference kernels of tests/_pbd_reference.py call
+# leafsim's, so their cached code must not outlive a change there either)
+import leafsim  # noqa: F401
+
 from hypothesis import HealthCheck, settings
 
 # property-based tests (tests/test_properties.py): a quick, reproducible profile by default;
