@@ -87,6 +87,12 @@ def plot_front(rows: list[dict], errors: dict, species: str, png: Path) -> None:
                 ax.scatter([c], [e], marker="*", s=240, color="crimson" if key == "after" else "0.55", zorder=4,
                            label="default (fine), after" if key == "after" else None)
     ax.set_xscale("log")
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:,.0f}".replace(",", " ")))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    lo, hi = ax.get_xlim()
+    ax.set_xticks([t for t in (500, 1000, 2000, 5000, 10000, 20000, 50000, 100000) if lo <= t <= hi])
     ax.set_xlabel("ms of one core per simulated second (whole drying, median frame)")
     ax.set_ylabel("worst relative error against the reference [%]")
     ax.set_title(f"{species}: accuracy front before and after (same errors: bit-identical results)", fontsize=9)
