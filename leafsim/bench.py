@@ -376,6 +376,8 @@ def _pass_jobs(model, params):
 
     def reset():
         q[:] = q0
+        d.slam[:] = 0.0
+        d.hlam[:] = 0.0
 
     def passes(one):
         def run():

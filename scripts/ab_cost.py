@@ -116,6 +116,8 @@ def main(argv=None) -> int:
     ap.add_argument("--plot", type=Path, default=None, help="PNG of the front before and after (needs --errors)")
     ap.add_argument("--replot", type=Path, default=None, help="a saved --json to plot from, running nothing")
     a = ap.parse_args(argv)
+    if (a.replot or a.plot) and not (a.errors and a.plot):
+        ap.error("--plot and --replot need --errors (the accuracy report) and --plot (the PNG)")
     if a.replot:
         saved = json.loads(a.replot.read_text())
         plot_front(saved["rows"], _study_errors(a.errors), saved["species"], a.plot)

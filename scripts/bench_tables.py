@@ -129,6 +129,12 @@ def main(argv=None) -> int:
     ap.add_argument("--readme", action="store_true")
     a = ap.parse_args(argv)
     res = json.loads(a.bench_json.read_text())
+    missing = [s for s in SIZES if s not in res] + [f"{s}: {k}" for s in SIZES if s in res
+                                                     for k in ("race", "frame", "parallel", "memory") if k not in res[s]]
+    if missing:
+        print(f"bench_tables: {a.bench_json} lacks {', '.join(missing)} (needs a full `leafsim bench --json`, "
+              "not --quick)", file=sys.stderr)
+        return 2
     if a.readme:
         print(readme_table(res))
     else:

@@ -24,7 +24,8 @@ class RefDynamics:
         self.halpha, self.out = np.zeros(m.hinge_count), np.zeros(3, np.int64)
         self.hgeom = 3.0 * m.hinge_edge_len ** 2 / np.maximum(m.hinge_area, 1e-30)
         self.hrod = params["material.vein_modulus"] * m.hinge_rod
-        self.table, self.nxt, self.pairs = np.zeros_like(d.table), np.zeros_like(d.nxt), np.zeros_like(d.pairs)
+        self.table, self.nxt = np.zeros_like(d.table), np.zeros_like(d.nxt)
+        self.pairs = np.zeros((16 * len(d.T_idx) + 16, 2), np.int64)  # room to spare (this reference never grows it)
 
     def apply(self, st):
         m, d = self.m, self.d

@@ -160,35 +160,57 @@ def test_contact_staleness_ignores_a_common_translation(tiny):
     assert kp.contacts_stale(q, T, qc, 0.0)
 
 
-def test_contact_list_grows_when_a_search_fills_it(tiny):
-    """A search that fills its list is searched again at the near reach (so no contact of that
-    substep is missed: the frames are bit-identical to a run with room to spare), flagged, and
-    the list doubled before the next frame until it holds every pair found."""
+def test_contact_list_grows_when_a_search_fills_it(tiny, monkeypatch):
+    """A search that fills its list is searched again at the near reach (no contact of that
+    substep is missed) and the list doubles before the next frame; a list too short even for
+    the near pairs makes the frame run again from its start with a longer one.  Either way the
+    frames are bit-identical to a run with room to spare."""
     m = tiny
-    runs = []
-    for cap in (None, "small"):
+    runs = {}
+    grown = []
+    real_grow, real_frame = Dynamics._grow_contact_lists, Dynamics._frame
+    frames = []
+
+    def grow(self):
+        grown.append(len(self.pairs))
+        real_grow(self)
+
+    def frame(self, *a):
+        frames.append(1)
+        return real_frame(self, *a)
+
+    monkeypatch.setattr(Dynamics, "_grow_contact_lists", grow)
+    monkeypatch.setattr(Dynamics, "_frame", frame)
+    for cap in ("roomy", "near fits", "nothing fits"):
         d = Dynamics(m)
         d.configure(ParamSet(), EFFECTS)
-        if cap:
-            d.pairs = np.zeros((near_max + 1, 2), np.int32)
+        if cap != "roomy":
+            d.pairs = np.zeros((near_max + 1 if cap == "near fits" else 3, 2), np.int32)
             d.near = np.zeros_like(d.pairs)
-        st, qs, lengths, flagged, most = _folded(m), [], [len(d.pairs)], 0, 0
+        grown.clear()
+        frames.clear()
+        st, qs, most = _folded(m), [], 0
         for _ in range(8):
             d.apply(st)
             most = max(most, int(d.cstate[4]))
-            flagged += int(d.cstate[6])
-            lengths.append(len(d.pairs))
             qs.append((st.particle_q.copy(), st.particle_qd.copy()))
-        if cap is None:
-            near_max = most  # (near lists are filtered every few substeps; this bounds the frames' ends)
+        if cap == "roomy":
+            near_max = most  # (sampled at the frames' ends)
             assert int(d.cstate[1]) > 2 * (near_max + 1)  # the wide search needs more room than the near list
-        runs.append((qs, lengths, flagged, int(d.out[1])))
-    (qa, _, _, ha), (qb, lengths, flagged, hb) = runs
-    assert flagged > 0 and lengths[-1] > lengths[0]
-    assert all(y in (x, 2 * x) for x, y in zip(lengths, lengths[1:]))
-    assert ha == hb
-    for (xa, va), (xb, vb) in zip(qa, qb):
-        assert np.array_equal(xa, xb) and np.array_equal(va, vb)
+            assert not grown
+        else:
+            assert grown and all(b == 2 * a for a, b in zip(grown, grown[1:]))
+            assert len(d.pairs) > int(d.cstate[1])  # room enough now
+            # only a list too short for the near pairs runs a frame again
+            assert (len(frames) > 8) == (cap == "nothing fits")
+        runs[cap] = (qs, int(d.out[1]))
+    qa, ha = runs["roomy"]
+    assert ha > 0
+    for cap in ("near fits", "nothing fits"):
+        qb, hb = runs[cap]
+        assert hb == ha
+        for (xa, va), (xb, vb) in zip(qa, qb):
+            assert np.array_equal(xa, xb) and np.array_equal(va, vb)
 
 
 def test_residual_serial(tiny):

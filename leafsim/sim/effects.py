@@ -307,8 +307,8 @@ class Dynamics:
         self.qc = np.zeros((len(T), 5))
         self.qn = np.zeros((len(T), 3))
         # search radius, search pairs (−1: none), searches, near reach, near pairs (−1: none),
-        # filterings, search list overflowed
-        self.cstate = np.array([0.0, -1.0, 0.0, 0.0, -1.0, 0.0, 0.0])
+        # filterings, a search overflowed its list, pairs within reach were missed
+        self.cstate = np.array([0.0, -1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0])
         self.last_iterations = 0
         self.last_contacts = 0
         self.last_uninverted = 0
@@ -384,11 +384,35 @@ class Dynamics:
         # hold a strongly shrunken leaf apart against its own springs)
         shrunk = max(float(np.mean(state.spring_rest[self.T_springs] / m.spring_rest0[self.T_springs])), 0.1)
         radius = self.radius * shrunk
-        if self.cstate[6]:  # the last search filled the list: a longer one, searched afresh
-            self.pairs = np.zeros((2 * len(self.pairs), 2), np.int32)
-            self.near = np.zeros_like(self.pairs)
-            self.cstate[1] = -1.0
-            self.cstate[6] = 0.0
+        # a snapshot to run the frame again from if a contact list overflowed so badly that
+        # pairs within reach were missed (cstate[7]; a list that merely filled is handled inside
+        # the frame and only grows before the next one)
+        snap = (state.particle_q.copy(), state.particle_qd.copy()) if self.pbd and self.self_coll else None
+        while True:
+            if self.cstate[6]:
+                self._grow_contact_lists()
+            out = self._frame(state, cons, radius, shrunk)
+            if not self.cstate[7]:
+                break
+            state.particle_q[:] = snap[0]
+            state.particle_qd[:] = snap[1]
+        self.last_iterations = int(out[0])
+        self.last_contacts = int(out[1])
+        self.last_uninverted = int(out[2])
+
+    def _grow_contact_lists(self) -> None:
+        """Twice the room for the contact lists, searched afresh."""
+        self.pairs = np.zeros((2 * len(self.pairs), 2), np.int32)
+        self.near = np.zeros_like(self.pairs)
+        self.cstate[1] = -1.0
+        self.cstate[4] = -1.0
+        self.cstate[6] = 0.0
+        self.cstate[7] = 0.0
+
+    def _frame(self, state: State, cons: tuple, radius: float, shrunk: float) -> np.ndarray:
+        """One :func:`~.kernels.pbd.frame` call on ``state`` (on float32 copies with
+        ``dynamics.precision`` float32); returns its counters."""
+        m = self.model
         contact = (m.particle_rest, self.T_idx, radius, CONTACT_SKIN * radius, CONTACT_NEAR_SKIN * radius, self.skip2,
                    self.table, self.nxt, self.pairs, self.qc, self.near, self.qn, self.cstate)
         out = self.out
@@ -417,10 +441,7 @@ class Dynamics:
         if self.f32:
             state.particle_q[:] = q
             state.particle_qd[:] = qd
-        self.last_iterations = int(out[0])
-        self.last_contacts = int(out[1])
-        self.last_uninverted = int(out[2])
-
+        return out
 
     def _f32_buffers(self) -> dict:
         """float32 twins of the frame's float arrays (made once): by name for the per-particle

@@ -40,15 +40,17 @@ from . import FASTMATH
 from .scalar import atan2_
 
 #: constraints per block: 32 measured fastest against 16 / 64 / 128 on the bench leaf (a
-#: block's buffer, 29 × 32 doubles, stays in L1 next to the particles it touches)
+#: block's buffer, 23 × 32 doubles, stays in L1 next to the particles it touches)
 BLOCK = 32
 #: fields of the block buffer (hinges: 9 differences, λ, 12 displacements, the change²)
 FIELDS = 23
 
 
 def block_starts(colour_start: np.ndarray, size: int = BLOCK) -> np.ndarray:
-    """int64 offsets of blocks of at most ``size`` constraints that never cross a colour:
-    block k is [starts[k], starts[k + 1])."""
+    """int64 offsets of blocks of at most ``size`` ≤ :data:`BLOCK` constraints that never cross
+    a colour: block k is [starts[k], starts[k + 1])."""
+    if not 0 < size <= BLOCK:
+        raise ValueError(f"block size {size}: expected 1 … {BLOCK} (the buffer's field stride)")
     cs = np.asarray(colour_start, np.int64)
     parts = [np.arange(a, b, size, dtype=np.int64) for a, b in zip(cs[:-1], cs[1:]) if b > a]
     return np.concatenate(parts + [cs[-1:]]) if parts else cs[-1:].copy()
@@ -126,7 +128,7 @@ def _hinge_block(B, R, lo, omega, n):
         m12 = max(w1 * w1 * s1, w2 * w2 * s2)
         gm2 = max(m12, max(w3 * w3 * s3, w4 * w4 * s4))
         lim = dl * dl * gm2 > 0.25 * el2  # gm2 > 0 where true
-        dl = math.copysign(0.5 * el / math.sqrt(max(gm2, 1e-300)), dl) if lim else dl
+        dl = math.copysign(0.5 * el / math.sqrt(gm2 if lim else 1.0), dl) if lim else dl
         dl = dl if ok else 0.0
         B[9 * BLOCK + k] += dl
         f1 = w1 * dl * g1; f2 = w2 * dl * g2; f3 = w3 * dl; f4 = w4 * dl
@@ -196,7 +198,7 @@ def _volume_block(B, R, lo, n):
         gm2 = max(max(wv * wv * sv, wa * wa * sa), max(wb * wb * sb, wc * wc * sc))
         lim2 = 0.25 * math.sqrt((bx * bx + by * by + bz * bz) * (cx * cx + cy * cy + cz * cz))
         lim = dl * dl * gm2 > lim2  # gm2 > 0 where true
-        dl = math.copysign(math.sqrt(lim2 / max(gm2, 1e-300)), dl) if lim else dl
+        dl = math.copysign(math.sqrt(lim2 / (gm2 if lim else 1.0)), dl) if lim else dl
         dl = dl if ok else 0.0
         fv = wv * dl; fa = wa * dl; fb = wb * dl; fc = wc * dl
         B[9 * BLOCK + k] = fv * gvx; B[10 * BLOCK + k] = fv * gvy; B[11 * BLOCK + k] = fv * gvz

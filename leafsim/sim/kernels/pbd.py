@@ -251,7 +251,8 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, qc, pairs):
     indirection) and :func:`contacts_stale` measures the motion since the search from them.
     Every bucket's chain holds its particles in descending k, so a particle's walk stops at the
     first k' ≤ k: pairs with j ≤ i are never looked at (idx ascending: j > i ⟺ k' > k).
-    Writes up to len(pairs) pairs; returns the count."""
+    Writes up to len(pairs) pairs; returns (the count, whether a pair found did not fit: the
+    count alone cannot tell, since repeats are dropped after the list filled)."""
     nt = table.shape[0]
     mask = nt - 1
     pow2 = (nt & mask) == 0  # power-of-two table: bit mask instead of a signed 64-bit modulo
@@ -269,6 +270,7 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, qc, pairs):
     s2 = search * search
     n = 0
     cap = pairs.shape[0]
+    full = False
     for k in range(idx.shape[0]):
         i = idx[k]
         g0 = n
@@ -295,17 +297,20 @@ def find_contacts(q, rest, idx, search, skip2, table, nxt, qc, pairs):
                         if dx * dx + dy * dy + dz * dz < s2:
                             ex = rx - qc[m, 3]
                             ey = ry - qc[m, 4]
-                            if ex * ex + ey * ey > skip2 and n < cap:
-                                pairs[n, 0] = i
-                                pairs[n, 1] = idx[m]
-                                n += 1
+                            if ex * ex + ey * ey > skip2:
+                                if n < cap:
+                                    pairs[n, 0] = i
+                                    pairs[n, 1] = idx[m]
+                                    n += 1
+                                else:
+                                    full = True
                         m = nxt[m]
         # canonical order (by i, then j), repeats dropped (two of the 8 cells can share a bucket,
         # so a chain can be walked twice): the projections then do not depend on the cell walk,
         # so a list searched at another moment (a resumed run, another skin) projects the pairs
         # that touch in the same order and gives bit-identical results
         n = canonical_pairs(pairs, g0, n)
-    return n
+    return n, full
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
@@ -522,24 +527,28 @@ def update_contacts(q, qrest, idx, radius, skin, skin2, skip2, table, nxt, pairs
     the leaf has really moved.  The near list keeps the canonical order, so the results do
     not depend on when either list was made.
 
-    ``cstate`` float64[7] = (search radius, search pairs (−1 = none), searches made, near
-    reach, near pairs (−1 = none), filterings made, 1 if a search filled the list: it was
-    searched again at the near reach, and the caller should give it more room)."""
+    ``cstate`` float64[8] = (search radius, search pairs (−1 = none), searches made, near
+    reach, near pairs (−1 = none), filterings made, 1 if a search overflowed the list (it was
+    searched again at the near reach; the caller should give it more room), 1 if that search
+    overflowed too (pairs within reach may be missing: the caller must grow the list and run
+    the frame again))."""
     reach = 1.05 * radius + skin2
     if cstate[1] >= 0.0 and cstate[4] >= 0.0 and not contacts_stale(q, idx, qn, 0.5 * (cstate[3] - 1.05 * radius)):
         return int(cstate[4])
     if cstate[1] < 0.0 or contacts_stale(q, idx, qc, 0.5 * (cstate[0] - reach)):
-        search = radius + skin
-        n = find_contacts(q, qrest, idx, search, skip2, table, nxt, qc, pairs)
+        search = max(radius + skin, reach)  # never narrower than the near list it feeds
+        n, full = find_contacts(q, qrest, idx, search, skip2, table, nxt, qc, pairs)
         cstate[2] += 1.0
-        if n >= pairs.shape[0]:
-            # the list is full, so pairs may be missing: search again at the near reach only
-            # (a list valid for this substep, searched afresh at the next) and have the caller
-            # double the list before the next frame
+        if full and search > reach:
+            # pairs did not fit: search again at the near reach only (a list valid for this
+            # substep, searched afresh at the next) and have the caller double the list
             cstate[6] = 1.0
             search = reach
-            n = find_contacts(q, qrest, idx, search, skip2, table, nxt, qc, pairs)
+            n, full = find_contacts(q, qrest, idx, search, skip2, table, nxt, qc, pairs)
             cstate[2] += 1.0
+        if full:
+            cstate[6] = 1.0
+            cstate[7] = 1.0
         cstate[0] = search
         cstate[1] = n
     m = near_pairs(q, pairs, int(cstate[1]), reach, idx, near, qn)
@@ -616,7 +625,8 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
     layers (``vidx`` in model order); with ``conserve`` remove the rigid part of the internal
     displacement (:func:`remove_rigid`; not with pinned particles); ground contact + friction;
     velocity update with damping, inelastic self-contacts.  ``contact`` = (qrest,
-    T_idx, radius, skin, skip2, table, nxt, pairs, qc, cstate) for :func:`update_contacts`.
+    T_idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn, cstate) for
+    :func:`update_contacts`.
     ``qa``/``dint`` (n, 3) scratch.  Writes (iterations, contact hits, uninverted) to ``out``
     (int64[3])."""
     qrest, T_idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn, cstate = contact
