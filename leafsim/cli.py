@@ -1,24 +1,33 @@
-"""Command line: ``leafsim [gui|species|params|outline|veins|build|run|compare|bench|scene|export] ...``.
+"""Command line: ``leafsim [gui|species|params|outline|veins|build|run|compare|bench|accuracy|scene|export] ...``.
 
-Every command prints a one-line error and exits with status 2 on bad input; ``--json``
-prints one JSON object on stdout and nothing else.
+This module only parses: each command is one function of :mod:`leafsim.commands`, called
+with the parsed arguments.  Every command prints a one-line error and exits with status 2 on
+bad input; ``--json`` prints one JSON object on stdout and nothing else.  The command modules
+are imported when their command runs (``leafsim species`` never loads numba or OpenGL).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import importlib
 import os
 import signal
 import sys
-import time
-from pathlib import Path
 
-from .errors import LeafsimError
+from leafsim import __version__
+from leafsim.base.errors import LeafsimError
+from leafsim.base.signals import Interrupted, main_thread, raise_interrupted
+from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
+from leafsim.config.presets import QUALITY
 
-#: the checkpoint file of ``leafsim run`` inside --out, and how often it is written by default
-CHECKPOINT = "checkpoint.npz"
-CHECKPOINT_EVERY = 100
+
+#: command → "module:function" in leafsim.commands
+COMMANDS = {
+    "gui": "gui:cmd_gui", "species": "library:cmd_species", "params": "library:cmd_params",
+    "outline": "shape:cmd_outline", "veins": "shape:cmd_veins", "build": "shape:cmd_build", "run": "run:cmd_run",
+    "compare": "compare:cmd_compare", "bench": "measure:cmd_bench", "accuracy": "measure:cmd_accuracy",
+    "scene": "scene:cmd_scene", "export": "export:cmd_export",
+}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -49,23 +58,13 @@ def _common(p: argparse.ArgumentParser, seed=True):
                    help="override a declared parameter, e.g. --set veins.main.kappa=4 (repeatable)")
     if seed:
         p.add_argument("--seed", type=_seed, default=0, help="random seed, a non-negative integer (default 0)")
-    from .sim.presets import QUALITY
-
     p.add_argument("--quality", default=None, choices=tuple(QUALITY),
                    help="mesh and solver settings from the accuracy study's front (see `leafsim params`); --set wins")
 
 
-def _overrides(args) -> dict:
-    """The quality level's settings (if any), then the --set values (validated)."""
-    from .params import parse_set_args
-    from .sim.presets import quality_overrides
-
-    q = getattr(args, "quality", None)
-    return {**(quality_overrides(q) if q else {}), **parse_set_args(args.sets)}
-
-
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="leafsim", description="Procedural leaves and how they age.")
+    ap.add_argument("--version", action="version", version=f"leafsim {__version__}")
     sub = ap.add_subparsers(dest="cmd", parser_class=_Parser)
 
     g = sub.add_parser("gui", help="interactive application (default)")
@@ -138,421 +137,6 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-class Interrupted(BaseException):
-    """SIGINT or SIGTERM ended a command: the CLI prints one line and exits with 128 + signal.
-    A BaseException (like KeyboardInterrupt), so no ``except Exception`` swallows it."""
-
-    def __init__(self, signum: int, message: str = ""):
-        super().__init__(signum, message)
-        self.signum, self.message = signum, message
-
-
-def _raise_interrupted(signum, frame):
-    raise Interrupted(signum)
-
-
-def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help"):
-        argv = ["gui"] + argv
-    # SIGTERM ends a command like Ctrl-C does (one line, no traceback), not silently
-    old_term = signal.signal(signal.SIGTERM, _raise_interrupted) if _main_thread() else None
-    try:
-        args = build_parser().parse_args(argv)
-        return COMMANDS[args.cmd](args) or 0
-    except LeafsimError as e:
-        print(f"leafsim: {one_line(str(e))}", file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, Interrupted) as e:
-        signum = e.signum if isinstance(e, Interrupted) else signal.SIGINT
-        what = e.message if isinstance(e, Interrupted) and e.message else "interrupted"
-        print(f"leafsim: {what} (by {signal.Signals(signum).name})", file=sys.stderr)
-        return 128 + int(signum)
-    except BrokenPipeError:
-        return 0
-    except Exception as e:  # never a traceback for the user
-        if os.environ.get("LEAFSIM_DEBUG"):
-            raise
-        print(f"leafsim: internal error: {type(e).__name__}: {one_line(str(e))[:300]} (set LEAFSIM_DEBUG=1 for a traceback)", file=sys.stderr)
-        return 1
-    finally:
-        if old_term is not None:
-            signal.signal(signal.SIGTERM, old_term)
-
-
-def _main_thread() -> bool:
-    import threading
-
-    return threading.current_thread() is threading.main_thread()
-
-
-class _DeferredSignals:
-    """Inside the frame loop, SIGINT/SIGTERM only set ``signum``: the loop finishes the frame it
-    is in, saves a checkpoint and stops, so the state on disk is always a whole frame.  A
-    second signal ends at once."""
-
-    def __init__(self):
-        self.signum = None
-
-    def _handler(self, signum, frame):
-        if self.signum is not None:
-            raise Interrupted(signum)
-        self.signum = signum
-
-    def __enter__(self):
-        self._old = {s: signal.signal(s, self._handler) for s in (signal.SIGINT, signal.SIGTERM)} if _main_thread() else {}
-        return self
-
-    def __exit__(self, *exc):
-        for s, h in self._old.items():
-            signal.signal(s, h)
-
-
-def one_line(text: str) -> str:
-    """The contract's last line of defence: a message never spans several lines."""
-    return " ".join(text.split("\n")).replace("\r", " ")
-
-
-def _emit(args, obj: dict, text: str) -> None:
-    if getattr(args, "json", False):
-        print(json.dumps(obj, sort_keys=True))
-    else:
-        print(text)
-
-
-def _load(args):
-    """Species + validated parameters (species values, then --set overrides)."""
-    from .species import DEFAULT_SPECIES, get_species
-
-    sp = get_species(args.species or DEFAULT_SPECIES, args.config)
-    params = sp.params.with_overrides(_overrides(args), where="--set")
-    return sp, params
-
-
-# ------------------------------------------------------------------ commands
-
-def cmd_species(args):
-    from .species import load_library
-
-    lib = load_library(args.config)
-    rows = [sp.summary() for sp in lib.values()]
-    lines = [f"{'key':16s} {'name':32s} {'length':>7s}  photo"]
-    for r in rows:
-        lines.append(f"{r['key']:16s} {r['name']:32s} {r['length_m']:6.3f}m  {r['photo'] or '(drawn outline)'}")
-    _emit(args, {"species": rows}, "\n".join(lines))
-
-
-def cmd_params(args):
-    from .params import PARAMS, markdown_table
-
-    if args.markdown:
-        print(markdown_table())
-        return
-    from .sim.presets import quality_table
-
-    rows = [{"name": p.name, "kind": p.kind, "default": p.default, "lo": p.lo, "hi": p.hi, "unit": p.unit,
-             "group": p.group, "rebuild": p.rebuild, "choices": list(p.choices), "help": p.help} for p in PARAMS.values()]
-    text = "\n".join(f"{r['name']:36s} {str(r['default']):>10s} {r['unit']:10s} {'rebuild' if r['rebuild'] else 'live':7s} {r['help']}" for r in rows)
-    from .params import ParamSet
-    from .sim.presets import quality_of
-
-    quality, default = quality_table(), quality_of(ParamSet())
-    text += "\n\n--quality (measured by the accuracy study, docs/accuracy.md; the defaults are " + f"{default}):\n" + "\n".join(
-        f"  {k:10s} {json.dumps(v['settings']):60s} " + (_quality_measured(v["measured"]) if v["measured"] else "not measured")
-        for k, v in quality.items())
-    _emit(args, {"params": rows, "quality": quality}, text)
-
-
-def _quality_measured(m: dict) -> str:
-    return (f"worst error {100 * m['worst_rel']:.0f} % of the reference, {m['ms_per_sim_s']:.0f} ms per simulated second "
-            f"({m['particles']} particles, maple)")
-
-
-def cmd_outline(args):
-    from .outline import draw_outline, load_image, outline_report, trace_outline
-    from .params import ParamSet, parse_set_args
-
-    params = ParamSet(parse_set_args(args.sets))
-    traced = trace_outline(args.image, params)
-    rep = outline_report(traced)
-    if args.out:
-        draw_outline(traced, load_image(args.image), args.out)
-    _emit(args, rep, f"{args.image}: {rep['points']} points, area {rep['area_px']:.0f} px, base {rep['base']}, apex {rep['apex']}, "
-                     f"{len(rep['lobes'])} lobe tips, IoU {rep['iou']:.4f}" + (f" -> {args.out}" if args.out else ""))
-
-
-def cmd_veins(args):
-    from .draw2d import draw_veins, write_png_atomic
-    from .leaf import leaf_shape, species_veins
-
-    sp, params = _load(args)
-    t0 = time.perf_counter()
-    shape = leaf_shape(sp, params)
-    graph = species_veins(sp, shape, params, args.seed)
-    dt = time.perf_counter() - t0
-    rep = {"species": sp.key, "seed": args.seed, "length_m": sp.length_m, **graph.stats}
-    if args.out:
-        photo = None
-        if sp.image is not None:
-            from .outline import load_image
-
-            photo = load_image(sp.image)
-        write_png_atomic(args.out, draw_veins(shape, graph, photo=photo))
-    c = graph.stats["counts"]
-    _emit(args, rep, f"{sp.key} seed {args.seed}: main {c['main']}, lateral {c['lateral']}, sublateral {c['sublateral']}, net {c['net']}; "
-                     f"crossings {graph.stats['crossings']}, outside {graph.stats['outside_length']:.3g} m ({dt * 1000:.0f} ms)"
-                     + (f" -> {args.out}" if args.out else ""))
-
-
-def _model(args):
-    from .leaf import build_leaf
-
-    sp, params = _load(args)
-    shape, graph, model = build_leaf(sp, params, args.seed)
-    return sp, params, shape, graph, model
-
-
-def cmd_build(args):
-    sp, params, shape, graph, model = _model(args)
-    rep = {"species": sp.key, "seed": args.seed, **model.to_report()}
-    _emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
-
-
-def _effects_overrides(spec: str | None) -> dict:
-    """``--effects osmosis,shrink,pbd``: the listed effects on, every other one off."""
-    from .params import PARAMS
-
-    if spec is None:
-        return {}
-    known = sorted(k.split(".", 1)[1] for k in PARAMS if k.startswith("effects."))
-    wanted = {e.strip() for e in spec.split(",") if e.strip()}
-    bad = wanted - set(known)
-    if bad:
-        raise LeafsimError(f"--effects: unknown effect '{sorted(bad)[0]}' (expected a comma-separated list of {', '.join(known)})")
-    return {f"effects.{e}": e in wanted for e in known}
-
-
-def _check_run_args(args) -> Path | None:
-    """Validate ``leafsim run``'s options before any work; returns the --out folder (or None)."""
-    if args.frames < 0:
-        raise LeafsimError(f"--frames {args.frames}: expected a non-negative number of frames")
-    if args.every < 0:
-        raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
-    if args.every and not args.out:
-        raise LeafsimError("--every needs --out DIR for the PNG frames")
-    if args.checkpoint_every is not None and args.checkpoint_every < 0:
-        raise LeafsimError(f"--checkpoint-every {args.checkpoint_every}: expected a non-negative frame interval")
-    if (args.checkpoint_every or args.resume) and not args.out:
-        raise LeafsimError(f"{'--resume' if args.resume else '--checkpoint-every'} needs --out DIR (the checkpoint lives there)")
-    out = Path(args.out) if args.out else None
-    if out is not None:
-        if out.exists() and not out.is_dir():
-            raise LeafsimError(f"--out {out}: exists and is not a folder")
-        if not out.parent.exists():
-            raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
-        if args.resume and not (out / CHECKPOINT).is_file():
-            raise LeafsimError(f"--resume: no checkpoint at {out / CHECKPOINT} (run first with --out {out})")
-    if args.stats and not Path(args.stats).parent.exists():
-        raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
-    if args.checkpoint_every is None:
-        args.checkpoint_every = CHECKPOINT_EVERY if out is not None else 0
-    return out
-
-
-def cmd_run(args):
-    from .fileio import remove_stale_temps
-    from .leaf import build_leaf, species_photo_rgba
-    from .sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
-    from .sim.run import StatsStream, run_headless, save_npz
-    from .sim.simulator import Simulator
-    from .species import DEFAULT_SPECIES, get_species
-
-    out = _check_run_args(args)
-    overrides = {**_overrides(args), **_effects_overrides(args.effects)}
-    t0 = time.perf_counter()
-    sp = get_species(args.species or DEFAULT_SPECIES, args.config)
-    params = sp.params.with_overrides(overrides, where="--set")
-    # what a checkpoint must have been made with to be resumed by this command
-    meta = {"species": sp.key, "config": str(Path(args.config).resolve()) if args.config else None,
-            "seed": args.seed, "params": params.to_dict()}
-    ck = out / CHECKPOINT if out is not None else None
-    if args.resume:
-        check_meta(ck, meta)  # before the build: a mismatch costs nothing
-    shape, veins, model = build_leaf(sp, params, args.seed)
-    build_s = time.perf_counter() - t0
-    sim = Simulator(model, params, seed=args.seed)
-    state = load_checkpoint(ck, model, meta) if args.resume else sim.state()
-    start = state.frame
-    snap = None
-    if out is not None:
-        out.mkdir(exist_ok=True)
-    for target in ([ck, out / "final.npz", out / "frame_*.png"] if out is not None else []) + ([Path(args.stats)] if args.stats else []):
-        remove_stale_temps(target)  # left by a run killed (SIGKILL) while writing
-    if args.every:
-        photo = species_photo_rgba(sp, params) if (sp.image is not None and params["render.texture"]) else None
-        snap = _FrameWriter(model, params, photo, out, sim.state(), sp.photo_colour)
-        if start == 0:
-            snap.write(0, state)
-
-    def on_frame(k, state, st):
-        if snap is not None and k % args.every == 0:
-            snap.write(k, state)
-        if ck is not None and args.checkpoint_every and (stop.signum or k % args.checkpoint_every == 0):
-            save_checkpoint(ck, model, state, meta)
-        return stop.signum is None
-
-    stream = StatsStream(args.stats, keep_until=start if args.resume else None) if args.stats else None
-    t1 = time.perf_counter()
-    try:
-        with _DeferredSignals() as stop:
-            state, stats = run_headless(model, params, max(args.frames - start, 0), on_frame=on_frame,
-                                        state=state, simulator=sim, stats_stream=stream)
-    finally:
-        if stream is not None:
-            stream.close()
-    sim_s = time.perf_counter() - t1
-    if stop.signum is not None:
-        where = (f"checkpoint {ck}: continue with the same command and --resume" if ck is not None and args.checkpoint_every
-                 else "no checkpoint (give --out DIR and --checkpoint-every K to be able to resume)")
-        raise Interrupted(stop.signum, f"interrupted at frame {state.frame} of {args.frames}"
-                                       + (f", statistics in {args.stats}" if args.stats else "") + f"; {where}")
-    if ck is not None and args.checkpoint_every:
-        save_checkpoint(ck, model, state, meta)  # the final state: --resume --frames M continues it
-    if out is not None:
-        save_npz(out / "final.npz", model, state)
-    rep = _run_report(sp, params, args, model, state, stats, start, build_s, sim_s, snap)
-    _emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
-
-
-def _run_report(sp, params, args, model, state, stats, start, build_s, sim_s, snap) -> dict:
-    import numpy as np
-
-    from .sim.run import shape_metrics
-
-    ms = [sum(s["ms"].values()) for s in stats]
-    water = float(state.particle_water.sum() / max(model.particle_water0.sum(), 1e-300))
-    rep = {
-        "species": sp.key, "seed": args.seed, "frames": len(stats), "frame": state.frame, "resumed_from": start,
-        "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
-        "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
-        "water_fraction": round(water, 6),
-        "nan": bool(any(s.get("nan") for s in stats)),
-        "png_frames": 0 if snap is None else snap.written,
-        **{f"shape_{k}": v for k, v in shape_metrics(model, state).items()},
-        **model.to_report(),
-    }
-    if rep["nan"]:
-        raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {state.frame} (parameters: {params.changed()})")
-    return rep
-
-
-class _FrameWriter:
-    """Offscreen PNG frames of one leaf (photo species: the pigment colour carrying the photo's
-    detail, as the GUI shows it); the camera is fixed by the first frame."""
-
-    def __init__(self, model, params, photo, out: Path, rest_state, photo_colour: bool = False):
-        from .view import LeafView
-
-        self.view = LeafView(model, photo, rest_state.pigments.copy(), photo_tint=False, photo_colour=photo_colour)
-        self.params, self.out = params, out
-        self.rest = rest_state  # the camera frames the rest leaf (the same after --resume)
-        self.renderer = self.camera = None
-        self.written = 0
-
-    def write(self, k: int, state) -> None:
-        from .render.offscreen import OffscreenRenderer, default_camera
-        from .render.options import RenderOptions
-
-        opts = RenderOptions(albedo="detail" if self.view.use_texture(self.params) else "colours")
-        path = self.out / f"frame_{k:05d}.png"
-        if self.renderer is None:
-            self.renderer = OffscreenRenderer(960, 720)
-            self.camera = default_camera(self.view.mesh(self.rest, self.params).positions)
-            self.renderer.render_png(self.view.mesh(state, self.params), path, camera=self.camera, options=opts)
-        else:
-            self.renderer.render_png(self.view.update(state, self.params), path, camera=self.camera, options=opts)
-        self.written += 1
-
-
-def _stage_arg(text: str | None):
-    if text is None or text in ("young", "dried"):
-        return text
-    try:
-        k = int(text)
-    except ValueError:
-        k = -1
-    if k < 0:
-        raise LeafsimError(f"--stage {text!r}: expected young, dried or a non-negative frame number")
-    return k
-
-
-def cmd_compare(args):
-    from .species import DEFAULT_SPECIES, get_species
-
-    stage = _stage_arg(args.stage)
-    if args.photo is not None and not Path(args.photo).is_file():
-        raise LeafsimError(f"--photo {args.photo}: file not found")
-    if args.out and not Path(args.out).resolve().parent.is_dir():
-        raise LeafsimError(f"--out {args.out}: folder {Path(args.out).parent} does not exist")
-    sp = get_species(args.species or DEFAULT_SPECIES, args.config)
-    params = sp.params.with_overrides({**_overrides(args), **_effects_overrides(args.effects)}, where="--set")
-    from .compare import montage
-    from .fileio import write_png_atomic
-    from .render.compare_run import run_compare
-
-    rep = run_compare(sp, params, seed=args.seed, photo=args.photo, stage=stage)
-    rows = rep.pop("_rows")
-    if args.out:
-        write_png_atomic(args.out, montage(rep, rows), rgb=True)
-        rep["montage"] = str(args.out)
-    lines = [f"{sp.key}: {'row':9s} {'frame':>6s} {'water':>6s} {'IoU':>7s} {'margin':>7s} {'colourTV':>8s} {'dE':>6s}  reference"]
-    for r in rep["rows"]:
-        m = "n/a" if r["margin_ratio"] is None else f"{r['margin_ratio']:.3f}"
-        lines.append(f"{sp.key}: {r['kind']:9s} {r['stage']['frame']:6d} {r['stage']['water']:6.2f} {r['iou']:7.4f} {m:>7s} "
-                     f"{r['colour_tv']:8.3f} {r['mean_delta_e'] or 0:6.1f}  {r['reference']}")
-    _emit(args, rep, "\n".join(lines) + (f"\n-> {args.out}" if args.out else ""))
-
-
-def cmd_accuracy(args):
-    from .accuracy import markdown, study, write_report
-
-    out = Path(args.out) if args.out else None
-    if out is not None and out.exists() and not out.is_dir():
-        raise LeafsimError(f"--out {out}: exists and is not a folder")
-    if out is not None and not out.parent.exists():
-        raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
-    if args.floor < 0:
-        raise LeafsimError(f"--floor {args.floor}: expected a count ≥ 0")
-    groups = None if args.groups is None else [g.strip() for g in args.groups.split(",") if g.strip()]
-    known = {"mesh", "iterations", "mass", "tolerance", "dt", "relaxation", "osmosis", "precision", "quality"}
-    if groups is not None and (not groups or set(groups) - known):
-        raise LeafsimError(f"--groups {args.groups}: expected a comma list of {', '.join(sorted(known))}")
-    report = study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json,
-                   floor=args.floor, floor_reference=args.floor_reference, groups=groups)
-    if out is not None:
-        report["files"] = write_report(report, out)
-    _emit(args, report, markdown(report))
-
-
-def cmd_bench(args):
-    from .bench import main as bench_main
-
-    return bench_main(json_out=args.json, quick=args.quick)
-
-
-def cmd_gui(args):
-
-    if args.screenshot and args.frames is None:
-        raise LeafsimError("--screenshot needs --frames N")
-    overrides = _overrides(args)
-    from .gui.app import run_app
-
-    return run_app(species=args.species, config=args.config, seed=args.seed, overrides=overrides,
-                   frames=args.frames, screenshot=args.screenshot, play=args.play)
-
-
-# ------------------------------------------------------------------ scene and export (leafsim/scene.py, leafsim/export.py)
-
 def _scene_export_parsers(sub) -> None:
     sc = sub.add_parser("scene", help="simulate a scene file of many leaves in parallel")
     sc.add_argument("scene", help="scene JSON (see configs/scenes/ and docs/scenes.md)")
@@ -574,74 +158,45 @@ def _scene_export_parsers(sub) -> None:
     ex.add_argument("--json", action="store_true")
 
 
-def cmd_scene(args):
-    from .scene import load_scene, run_scene
+def one_line(text: str) -> str:
+    """The contract's last line of defence: a message never spans several lines."""
+    return " ".join(text.split("\n")).replace("\r", " ")
 
-    scene = load_scene(args.scene)
-    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem
-    rep = run_scene(scene, out, workers=workers, scheduler=args.scheduler)
-    bad = rep["failed"]
-    text = (f"{scene.name}: {rep['ran']} leaves simulated, {rep['skipped']} already done, {len(bad)} failed "
-            f"in {rep['total_s']:.1f} s ({rep['leaves_per_s'] or 0:.3g} leaves/s) -> {out}")
-    _emit(args, rep, text)
-    if bad:
-        names = ", ".join(f"{b['name']} ({b['error']})" for b in bad)
-        print(f"leafsim: scene {scene.name}: {len(bad)} of {rep['leaves']} leaves failed: {names}", file=sys.stderr)
+
+def command(name: str):
+    """The function that runs command ``name``."""
+    module, func = COMMANDS[name].split(":")
+    return getattr(importlib.import_module(f"leafsim.commands.{module}"), func)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version"):
+        argv = ["gui"] + argv
+    # SIGTERM ends a command like Ctrl-C does (one line, no traceback), not silently
+    old_term = signal.signal(signal.SIGTERM, raise_interrupted) if main_thread() else None
+    try:
+        args = build_parser().parse_args(argv)
+        return command(args.cmd)(args) or 0
+    except LeafsimError as e:
+        print(f"leafsim: {one_line(str(e))}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, Interrupted) as e:
+        signum = e.signum if isinstance(e, Interrupted) else signal.SIGINT
+        what = e.message if isinstance(e, Interrupted) and e.message else "interrupted"
+        print(f"leafsim: {what} (by {signal.Signals(signum).name})", file=sys.stderr)
+        return 128 + int(signum)
+    except BrokenPipeError:
+        return 0
+    except Exception as e:  # never a traceback for the user
+        if os.environ.get("LEAFSIM_DEBUG"):
+            raise
+        print(f"leafsim: internal error: {type(e).__name__}: {one_line(str(e))[:300]} (set LEAFSIM_DEBUG=1 for a traceback)", file=sys.stderr)
         return 1
-    return 0
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
 
-
-def cmd_export(args):
-    from .export import export_mesh, format_of
-    from .leaf import build_leaf, species_photo_rgba
-    from .sim.run import run_headless
-    from .sim.simulator import Simulator
-    from .species import get_species
-    from .view import LeafView
-
-    fmt = format_of(args.out, args.format)
-    if args.frames < 0 or args.every < 0:
-        raise LeafsimError(f"--frames {args.frames} / --every {args.every}: expected non-negative frame counts")
-    if args.every and fmt in ("obj", "ply"):
-        raise LeafsimError(f"--every needs --format glb or gltf ({fmt} holds one static shape)")
-    folder = Path(args.out).parent
-    if not folder.is_dir():
-        raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")
-    sp = get_species(args.species, args.config)
-    params = sp.params.with_overrides({**_overrides(args), **_effects_overrides(args.effects)}, where="--set")
-    if args.texture == "photo" and sp.image is None:
-        raise LeafsimError(f"--texture photo: species '{sp.key}' has no photo (drawn outline)")
-    shape, veins, model = build_leaf(sp, params, args.seed)
-    sim = Simulator(model, params, seed=args.seed)
-    state = sim.state()
-    keys = [state.copy()]
-
-    def on_frame(k, st, stats):
-        if args.every and k % args.every == 0:
-            keys.append(st.copy())
-
-    state, stats = run_headless(model, params, args.frames, on_frame=on_frame, state=state, simulator=sim)
-    if any(s["nan"] for s in stats):
-        raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {len(stats)}")
-    if not args.every:
-        keys = [state]
-    elif keys[-1].frame != state.frame:
-        keys.append(state.copy())
-    photo = species_photo_rgba(sp, params) if sp.image is not None else None
-    view = LeafView(model, photo, sim.state().pigments, photo_colour=sp.photo_colour)
-    rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view,
-                      layers=args.layers, veins=args.veins, texture=args.texture)
-    rep.update(species=sp.key, seed=args.seed, frames=state.frame)
-    counts = ", ".join(f"{k} {v['vertices']} vertices / {v['triangles']} triangles" for k, v in rep["meshes"].items())
-    _emit(args, rep, f"{sp.key}: {counts}, {rep['targets']} morph targets -> {', '.join(rep['files'])}")
-
-
-COMMANDS = {
-    "gui": cmd_gui, "species": cmd_species, "params": cmd_params, "outline": cmd_outline, "veins": cmd_veins,
-    "build": cmd_build, "run": cmd_run, "bench": cmd_bench, "compare": cmd_compare,
-}
-COMMANDS.update(scene=cmd_scene, export=cmd_export, accuracy=cmd_accuracy)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -1,5 +1,10 @@
 """Shared fixtures.  ``xdisplay`` starts a private Xvfb server for GUI tests only (when no
-DISPLAY is set) and stops it at the end of the session; other tests never need it."""
+DISPLAY is set) and stops it at the end of the session; other tests never need it.
+``tiny`` is the bench's small leaf (a maple-like outline at a coarse mesh), built once.
+
+The tests mirror the package's folders (``tests/sim/`` tests ``leafsim/sim/``); shared test
+code lives in ``tests/helpers/`` (importable as ``helpers.*``: ``tests`` is on the path).
+Markers: ``gui`` (the real window under Xvfb), ``slow`` (``-m "not slow"`` skips them)."""
 
 from __future__ import annotations
 
@@ -11,7 +16,7 @@ import time
 import pytest
 
 # leafsim first: it points numba's cache at a folder keyed to the kernel sources, which only
-# works before anything imports numba (the reference kernels of tests/_pbd_reference.py call
+# works before anything imports numba (the reference kernels of tests/helpers/pbd_reference.py call
 # leafsim's, so their cached code must not outlive a change there either)
 import leafsim  # noqa: F401
 
@@ -78,3 +83,18 @@ def xdisplay():
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+@pytest.fixture(scope="session")
+def tiny():
+    """The bench's tiny leaf (a coarse maple-like blade), built once per test session."""
+    from leafsim.measure.bench import build_bench_model
+
+    return build_bench_model("tiny")
+
+
+def pytest_collection_modifyitems(items):
+    """Every test in tests/gui/ drives the real window: marked ``gui``."""
+    for item in items:
+        if "/tests/gui/" in str(item.path).replace("\\", "/") and item.path.name != "test_fonts.py":
+            item.add_marker(pytest.mark.gui)

@@ -4,11 +4,12 @@
 * the leaf is drawn by :class:`leafsim.render.Renderer` in ``callbacks.custom_background``
   (into the part of the window between the two panels, straight into the window's
   framebuffer at render scale 1);
-* the panels (generated from :data:`leafsim.params.PARAMS`) and the fixed status bar are
-  drawn in ``callbacks.show_gui`` (:mod:`leafsim.gui.panels`).
+* the panels (generated from :data:`leafsim.config.params.PARAMS`) and the fixed status bar are
+  drawn in ``callbacks.show_gui`` by the panel objects of :mod:`leafsim.gui.panels`, each
+  holding this app.
 
-All state lives in a :class:`leafsim.session.Session`: builds run in a background thread, the
-simulation in the session's worker thread (:mod:`leafsim.worker`); every frame the window
+All state lives in a :class:`leafsim.interactive.session.Session`: builds run in a background
+thread, the simulation in the session's worker thread (:mod:`leafsim.interactive.worker`); every frame the window
 takes the worker's latest consistent snapshot and draws it, so the window never waits for a
 step or a build.  Errors (unreadable photo, broken preset, unwritable export folder, a build
 that fails, a diverged simulation) appear in the status bar at the bottom, which has a fixed
@@ -22,14 +23,27 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
+import moderngl
 import numpy as np
+from imgui_bundle import hello_imgui, imgui, immapp
 
-from ..errors import LeafsimError
-from .panels import BACKGROUND, LEFT_W, RIGHT_W, STATUS_H, Panels
-from .status import Status
-
-#: resolution factors of the 3-D view (llvmpipe's cost is per pixel)
-SCALES = (0.35, 0.5, 0.75, 1.0)
+from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import write_png_atomic
+from leafsim.export.mesh import export_mesh
+from leafsim.gui.exports import ensure_folder, free_path, new_take
+from leafsim.gui.fonts import load_ui_font
+from leafsim.gui.layout import BACKGROUND, LEFT_W, PANEL_BG, RIGHT_W, STATUS_H, fixed_flags, window_rects
+from leafsim.gui.panels.controls import ControlsPanel
+from leafsim.gui.panels.stats import StatsPanel
+from leafsim.gui.panels.status_bar import StatusBar
+from leafsim.gui.panels.view import ViewOverlay
+from leafsim.gui.photo import texcoord_affine
+from leafsim.gui.status import Status
+from leafsim.interactive.session import Session
+from leafsim.render.camera import OrbitCamera
+from leafsim.render.options import RenderOptions
+from leafsim.render.renderer import Renderer
 #: above this many triangles the view is drawn into a texture kept while nothing changes (a
 #: large mesh costs more to draw than the texture costs to show; a small one is drawn straight
 #: into the window every frame)
@@ -44,7 +58,7 @@ def _configure_threads() -> None:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
-class LeafApp(Panels):
+class LeafApp:
     """One window: a session, its renderer, camera and the UI state.
 
     Parameters
@@ -57,8 +71,6 @@ class LeafApp(Panels):
 
     def __init__(self, session, frames: int | None = None, play: bool = False, window_size=(1280, 800),
                  title: str = "leafsim"):
-        from ..render.camera import OrbitCamera
-
         self.session = session
         self.frames = frames
         self.window_size = tuple(int(v) for v in window_size)
@@ -111,21 +123,19 @@ class LeafApp(Panels):
         self.view_direct = False
         self._view_key = None
         self.uploads = 0
-        session.start_worker()
-        session.set_speed(None)
+        self.controls, self.stats = ControlsPanel(self), StatsPanel(self)
+        self.status_bar, self.overlay = StatusBar(self), ViewOverlay(self)
+        session.playback.start_worker()
+        session.playback.set_speed(None)
         if play or frames is not None:
-            session.play(True)
+            session.playback.play(True)
 
     @property
     def playing(self) -> bool:
-        return self.session.playing
+        return self.session.playback.playing
 
     # ------------------------------------------------------------------ runner wiring
     def runner_params(self):
-        from imgui_bundle import hello_imgui
-
-        from .fonts import load_ui_font
-
         rp = hello_imgui.RunnerParams()
         rp.app_window_params.window_title = self.title
         rp.app_window_params.window_geometry.size = self.window_size
@@ -144,15 +154,9 @@ class LeafApp(Panels):
 
     @staticmethod
     def addons():
-        from imgui_bundle import immapp
-
         return immapp.AddOnsParams(with_implot=True)
 
     def post_init(self) -> None:
-        import moderngl
-
-        from ..render.renderer import Renderer
-
         self.ctx = moderngl.create_context()
         self.renderer = Renderer(self.ctx)
         gl = str(self.ctx.info.get("GL_RENDERER", "")).lower()
@@ -184,7 +188,7 @@ class LeafApp(Panels):
         """The newest error shown in the status bar (None when there is none)."""
         return self.status.error_text
 
-    def _guard(self, fn, *args, topic: str = "app"):
+    def guard(self, fn, *args, topic: str = "app"):
         try:
             return fn(*args)
         except LeafsimError as e:
@@ -197,8 +201,6 @@ class LeafApp(Panels):
 
     # ------------------------------------------------------------------ per frame (GL)
     def render_options(self):
-        from ..render.options import RenderOptions
-
         p = self.session.params
         opts = RenderOptions(view=self.view, translucency=float(p["render.translucency"]) * 1.8,
                              specular=float(p["render.specular"]), veins=p["render.vein_alpha"] > 0.02,
@@ -220,8 +222,35 @@ class LeafApp(Panels):
         if self.t_first_frame is None:
             self.t_first_frame = now
         self.gui_frames += 1
-        self._guard(self._frame)
+        self.guard(self._frame)
 
+    # ------------------------------------------------------------------ panels (imgui)
+    def show_gui(self) -> None:
+        self.guard(self._gui)
+
+    def panel_rects(self):
+        _, _, left, right, bar = window_rects()
+        return left, right, bar
+
+    def _window(self, name: str, rect, draw) -> None:
+        x, y, w, h = rect
+        imgui.set_next_window_pos((x, y), imgui.Cond_.always)
+        imgui.set_next_window_size((w, h), imgui.Cond_.always)
+        extra = imgui.WindowFlags_.no_title_bar | imgui.WindowFlags_.no_scrollbar if name == "Status" else 0
+        if imgui.begin(name, None, fixed_flags() | extra):
+            self.guard(draw)
+        imgui.end()
+
+    def _gui(self) -> None:
+        W, H, left, right, bar = window_rects()
+        self._window("Controls", left, self.controls.draw)
+        self._window("Stats", right, self.stats.draw)
+        self._window("Status", bar, self.status_bar.draw)
+        self.leaf_rect_px = (LEFT_W, 0, max(W - LEFT_W - RIGHT_W, 64), max(H - STATUS_H, 64))
+        self.overlay.draw()
+        self.overlay.mouse(imgui.get_io())
+
+    # ------------------------------------------------------------------ session news
     def _take_session(self) -> None:
         """Swap in a finished build and the worker's latest snapshot; route their news to the
         status bar."""
@@ -235,12 +264,13 @@ class LeafApp(Panels):
             if self.frames is not None:
                 self.exit_code = 2
                 self._exit()
-        if s.take_snapshot():
+        if s.playback.take_snapshot():
             self.dirty = True
             if self.take is not None and s.frame >= self._last_recorded_frame + max(self.record_every, 1):
                 self.requests.append(("record", None))
-        if s.sim_error and self.status.get("sim") is None:
-            self.status.error("sim", s.sim_error, holds=lambda: s.sim_error is not None)
+        pb = s.playback
+        if pb.sim_error and self.status.get("sim") is None:
+            self.status.error("sim", pb.sim_error, holds=lambda: pb.sim_error is not None)
             if self.take is not None:
                 self.stop_recording()
 
@@ -254,7 +284,7 @@ class LeafApp(Panels):
             self._sync_renderer()
             while self.requests:
                 kind, arg = self.requests.pop(0)
-                self._guard(self._export, kind, arg, topic="export")
+                self.guard(self._export, kind, arg, topic="export")
         t1 = time.perf_counter()
         self._draw_screen(fb)
         t2 = time.perf_counter()
@@ -267,8 +297,6 @@ class LeafApp(Panels):
                 self._exit()
 
     def _exit(self) -> None:
-        from imgui_bundle import hello_imgui
-
         hello_imgui.get_runner_params().app_shall_exit = True
 
     def _sync_renderer(self) -> None:
@@ -302,10 +330,6 @@ class LeafApp(Panels):
     def _make_photo_texture(self) -> None:
         """The photo as two textures: whole (side panel) and leaf-masked (overlay); and the
         affine that maps model xy to its texture coordinates."""
-        import cv2
-
-        from .photo import texcoord_affine
-
         s = self.session
         for t in (self.photo_tex, self.photo_tex_masked):
             if t is not None:
@@ -337,8 +361,6 @@ class LeafApp(Panels):
         """Fill the panels' and status bar's rectangles with their background colour by a
         scissored clear (the panels are drawn without an imgui background: a blended fill
         of a third of the window was ~5 ms per frame under llvmpipe)."""
-        from .panels import PANEL_BG
-
         for x, y, w, h in self.panel_rects():
             fb.clear(*PANEL_BG, 1.0, depth=1.0,
                      viewport=(int(x * sx), int(H - (y + h) * sy), max(int(w * sx), 1), max(int(h * sy), 1)))
@@ -347,8 +369,6 @@ class LeafApp(Panels):
         """Clear the window and draw the leaf: at render scale 1 straight into the window's
         framebuffer, else into a smaller texture that imgui draws scaled (llvmpipe's cost is per
         pixel)."""
-        from imgui_bundle import imgui
-
         io = imgui.get_io()
         sx, sy = io.display_framebuffer_scale.x, io.display_framebuffer_scale.y
         W, H = int(io.display_size.x * sx), int(io.display_size.y * sy)
@@ -375,8 +395,6 @@ class LeafApp(Panels):
         fb.viewport = (0, 0, W, H)
 
     def _draw_scaled(self, cam, opts, w: int, h: int) -> None:
-        import moderngl
-
         if self.view_fbo is None or self.view_fbo.size != (w, h):
             for o in (self.view_fbo, self.view_tex, self.view_depth):
                 if o is not None:
@@ -406,27 +424,16 @@ class LeafApp(Panels):
 
     def _export_folder(self) -> Path:
         """The export folder, created when missing (the status bar says so)."""
-        from .exports import ensure_folder
-
         folder, created = ensure_folder(self.export_dir)
         if created:
             self.status.info("folder", f"created export folder {folder}", path=folder)
         return folder
 
     def _write_png(self, path: Path) -> None:
-        from ..render.offscreen import write_png_atomic
-        from ..session import public_mode
-
-        try:
-            write_png_atomic(self.leaf_image(), path)
-            os.chmod(path, public_mode())
-        except OSError as e:
-            raise LeafsimError(f"cannot write {path}: {e.strerror or e}") from None
+        write_png_atomic(path, self.leaf_image(), rgb=True)
         self.exported.append(str(path))
 
     def _export(self, kind: str, arg) -> None:
-        from .exports import free_path
-
         s = self.session
         if kind == "frame":
             folder = self._export_folder()
@@ -452,8 +459,6 @@ class LeafApp(Panels):
 
     def start_recording(self) -> None:
         """A new numbered take folder; frames are written while the leaf changes."""
-        from .exports import new_take
-
         try:
             self.take = new_take(self._export_folder())
         except LeafsimError as e:
@@ -472,12 +477,9 @@ class LeafApp(Panels):
     # ------------------------------------------------------------------ actions
     def export_mesh(self) -> Path:
         """The current snapshot as ``<species>_frame_NNNNN.glb`` in the export folder."""
-        from ..export import export_mesh
-        from .exports import free_path
-
         s = self.session
         path = free_path(self._export_folder(), f"{s.species_key}_frame_{s.frame:05d}", ".glb")
-        rep = export_mesh(s.model, s.state.copy(), path, params=s._sim_params(), view=s.view, veins=True)
+        rep = export_mesh(s.model, s.state.copy(), path, params=s.sim_params, view=s.view, veins=True)
         tri = sum(m["triangles"] for m in rep["meshes"].values())
         self.status.info("mesh", f"exported mesh {path} ({tri} triangles)", path=path)
         return path
@@ -520,8 +522,6 @@ def run_app(species=None, config=None, seed: int = 0, overrides=None, frames=Non
     ``screenshot``: write the final window (PNG, atomically) when exiting.
     """
     _configure_threads()
-    from ..session import Session
-
     if frames is not None and frames < 0:
         raise LeafsimError(f"--frames {frames}: expected a non-negative number of frames")
     if screenshot is not None:
@@ -534,18 +534,10 @@ def run_app(species=None, config=None, seed: int = 0, overrides=None, frames=Non
                            "xvfb-run -a -s '-screen 0 1280x800x24' leafsim gui ...")
     session.rebuild_async()
     app = LeafApp(session, frames=frames, play=play)
-    from imgui_bundle import hello_imgui, immapp
-
     immapp.run(app.runner_params(), app.addons())
     if screenshot is not None:
-        from ..render.offscreen import write_png_atomic
-
         img = hello_imgui.final_app_window_screenshot()
         if img is None or getattr(img, "size", 0) == 0:
             raise LeafsimError("--screenshot: the window produced no frame")
-        img = np.asarray(img)
-        write_png_atomic(np.ascontiguousarray(img[:, :, :3]), screenshot)
-        from ..session import public_mode
-
-        os.chmod(screenshot, public_mode())
+        write_png_atomic(screenshot, np.ascontiguousarray(np.asarray(img)[:, :, :3]), rgb=True)
     return app.exit_code

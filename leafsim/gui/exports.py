@@ -14,7 +14,7 @@ import os
 import re
 from pathlib import Path
 
-from ..errors import LeafsimError
+from leafsim.base.errors import LeafsimError
 
 TAKE_RE = re.compile(r"^take_(\d{3,})$")
 

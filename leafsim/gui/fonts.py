@@ -12,7 +12,9 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
-FONT_PATH = Path(__file__).resolve().parent / "fonts" / "DejaVuSans.ttf"
+from leafsim.base.resources import font_dir
+
+FONT_PATH = font_dir() / "DejaVuSans.ttf"
 FONT_SIZE = 15.0
 
 
@@ -74,7 +76,7 @@ def cmap(path=FONT_PATH) -> set[int]:
 
 def ui_strings() -> list[str]:
     """Every declared label, unit, help and range text the panels show (from PARAMS)."""
-    from ..params import PARAMS
+    from leafsim.config.params import PARAMS
 
     out = []
     for p in PARAMS.values():

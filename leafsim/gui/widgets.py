@@ -1,4 +1,4 @@
-"""imgui widgets generated from the parameter declaration (:data:`leafsim.params.PARAMS`).
+"""imgui widgets generated from the parameter declaration (:data:`leafsim.config.params.PARAMS`).
 
 Every parameter gets one widget whose kind follows the declaration: float → slider (log scale
 where declared) with the unit in the label and the help text as tooltip, int → integer
@@ -13,7 +13,7 @@ from typing import Any
 
 from imgui_bundle import imgui
 
-from ..params import GROUPS, PARAMS, Param, ParamSet
+from leafsim.config.params import GROUPS, PARAMS, Param, ParamSet
 
 #: names of the parameter widgets drawn since the last :func:`reset_drawn` (tests use it to
 #: check that every declared parameter has a widget)

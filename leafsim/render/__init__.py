@@ -2,7 +2,7 @@
 ``Renderer`` and ``OffscreenRenderer`` load moderngl on first use."""
 
 from leafsim.render.camera import OrbitCamera
-from leafsim.render.mesh import RenderMesh
+from leafsim.appearance.mesh import RenderMesh
 from leafsim.render.options import RenderOptions
 
 __all__ = ["OrbitCamera", "RenderMesh", "RenderOptions", "Renderer", "OffscreenRenderer"]

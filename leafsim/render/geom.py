@@ -8,6 +8,9 @@ try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency, keep a slow path anyway
     njit = None
+from leafsim.base.cache import configure_numba_cache
+
+configure_numba_cache()  # before the first @njit(cache=True): the cache folder keyed to the kernel sources
 
 
 def _normals_numpy(pos: np.ndarray, tri: np.ndarray, out: np.ndarray) -> None:

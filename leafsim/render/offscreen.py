@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from leafsim import ROOT
-from leafsim.errors import LeafsimError
-from leafsim.fileio import write_png_atomic as _write_png
+from leafsim.base.resources import shader_dir as default_shader_dir
+from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import write_png_atomic as _write_png
 from leafsim.render.camera import OrbitCamera
 
 
@@ -63,7 +63,7 @@ class OffscreenRenderer:
             self.resolve = self.ctx.framebuffer(self._resolve_rb)
         else:
             self._resolve_rb, self.resolve = None, self.fbo
-        self.renderer = Renderer(self.ctx, ROOT / "shaders" if shader_dir is None else shader_dir)
+        self.renderer = Renderer(self.ctx, default_shader_dir() if shader_dir is None else shader_dir)
         self._mesh = None
 
     def _prepare(self, mesh_or_update):

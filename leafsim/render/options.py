@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
 
-from leafsim.errors import LeafsimError
+from leafsim.base.errors import LeafsimError
 
 #: Views that are not scalar heat maps; any other view name must be a key of ``mesh.scalars``.
 BASIC_VIEWS = ("shaded", "particles", "springs", "wireframe")

@@ -1,7 +1,7 @@
 """Scene overview: many placed leaves in one offscreen image (ground, shadows).
 
-The renderer draws one :class:`~leafsim.render.mesh.RenderMesh` per ``populate``; a scene is
-drawn by merging every placed leaf into one mesh (:func:`merge_views`: positions transformed,
+The renderer draws one :class:`~leafsim.appearance.mesh.RenderMesh` per ``populate``; a scene is
+drawn by merging every placed leaf into one mesh (:func:`leafsim.scene.placement.merge_views`: positions transformed,
 triangle and vein indices offset, per-vertex pigment colours).  One populate, one shadow map
 over the whole scene, no change to the renderer itself.  Leaves are drawn with their baked
 pigment colours (one mesh holds one texture, so photos are not used here).
@@ -13,36 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from leafsim.render.mesh import RenderMesh
+from leafsim.appearance.mesh import RenderMesh
 
 
-def merge_views(views: dict, placed: dict) -> RenderMesh:
-    """One RenderMesh of every placed leaf (``views``: name → ``view.npz`` arrays;
-    ``placed``: :func:`leafsim.placement.place` output)."""
-    from leafsim.placement import transformed
-
-    pos, tri, col, veins = [], [], [], []
-    base = 0
-    for leaf in placed["leaves"]:
-        v = views[leaf["name"]]
-        pos.append(transformed(v, leaf))
-        tri.append(v["triangles"] + base)
-        col.append(v["colours"])
-        s = v["vein_start"]
-        for k in range(len(v["vein_order"])):
-            a, b = s[k], s[k + 1]
-            veins.append((v["vein_index"][a:b] + base, v["vein_width"][a:b], int(v["vein_order"][k])))
-        base += len(v["positions"])
-    return RenderMesh(positions=np.concatenate(pos).astype(np.float32), triangles=np.concatenate(tri).astype(np.int32),
-                      colours=np.concatenate(col).astype(np.float32), vein_lines=veins)
-
-
-def render_overview(views: dict, placed: dict, layout: dict, overview: dict, path: Path) -> Path:
-    """Render the placed leaves on the ground with shadows into ``path`` (PNG, atomic)."""
+def render_overview(mesh: RenderMesh, layout: dict, overview: dict, path: Path) -> Path:
+    """Render the placed leaves (one merged mesh, :func:`leafsim.scene.placement.merge_views`)
+    on the ground with shadows into ``path`` (PNG, atomic)."""
     from leafsim.render.offscreen import OffscreenRenderer, default_camera
     from leafsim.render.options import RenderOptions
 
-    mesh = merge_views(views, placed)
     pts = mesh.positions
     if layout["kind"] == "canopy":  # frame the crown together with the ground under it
         lo, hi = pts.min(0), pts.max(0)

@@ -12,11 +12,11 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from leafsim import ROOT
-from leafsim.errors import LeafsimError
+from leafsim.base.resources import shader_dir as default_shader_dir
+from leafsim.base.errors import LeafsimError
 from leafsim.render.camera import look_at, orthographic
 from leafsim.render.geom import VeinRibbons, bounds, orient_up, unique_edges, vertex_normals
-from leafsim.render.mesh import validate_mesh
+from leafsim.appearance.mesh import validate_mesh
 from leafsim.render.options import BASIC_VIEWS, RenderOptions
 
 DEFAULT_COLOUR = np.array([0.10, 0.32, 0.05], dtype=np.float32)  # linear summer green
@@ -80,12 +80,12 @@ class Renderer:
     ctx : moderngl.Context
         An OpenGL >= 3.3 core context (GUI window or EGL standalone).
     shader_dir : path
-        Folder of the ``.vert``/``.frag``/``.glsl`` files (default ``ROOT/shaders``).
+        Folder of the ``.vert``/``.frag``/``.glsl`` files (default: the shipped ``shaders/``, :func:`leafsim.base.resources.shader_dir`).
     """
 
-    def __init__(self, ctx: moderngl.Context, shader_dir: Path | str = ROOT / "shaders"):
+    def __init__(self, ctx: moderngl.Context, shader_dir: Path | str | None = None):
         self.ctx = ctx
-        self.shader_dir = Path(shader_dir)
+        self.shader_dir = Path(shader_dir) if shader_dir is not None else default_shader_dir()
         self._variants: dict = {}     # (name, defines) -> program with compile-time switches
         self._shadow_cache: dict = {}
         self._geometry = 0

@@ -1,4 +1,4 @@
-"""Top-down orthographic pictures of a leaf in a :class:`leafsim.compare.Frame` (``leafsim compare``).
+"""Top-down orthographic pictures of a leaf in a :class:`leafsim.compare.metrics.Frame` (``leafsim compare``).
 
 The camera looks straight down (apex up on the canvas, world x to the right) with the frame's
 scale, so a model pixel and a photo pixel of the comparison frame are the same point.  The

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LeafsimError
-from ..fileio import atomic_write_bytes
-from .colour import PigmentState
-from .model import Model, State
+from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import atomic_write_bytes
+from leafsim.sim.pigments import PigmentState
+from leafsim.sim.model import Model, State
 
 FORMAT = "leafsim-checkpoint/1"
 _PIGMENT_ARRAYS = ("chlorophyll", "carotenoid", "anthocyanin", "browning", "necrosis", "vein", "leaf")

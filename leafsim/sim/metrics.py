@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry import LeafShape, distance_to_polygon, points_in_polygon, resample_closed
-from .model import LAYER_T, Model, State
+from leafsim.base.geometry import LeafShape, distance_to_polygon, points_in_polygon, resample_closed
+from leafsim.sim.model import LAYER_T, Model, State
 
 #: grid resolution of the interior probe points (across the leaf's bounding box)
 GRID = 40

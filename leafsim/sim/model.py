@@ -28,7 +28,7 @@ class State:
     particle_q : (n, 3) float64 positions [m];  particle_qd : (n, 3) velocities [m/s];
     particle_water : (n,) water [kg];  spring_rest : (s,) current rest lengths [m];
     hinge_plastic : (h,) plastic rest angle of the bending hinges [rad];
-    time [s], frame; pigments : :class:`leafsim.sim.colour.PigmentState` or None (the
+    time [s], frame; pigments : :class:`leafsim.sim.pigments.PigmentState` or None (the
     :class:`~leafsim.sim.simulator.Simulator` gives every state it makes one).  Arrays are
     mutated in place by the simulator; ``copy()`` snapshots everything.
     """
@@ -58,7 +58,7 @@ class State:
 
 @dataclass(frozen=True)
 class Model:
-    """Array-backed, immutable two-layer blade model (build with :func:`leafsim.blade.build_blade`).
+    """Array-backed, immutable two-layer blade model (build with :func:`leafsim.blade.build.build_blade`).
 
     Particles
     ---------
@@ -100,7 +100,7 @@ class Model:
 
     Hydraulic patches
     -----------------
-    particle_patch (n,) the seeded smooth patch field of :func:`leafsim.blade.patch_field`
+    particle_patch (n,) the seeded smooth patch field of :func:`leafsim.blade.build.patch_field`
     (zero mean, unit spread): where it is high the blade loses water faster
     (``osmosis.patchiness``); None for models made without it (zero).
 

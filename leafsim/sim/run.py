@@ -1,190 +1,182 @@
-"""Headless runs, per-frame statistics, atomic .npz export and shape metrics."""
+"""The one run loop: :class:`Run` steps one leaf's :class:`~leafsim.sim.simulator.Simulator`
+until a stopping rule holds, and checks every frame for NaN/Inf.  ``leafsim run``, ``leafsim
+export``, scenes, ``leafsim compare``, the accuracy study, the bench and the GUI's worker all
+drive a leaf through it; what they do with each frame (statistics, PNG frames, checkpoints,
+snapshots, colour matching) is the body of their own ``for`` loop.
+
+Example
+-------
+>>> run = Run(model, params, seed=0)                      # doctest: +SKIP
+>>> for ms in run.frames(Stop(water_left=0.02, max_frames=100_000)):   # doctest: +SKIP
+...     pass
+>>> run.state.frame, run.water_left                       # doctest: +SKIP
+"""
 
 from __future__ import annotations
 
-import json
-import os
-from pathlib import Path
+from dataclasses import dataclass
+from typing import Callable, Iterator
 
 import numpy as np
 
-from ..errors import LeafsimError
-from ..fileio import atomic_write_bytes
-from ..params import ParamSet
-from .kernels.pbd import residual
-from .model import LAYER_T, LAYER_V, Model, State
-from .simulator import Simulator
+from leafsim.base.errors import LeafsimError
+from leafsim.config.params import ParamSet
+from leafsim.sim.model import Model, State
+from leafsim.sim.simulator import Simulator
+from leafsim.sim.stats import StatsStream, frame_stats
 
 
-def frame_stats(model: Model, state: State, ms: dict, sim: Simulator | None = None) -> dict:
-    """Total water per layer, max residual |C|/l, kinetic energy [J], NaN flag, ms per stage."""
-    w = state.particle_water
-    lay = model.particle_layer
-    q, qd = state.particle_q, state.particle_qd
-    finite = bool(np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(w).all())
-    m = model.particle_cytosol + w
-    out = {
-        "frame": state.frame,
-        "time": state.time,
-        "water_T": float(w[lay == LAYER_T].sum()),
-        "water_V": float(w[lay == LAYER_V].sum()),
-        "residual": float(residual(q, model.spring_ij, state.spring_rest)) if finite else float("nan"),
-        "kinetic": float(0.5 * (m * (qd * qd).sum(1)).sum()) if finite else float("nan"),
-        "nan": not finite,
-        "ms": {k: round(v, 4) for k, v in ms.items()},
-    }
-    if sim is not None:
-        out["iterations"] = sim.iterations
-    return out
+class Diverged(LeafsimError):
+    """The simulation produced NaN/Inf (or a kernel raised an arithmetic error)."""
 
 
-class StatsStream:
-    """Per-frame statistics as JSON lines, written and flushed frame by frame, so that a run
-    killed at any moment (even SIGKILL) keeps every frame it finished.
+class NotReached(LeafsimError):
+    """A stopping criterion was not met within its frame budget."""
 
-    ``keep_until``: continue an earlier file (``--resume``): its lines up to that frame are kept
-    (the rest, computed after the checkpoint, are dropped; they are computed again), then new
-    lines are appended.  Without it the file is started afresh.  Errors name the path.
+
+@dataclass(frozen=True)
+class Stop:
+    """When a run ends.  Checked before every step, so a criterion that already holds runs
+    nothing: at absolute frame ``frames``, when the water left falls to ``water_left`` (a
+    fraction of the fresh leaf's), or when the season clock reaches ``season``.  Past
+    ``max_frames`` an unmet criterion raises :class:`NotReached`."""
+
+    frames: int | None = None
+    water_left: float | None = None
+    season: float | None = None
+    max_frames: int | None = None
+
+    def reached(self, run: "Run") -> bool:
+        s = run.state
+        if self.frames is not None and s.frame >= self.frames:
+            return True
+        if self.water_left is not None and run.water_left <= self.water_left:
+            return True
+        return self.season is not None and run.season >= self.season
+
+    def describe(self) -> str:
+        parts = [f"{k} = {v:g}" for k, v in (("frames", self.frames), ("water_left", self.water_left),
+                                             ("season", self.season)) if v is not None]
+        return ", ".join(parts) or "no criterion"
+
+
+class Run:
+    """One leaf simulated by one :class:`Simulator`.
+
+    Parameters
+    ----------
+    model : Model
+    params : ParamSet (used to make the simulator unless ``simulator`` is given).
+    effects : effect names to enable (default: the ``effects.*`` parameters).
+    seed : seeds the fresh leaf's colour variation.
+    state : continue this state (a checkpoint) instead of a fresh leaf.
+    simulator : use this simulator (made for ``model``).
+    watchdog : let the simulator stop a blow-up that produces no NaN.
+    name : prefix of error messages (the species key, a scene leaf's name).
+
+    Attributes
+    ----------
+    model, sim (the Simulator), state (stepped in place), last_ms (stage timings of the last
+    step).
     """
 
-    def __init__(self, path, keep_until: int | None = None):
-        self.path = Path(path)
+    def __init__(self, model: Model, params: ParamSet | None = None, effects=None, seed: int = 0,
+                 state: State | None = None, simulator: Simulator | None = None, watchdog: bool = True,
+                 name: str = ""):
+        if simulator is None:
+            if params is None:
+                raise ValueError("Run needs params or a simulator")
+            simulator = Simulator(model, params, effects, seed=seed, watchdog=watchdog)
+        self.model = model
+        self.sim = simulator
+        self.state = simulator.state() if state is None else state
+        self.last_ms: dict = {}
+        self._prefix = f"{name}: " if name else ""
+        self._w0 = max(float(model.particle_water0.sum()), 1e-300)
+
+    # ------------------------------------------------------------------ measures
+    @property
+    def water_left(self) -> float:
+        """Water now / water of the fresh leaf."""
+        return float(self.state.particle_water.sum() / self._w0)
+
+    @property
+    def season(self) -> float:
+        """The season clock of the pigments (0 without them)."""
+        return float(self.state.pigments.age) if self.state.pigments is not None else 0.0
+
+    def finite(self) -> bool:
+        s = self.state
+        return bool(np.isfinite(s.particle_q).all() and np.isfinite(s.particle_qd).all()
+                    and np.isfinite(s.particle_water).all())
+
+    def stats(self, ms: dict | None = None) -> dict:
+        """:func:`~leafsim.sim.stats.frame_stats` of the current state."""
+        return frame_stats(self.model, self.state, self.last_ms if ms is None else ms, self.sim)
+
+    # ------------------------------------------------------------------ stepping
+    def step(self) -> dict:
+        """One frame; returns milliseconds per stage.  A kernel's arithmetic error becomes
+        :class:`Diverged` (NaN/Inf in the state is reported by :meth:`frames`)."""
         try:
-            if keep_until is not None:
-                self._keep(keep_until)
-                self.f = open(self.path, "a", encoding="utf-8")
-            else:
-                self.f = open(self.path, "w", encoding="utf-8")
-        except OSError as e:
-            raise LeafsimError(f"--stats {self.path}: cannot write statistics ({e.strerror or e})") from None
+            self.last_ms = self.sim.step(self.state)
+        except ArithmeticError as e:  # a kernel met NaN/Inf (division by zero, overflow)
+            raise Diverged(f"{self._prefix}the simulation blew up at frame {self.state.frame + 1} ({type(e).__name__}: {e})") from None
+        return self.last_ms
 
-    def _keep(self, frame: int) -> None:
-        kept = []
-        if self.path.exists():
-            for line in self.path.read_text(encoding="utf-8", errors="replace").splitlines():
-                try:
-                    st = json.loads(line)
-                except ValueError:
-                    break  # a line cut by a kill
-                if not isinstance(st, dict) or st.get("frame", frame + 1) > frame:
-                    break
-                kept.append(line + "\n")
-        atomic_write_bytes(self.path, "".join(kept).encode(), "statistics")
+    def frames(self, stop: Stop | None = None, until: Callable[[State], bool] | None = None) -> Iterator[dict]:
+        """Step frame by frame, yielding each step's stage timings, until ``stop`` holds
+        (checked before each step) or ``until(state)`` is true (checked after each step).
 
-    def write(self, st: dict) -> None:
-        self.f.write(json.dumps(st, sort_keys=True) + "\n")
-        self.f.flush()
+        A frame that leaves NaN/Inf in the state is yielded (its statistics can still be
+        written), then :class:`Diverged` is raised.  Breaking out of the loop stops the run
+        at the frame just yielded."""
+        while True:
+            if stop is not None:
+                if stop.reached(self):
+                    return
+                if stop.max_frames is not None and self.state.frame >= stop.max_frames:
+                    raise NotReached(f"{self._prefix}stopping criterion {stop.describe()} not reached within max_frames = "
+                                     f"{stop.max_frames} (water left {self.water_left:.3g}, season {self.season:.3g})")
+            ms = self.step()
+            finite = self.finite()
+            yield ms
+            if not finite:
+                raise Diverged(f"{self._prefix}the simulation produced NaN/Inf at frame {self.state.frame}")
+            if until is not None and until(self.state):
+                return
 
-    def close(self) -> None:
-        if not self.f.closed:
-            self.f.flush()
-            os.fsync(self.f.fileno())
-            self.f.close()
-
-    def __enter__(self):
+    def advance(self, n: int) -> "Run":
+        """Step ``n`` frames (or until NaN/Inf: :class:`Diverged`)."""
+        for _ in self.frames(Stop(frames=self.state.frame + max(int(n), 0))):
+            pass
         return self
-
-    def __exit__(self, *exc):
-        self.close()
 
 
 def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stats_path=None, on_frame=None,
                  seed: int = 0, state: State | None = None, simulator: Simulator | None = None, stats_stream=None):
-    """Simulate ``frames`` frames with one :class:`Simulator`; returns (state, stats list).
+    """``frames`` frames of a :class:`Run` with every frame's statistics; returns (state, stats).
 
-    ``effects``: iterable of effect names (default: the ``effects.*`` parameters).
-    ``stats_path``: stream the stats there as JSON lines (:class:`StatsStream`, flushed every
-    frame); or ``stats_stream``: an open :class:`StatsStream` to write to (left open).
-    ``on_frame(frame, state, stats)``: called after every frame (after its stats line is
-    written); return False to stop.
-    ``seed``: colour variation of the fresh leaf; ``state``: continue from this state instead
-    of a fresh leaf; ``simulator``: use this one (made for ``model``/``params``) instead of a new one.
+    ``stats_path``: stream the statistics there as JSON lines (or ``stats_stream``: an open
+    :class:`~leafsim.sim.stats.StatsStream`, left open).  ``on_frame(frame, state, stats)`` is
+    called after every frame; return False to stop.  A NaN frame ends the run (its statistics
+    say ``"nan": true``) without raising.  ``seed``, ``state``, ``simulator``: as :class:`Run`.
     """
     if frames < 0:
         raise LeafsimError(f"run: frames = {frames} must be ≥ 0")
-    sim = simulator if simulator is not None else Simulator(model, params, effects, seed=seed)
-    state = sim.state() if state is None else state
+    run = Run(model, params, effects, seed=seed, state=state, simulator=simulator)
     own = StatsStream(stats_path) if stats_path and stats_stream is None else None
     stream = stats_stream or own
     stats = []
     try:
-        for _ in range(frames):
-            ms = sim.step(state)
-            st = frame_stats(model, state, ms, sim)
+        for ms in run.frames(Stop(frames=run.state.frame + frames)):
+            st = run.stats(ms)
             stats.append(st)
             if stream is not None:
                 stream.write(st)
-            if on_frame is not None and on_frame(state.frame, state, st) is False:
-                break
-            if st["nan"]:
+            if (on_frame is not None and on_frame(run.state.frame, run.state, st) is False) or st["nan"]:
                 break
     finally:
         if own is not None:
             own.close()
-    return state, stats
-
-
-def save_npz(path, model: Model, state: State) -> None:
-    """Write model topology and state arrays to ``path`` (.npz) atomically (temp + os.replace)."""
-    import io
-
-    buf = io.BytesIO()
-    np.savez_compressed(
-        buf, particle_rest=model.particle_rest, particle_layer=model.particle_layer, tri_T=model.tri_T,
-        tri_V=model.tri_V, spring_ij=model.spring_ij, vein_particles=model.vein_particles,
-        vein_start=model.vein_start, vein_order=model.vein_order, vein_width=model.vein_width,
-        particle_texcoord=model.particle_texcoord, particle_q=state.particle_q,
-        particle_qd=state.particle_qd, particle_water=state.particle_water,
-        particle_water0=model.particle_water0, spring_rest=state.spring_rest,
-        scalars=state.scalars)
-    atomic_write_bytes(path, buf.getvalue(), "positions")
-
-
-def _area3(q, tri):
-    a, b, c = q[tri[:, 0]], q[tri[:, 1]], q[tri[:, 2]]
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-
-
-def leaf_frame(model: Model, state: State) -> np.ndarray:
-    """Positions in the leaf's own frame: best rigid fit (Kabsch) of layer T onto its rest."""
-    T = model.particle_layer == LAYER_T
-    P = state.particle_q[T]
-    Q = model.particle_rest[T]
-    pc, qc = P.mean(0), Q.mean(0)
-    H = (P - pc).T @ (Q - qc)
-    U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(Vt.T @ U.T))
-    R = Vt.T @ np.diag([1, 1, d]) @ U.T
-    return (state.particle_q - pc) @ R.T + qc
-
-
-def shape_metrics(model: Model, state: State, own_frame: bool | None = None) -> dict:
-    """Shape of the leaf.
-
-    area_ratio : 3D area of layer T now / at rest.
-    margin_lift : (max z of contour particles − min z of layer T) / leaf length.
-    max_height : (max z − min z of layer T) / length.
-    inverted : number of triangles whose V particle is below the triangle (layer inversion).
-    max_displacement : largest |q − rest| / length.
-    own_frame : measure z in the leaf's best-fit rigid frame (default: True unless on the ground).
-    """
-    q = state.particle_q
-    if own_frame:
-        q = leaf_frame(model, state)
-    T = model.particle_layer == LAYER_T
-    L = model.length
-    tri = model.tri_T
-    a, b, c = q[tri[:, 0]], q[tri[:, 1]], q[tri[:, 2]]
-    n = np.cross(b - a, c - a)
-    hv = ((q[model.tri_V] - a) * n).sum(1)
-    zc = q[model.contour_particles, 2]
-    zmin = q[T, 2].min()
-    return {
-        "area_ratio": float(_area3(state.particle_q, tri).sum() / _area3(model.particle_rest, tri).sum()),
-        "margin_lift": float((zc.max() - zmin) / L),
-        "margin_lift_mean": float((np.median(zc) - zmin) / L),
-        "max_height": float((q[T, 2].max() - zmin) / L),
-        "inverted": int((hv <= 0).sum()),
-        "max_displacement": float(np.linalg.norm(state.particle_q - model.particle_rest, axis=1).max() / L),
-        "water_fraction_left": float(state.particle_water.sum() / model.particle_water0.sum()),
-    }
+    return run.state, stats

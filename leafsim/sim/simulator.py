@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import time
 
-from ..errors import LeafsimError
-from ..params import ParamSet
-from .effects import Colour, Dynamics, Osmosis, Shrink
-from .model import Model, State
+from leafsim.base.errors import LeafsimError
+from leafsim.config.params import ParamSet
+from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
+from leafsim.sim.model import Model, State
 
 #: the watchdog measures energy and momentum every this many frames
 WATCH_EVERY = 5
-EFFECTS = ("osmosis", "shrink", "gravity", "pbd", "bending", "ground", "self_collision", "colour")
 
 
 class Simulator:
@@ -80,7 +79,7 @@ class Simulator:
             self._colour.configure(params)
         self.dt = params["dynamics.dt"]
         if self._watch and self.dynamic:
-            from .watchdog import Watchdog
+            from leafsim.sim.watchdog import Watchdog
 
             if self.watchdog is None:
                 self.watchdog = Watchdog(self.model, params, every=WATCH_EVERY)

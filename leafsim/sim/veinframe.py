@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .model import Model
+from leafsim.sim.model import Model
 
 #: veins that steer the curl: main (0) and lateral (1), the orders that are stiff rods
 FIELD_MAX_ORDER = 1
@@ -122,7 +122,7 @@ def vein_frame_curl(model: Model, q: np.ndarray, align: np.ndarray | None = None
     (s > 0) curls the bilayer's way and every hinge along one bends back, i.e. the blade rolls
     up about its veins; ≈ 0: bending unrelated to the veins (one roll through the whole leaf,
     or flat); negative: it rolls up about axes across them."""
-    from .kernels.pbd import dihedral_angles
+    from leafsim.sim.kernels.pbd import dihedral_angles
 
     if model.hinge_count == 0:
         return 0.0

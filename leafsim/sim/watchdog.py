@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import LeafsimError
-from ..params import PARAMS, ParamSet
+from leafsim.base.errors import LeafsimError
+from leafsim.config.params import PARAMS, ParamSet
 
 #: largest RMS (mass-weighted) internal speed of a drying leaf [m/s]
 MAX_RMS_SPEED = 2.0

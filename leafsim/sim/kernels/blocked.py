@@ -36,8 +36,8 @@ import math
 import numpy as np
 from numba import njit
 
-from . import FASTMATH
-from .scalar import atan2_
+from leafsim.sim.kernels import FASTMATH
+from leafsim.sim.kernels.scalar import atan2_
 
 #: constraints per block: 32 measured fastest against 16 / 64 / 128 on the bench leaf (a
 #: block's buffer, 23 × 32 doubles, stays in L1 next to the particles it touches)

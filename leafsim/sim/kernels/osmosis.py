@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from . import FASTMATH
+from leafsim.sim.kernels import FASTMATH
 
 
 @njit(inline="always", fastmath=FASTMATH)

@@ -20,9 +20,9 @@ import math
 import numpy as np
 from numba import njit
 
-from . import FASTMATH
-from .blocked import hinges_blocked, volumes_blocked
-from .scalar import atan2_, hinge_pass, spring_pass, volume_pass  # noqa: F401  (the reference kernels, re-exported)
+from leafsim.sim.kernels import FASTMATH
+from leafsim.sim.kernels.blocked import hinges_blocked, volumes_blocked
+from leafsim.sim.kernels.scalar import atan2_, hinge_pass, spring_pass, volume_pass  # noqa: F401  (the reference kernels, re-exported)
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)

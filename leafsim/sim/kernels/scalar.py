@@ -15,7 +15,7 @@ import math
 
 from numba import njit
 
-from . import FASTMATH
+from leafsim.sim.kernels import FASTMATH
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from . import FASTMATH
+from leafsim.sim.kernels import FASTMATH
 
 
 def _shrink_springs(ij, rest0, sigma, alpha, l_min, cyt, water, m0, rest):

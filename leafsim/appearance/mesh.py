@@ -1,0 +1,122 @@
+"""What the renderer draws: a plain, OpenGL-free description of one leaf.
+
+The simulation side fills a :class:`RenderMesh` once (topology, texture, veins, springs) and
+afterwards only passes new per-vertex arrays to ``Renderer.update``. Importing this module
+imports no OpenGL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from leafsim.base.errors import LeafsimError
+
+#: Spring kinds used by the "springs" debug view.
+SPRING_SURFACE_T, SPRING_SURFACE_V, SPRING_LINK, SPRING_VEIN = 0, 1, 2, 3
+
+
+@dataclass
+class RenderMesh:
+    """One leaf as the renderer sees it (duck typing: any object with these attributes works).
+
+    Parameters
+    ----------
+    positions : (n, 3) float32
+        Blade vertices in metres; z up, the rest leaf lies in z ~ 0, base (petiole) at the
+        origin, apex towards +y.
+    triangles : (m, 3) int32
+        Blade triangles (the bottom layer). Winding need not be consistent: ``populate``
+        orients every triangle so that its normal points to +z in the *given* positions, so
+        populate with the flat rest shape.
+    texcoords : (n, 2) float32 or None
+        Photo coordinates in [0, 1]: ``u = x_px / width``, ``v = y_px / height`` in image
+        convention (``v = 0`` is the top row of ``texture_rgba``).
+    colours : (n, 3) float32 or None
+        Linear RGB albedo per vertex (0..1). None means a default summer green.
+    texture_rgba : (H, W, 4) uint8 or None
+        The species photo (sRGB) with alpha = leaf mask.
+    tint : (n, 3) float32 or None
+        Linear multiplier applied to the albedo (photo or colours), e.g. to age the photo.
+    vein_lines : list of (indices (p,) int, widths (p,) float metres, order int)
+        Vein polylines through blade vertices; ``order`` 0 = main, 1 = lateral,
+        2 = sublateral, 3+ = tertiary.
+    springs : (s, 2) int32 or None
+        Spring end points, indices into ``positions`` followed by ``top_positions``
+        (top-layer index ``j`` is ``n + j``).
+    spring_kind : (s,) int8 or None
+        0 surface T, 1 surface V, 2 link, 3 vein.
+    top_positions : (k, 3) float32 or None
+        Second (top) layer particles, drawn by the "particles" debug view.
+    scalars : dict str -> (n,) float32
+        Per-vertex fields for heat-map views, e.g. ``"mass"``, ``"water"``.
+    """
+
+    positions: np.ndarray
+    triangles: np.ndarray
+    texcoords: np.ndarray | None = None
+    colours: np.ndarray | None = None
+    texture_rgba: np.ndarray | None = None
+    tint: np.ndarray | None = None
+    vein_lines: list = field(default_factory=list)
+    springs: np.ndarray | None = None
+    spring_kind: np.ndarray | None = None
+    top_positions: np.ndarray | None = None
+    scalars: dict = field(default_factory=dict)
+
+    @property
+    def vertex_count(self) -> int:
+        return int(np.asarray(self.positions).shape[0])
+
+
+def validate_mesh(mesh) -> None:
+    """Raise :class:`LeafsimError` naming the first malformed field of a render mesh."""
+    pos = np.asarray(mesh.positions)
+    if pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] < 3:
+        raise LeafsimError(f"render mesh: positions must be (n>=3, 3), got {pos.shape}")
+    n = pos.shape[0]
+    tri = np.asarray(mesh.triangles)
+    if tri.ndim != 2 or tri.shape[1] != 3 or tri.shape[0] < 1:
+        raise LeafsimError(f"render mesh: triangles must be (m>=1, 3), got {tri.shape}")
+    if tri.min() < 0 or tri.max() >= n:
+        raise LeafsimError(f"render mesh: triangle index out of range [0, {n})")
+
+    def _check(name, shape_tail):
+        a = getattr(mesh, name, None)
+        if a is None:
+            return
+        a = np.asarray(a)
+        if a.shape != (n, *shape_tail):
+            raise LeafsimError(f"render mesh: {name} must be {(n, *shape_tail)}, got {a.shape}")
+
+    _check("texcoords", (2,))
+    _check("colours", (3,))
+    _check("tint", (3,))
+    for name, arr in (getattr(mesh, "scalars", None) or {}).items():
+        if np.asarray(arr).shape != (n,):
+            raise LeafsimError(f"render mesh: scalar field {name!r} must be ({n},)")
+    tex = getattr(mesh, "texture_rgba", None)
+    if tex is not None:
+        tex = np.asarray(tex)
+        if tex.ndim != 3 or tex.shape[2] != 4 or tex.dtype != np.uint8:
+            raise LeafsimError(f"render mesh: texture_rgba must be (H, W, 4) uint8, got {tex.shape} {tex.dtype}")
+    top = getattr(mesh, "top_positions", None)
+    k = 0 if top is None else np.asarray(top).shape[0]
+    springs = getattr(mesh, "springs", None)
+    if springs is not None:
+        s = np.asarray(springs)
+        if s.ndim != 2 or s.shape[1] != 2:
+            raise LeafsimError(f"render mesh: springs must be (s, 2), got {s.shape}")
+        if s.size and (s.min() < 0 or s.max() >= n + k):
+            raise LeafsimError(f"render mesh: spring index out of range [0, {n + k})")
+        kind = getattr(mesh, "spring_kind", None)
+        if kind is not None and np.asarray(kind).shape != (s.shape[0],):
+            raise LeafsimError("render mesh: spring_kind must have one entry per spring")
+    for i, line in enumerate(getattr(mesh, "vein_lines", None) or []):
+        idx, width, _order = line
+        idx = np.asarray(idx)
+        if idx.ndim != 1 or np.asarray(width).shape != idx.shape:
+            raise LeafsimError(f"render mesh: vein line {i}: indices and widths must be equal-length 1-D")
+        if idx.size and (idx.min() < 0 or idx.max() >= n):
+            raise LeafsimError(f"render mesh: vein line {i}: index out of range [0, {n})")

@@ -1,0 +1,185 @@
+"""What a renderer needs from one simulated leaf (core: no OpenGL, no imgui).
+
+:class:`LeafView` turns a model + state into a :class:`leafsim.appearance.mesh.RenderMesh` once
+(:meth:`LeafView.mesh`) and into the per-frame arrays of ``Renderer.update`` afterwards
+(:meth:`LeafView.update`).  The GUI's session, ``leafsim run`` frames and scene overviews all
+use it, so every picture of a leaf is made the same way.
+
+Example
+-------
+>>> view = LeafView(model, photo_rgba=None)               # doctest: +SKIP
+>>> renderer.populate(view.mesh(state, params))           # doctest: +SKIP
+>>> renderer.update(**view.update(state, params))         # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from leafsim.sim.model import LAYER_T, SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN, Model, State
+
+#: pigment fields offered as heat-map debug views
+PIGMENT_VIEWS = ("chlorophyll", "carotenoid", "anthocyanin", "browning", "necrosis")
+
+
+class LeafView:
+    """Render data of one model.
+
+    Parameters
+    ----------
+    model : Model
+    photo_rgba : (H, W, 4) uint8 photo with alpha = leaf mask, or None (drawn species).
+    pigments0 : the young :class:`~leafsim.sim.pigments.PigmentState` (for the photo tint), or None.
+    photo_tint : with a photo as albedo, tint it by the pigment change (True) or leave the tint
+        at 1 (renderers that take the pigment colour with the photo's detail).
+    photo_colour : the photo shows the young leaf: its colour is the young colour (see
+        :meth:`colours`).  False for a photo of a senescent leaf (its outline and detail are
+        used, the young colour is the palette's).
+    """
+
+    def __init__(self, model: Model, photo_rgba=None, pigments0=None, photo_tint: bool = True, photo_colour: bool = False):
+        self.model = model
+        self.photo_rgba = photo_rgba
+        self.pigments0 = pigments0
+        self.photo_tint = photo_tint
+        self.photo_colour = bool(photo_colour) and photo_rgba is not None
+        T = np.flatnonzero(model.particle_layer == LAYER_T)
+        V = np.flatnonzero(model.particle_layer != LAYER_T)
+        remap = np.empty(model.particle_count, np.int64)
+        remap[T] = np.arange(len(T))
+        remap[V] = len(T) + np.arange(len(V))
+        self.T, self.V, self.remap = T, V, remap
+        self._young = None   # (photo colour per particle (n, 3) linear, luminance normaliser (nT,))
+        self._fit = None     # (vein_pallor, fitted contents)
+
+    def use_texture(self, params) -> bool:
+        return bool(params["render.texture"]) and self.photo_rgba is not None
+
+    def young_photo_colour(self) -> np.ndarray:
+        """(n, 3) linear RGB of the photo at every particle: the photo blurred over half a mesh
+        spacing (blade pixels only), sampled at the particle's texture coordinates."""
+        if self._young is None:
+            self._young = _photo_at_particles(self.model, self.photo_rgba)
+        return self._young[0]
+
+    def photo_contents(self, params) -> tuple:
+        """Pigment contents fitted to the photo's young colour (cached per ``colour.vein_pallor``)."""
+        from leafsim.appearance.reflectance import fit_photo_contents
+
+        key = float(params["colour.vein_pallor"])
+        if self._fit is None or self._fit[0] != key:
+            m = self.model
+            sel = m.particle_layer == LAYER_T
+            self._fit = (key, fit_photo_contents(self.young_photo_colour(), self.pigments0, params, m.particle_area, sel))
+        return self._fit[1]
+
+    def colours(self, state: State, params):
+        """(colours (nT, 3) linear RGB, tint (nT, 3) or None) of layer T from the pigments.
+
+        Photo species whose photo shows the young leaf (``photo_colour``): the young colour is
+        the photo's, per particle; aging multiplies it by the model's reflectance change
+        rgb(now) / rgb(young), both with pigment contents fitted to the photo
+        (:func:`~leafsim.sim.pigments.fit_photo_contents`), so the photo's hue is the start and
+        the pigments move it.  The tint (photo as albedo) is that change; the vertex colours
+        carry the mean luminance of the photo (the "detail" albedo multiplies it by the pixel's
+        luminance over the mean: the photo's own pixel brightness, not twice its shading).
+        Otherwise: the palette's pigment colour, and the tint rgb(now) / rgb(young) clipped to
+        [0, 4] (ones when :attr:`photo_tint` is False)."""
+        from leafsim.appearance.reflectance import pigments_to_rgb, tint_for_texture
+
+        T = self.T
+        pig = state.pigments
+        if pig is None:
+            rgb = np.tile(np.float32([0.18, 0.35, 0.08]), (len(T), 1))
+        elif self.photo_colour and self.pigments0 is not None:
+            return self._photo_colours(pig, params)
+        else:
+            rgb = pigments_to_rgb(pig, params)[T]
+        if not self.use_texture(params):
+            return rgb, None
+        if self.photo_tint and pig is not None and self.pigments0 is not None:
+            return rgb, np.clip(tint_for_texture(pig, self.pigments0, params)[T], 0.0, 4.0)
+        return rgb, np.ones_like(rgb)
+
+    def _photo_colours(self, pig, params):
+        from leafsim.appearance.reflectance import pigments_to_rgb
+
+        T = self.T
+        contents = self.photo_contents(params)
+        change = pigments_to_rgb(pig, params, contents)[T] / pigments_to_rgb(self.pigments0, params, contents)[T]
+        self.young_photo_colour()
+        rgb = (self._young[0][T] * self._young[1][:, None] * change).astype(np.float32)
+        if not self.use_texture(params):
+            return rgb, None
+        return rgb, (np.clip(change, 0.0, 64.0).astype(np.float32) if self.photo_tint else np.ones_like(rgb))
+
+    def scalar_fields(self, state: State) -> dict:
+        """Per layer-T vertex heat-map fields: ``mass`` per area [kg/m²] now, ``water`` (now / initial) and
+        the pigment fields (relative to the summer content)."""
+        m, T = self.model, self.T
+        w = state.particle_water[T]
+        out = {"mass": ((m.particle_cytosol[T] + w) / np.maximum(m.particle_area[T], 1e-300)).astype(np.float32),
+               "water": (w / np.maximum(m.particle_water0[T], 1e-300)).astype(np.float32)}
+        if state.pigments is not None:
+            for name in PIGMENT_VIEWS:
+                out[name] = np.asarray(getattr(state.pigments, name), np.float32)[T]
+        return out
+
+    def mesh(self, state: State, params):
+        """A :class:`leafsim.appearance.mesh.RenderMesh` of the model in ``state`` (populate once)."""
+        from leafsim.appearance.mesh import SPRING_LINK as R_LINK, SPRING_SURFACE_T, SPRING_SURFACE_V, SPRING_VEIN as R_VEIN, RenderMesh
+
+        m, T, V, remap = self.model, self.T, self.V, self.remap
+        kind_map = np.zeros(4, np.int8)
+        kind_map[SPRING_SURFACE], kind_map[SPRING_V] = SPRING_SURFACE_T, SPRING_SURFACE_V
+        kind_map[SPRING_LINK], kind_map[SPRING_VEIN] = R_LINK, R_VEIN
+        colours, tint = self.colours(state, params)
+        veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()]
+        return RenderMesh(
+            positions=state.particle_q[T].astype(np.float32),
+            triangles=remap[m.tri_T].astype(np.int32),
+            texcoords=m.particle_texcoord[T].astype(np.float32),
+            colours=colours,
+            texture_rgba=self.photo_rgba if self.use_texture(params) else None,
+            tint=tint,
+            vein_lines=veins,
+            springs=remap[m.spring_ij].astype(np.int32),
+            spring_kind=kind_map[m.spring_type],
+            top_positions=state.particle_q[V].astype(np.float32),
+            scalars=self.scalar_fields(state),
+        )
+
+    def update(self, state: State, params) -> dict:
+        """Keyword arguments for ``Renderer.update`` with ``state``."""
+        colours, tint = self.colours(state, params)
+        out = {"positions": state.particle_q[self.T], "colours": colours, "scalar": self.scalar_fields(state),
+               "top_positions": state.particle_q[self.V]}
+        if tint is not None:
+            out["tint"] = tint
+        return out
+
+
+def _photo_at_particles(model: Model, rgba: np.ndarray):
+    """(linear RGB of the photo at every particle (n, 3), mean luminance / particle luminance
+    for layer T (nT,)): blade pixels blurred over half a mesh spacing, bilinear at the
+    particles' texture coordinates; the mean is the texture's leaf-area mean (the renderer's)."""
+    import cv2
+
+    h, w = rgba.shape[:2]
+    lin = (rgba[..., :3].astype(np.float32) / 255.0) ** 2.2
+    a = (rgba[..., 3] >= 128).astype(np.float32)
+    uv = model.particle_texcoord
+    span = np.ptp(model.particle_rest[:, :2], axis=0).max()
+    px_per_m = float(np.ptp(uv[:, 1] * h) + np.ptp(uv[:, 0] * w)) / max(float(np.ptp(model.particle_rest[:, 1]) + np.ptp(model.particle_rest[:, 0])), 1e-12)
+    sigma = max(0.5 * model.spacing * px_per_m, 0.7) if span > 0 else 1.0
+    num = cv2.GaussianBlur(lin * a[..., None], (0, 0), sigma)
+    den = cv2.GaussianBlur(a, (0, 0), sigma)
+    mx, my = (uv[:, 0] * w - 0.5).astype(np.float32), (uv[:, 1] * h - 0.5).astype(np.float32)
+    n_ = cv2.remap(num, mx.reshape(-1, 1), my.reshape(-1, 1), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3)
+    d_ = cv2.remap(den, mx.reshape(-1, 1), my.reshape(-1, 1), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(-1)
+    mean = lin[a > 0].mean(axis=0) if a.any() else np.full(3, 0.1, np.float32)
+    young = np.where(d_[:, None] > 1e-3, n_ / np.maximum(d_[:, None], 1e-3), mean).astype(np.float32)
+    lum = young @ np.float32([0.2126, 0.7152, 0.0722])
+    T = model.particle_layer == LAYER_T
+    norm = float(mean @ np.float32([0.2126, 0.7152, 0.0722])) / np.maximum(lum[T], 1e-4)
+    return young, norm.astype(np.float32)

@@ -1,0 +1,44 @@
+"""``leafsim compare``: the model top-down beside the species photo (and a senescent one)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import write_png_atomic
+from leafsim.commands.common import emit, species_params
+from leafsim.compare.metrics import montage
+from leafsim.compare.run import run_compare
+
+
+def stage_arg(text: str | None):
+    """``--stage``: young, dried or a frame number."""
+    if text is None or text in ("young", "dried"):
+        return text
+    try:
+        k = int(text)
+    except ValueError:
+        k = -1
+    if k < 0:
+        raise LeafsimError(f"--stage {text!r}: expected young, dried or a non-negative frame number")
+    return k
+
+
+def cmd_compare(args):
+    stage = stage_arg(args.stage)
+    if args.photo is not None and not Path(args.photo).is_file():
+        raise LeafsimError(f"--photo {args.photo}: file not found")
+    if args.out and not Path(args.out).resolve().parent.is_dir():
+        raise LeafsimError(f"--out {args.out}: folder {Path(args.out).parent} does not exist")
+    sp, params = species_params(args, effects=True)
+    rep = run_compare(sp, params, seed=args.seed, photo=args.photo, stage=stage)
+    rows = rep.pop("_rows")
+    if args.out:
+        write_png_atomic(args.out, montage(rep, rows), rgb=True)
+        rep["montage"] = str(args.out)
+    lines = [f"{sp.key}: {'row':9s} {'frame':>6s} {'water':>6s} {'IoU':>7s} {'margin':>7s} {'colourTV':>8s} {'dE':>6s}  reference"]
+    for r in rep["rows"]:
+        m = "n/a" if r["margin_ratio"] is None else f"{r['margin_ratio']:.3f}"
+        lines.append(f"{sp.key}: {r['kind']:9s} {r['stage']['frame']:6d} {r['stage']['water']:6.2f} {r['iou']:7.4f} {m:>7s} "
+                     f"{r['colour_tv']:8.3f} {r['mean_delta_e'] or 0:6.1f}  {r['reference']}")
+    emit(args, rep, "\n".join(lines) + (f"\n-> {args.out}" if args.out else ""))

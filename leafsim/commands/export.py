@@ -1,0 +1,57 @@
+"""``leafsim export``: one leaf simulated and written as a mesh (glTF with the drying as
+morph targets, OBJ, PLY)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from leafsim.appearance.photo import species_photo_rgba
+from leafsim.appearance.view import LeafView
+from leafsim.base.errors import LeafsimError
+from leafsim.commands.common import emit, species_params
+from leafsim.export.mesh import export_mesh, format_of
+from leafsim.pipeline import build_leaf
+from leafsim.sim.run import Run, Stop
+
+
+def _check(args) -> str:
+    fmt = format_of(args.out, args.format)
+    if args.frames < 0 or args.every < 0:
+        raise LeafsimError(f"--frames {args.frames} / --every {args.every}: expected non-negative frame counts")
+    if args.every and fmt in ("obj", "ply"):
+        raise LeafsimError(f"--every needs --format glb or gltf ({fmt} holds one static shape)")
+    folder = Path(args.out).parent
+    if not folder.is_dir():
+        raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")
+    return fmt
+
+
+def key_frames(run: Run, frames: int, every: int) -> list:
+    """Simulate to ``frames``; the states every ``every`` frames (with the first and the last),
+    or the last state alone when ``every`` is 0."""
+    keys = [run.state.copy()]
+    for _ in run.frames(Stop(frames=frames)):
+        if every and run.state.frame % every == 0:
+            keys.append(run.state.copy())
+    if not every:
+        return [run.state]
+    if keys[-1].frame != run.state.frame:
+        keys.append(run.state.copy())
+    return keys
+
+
+def cmd_export(args):
+    fmt = _check(args)
+    sp, params = species_params(args, effects=True)
+    if args.texture == "photo" and sp.image is None:
+        raise LeafsimError(f"--texture photo: species '{sp.key}' has no photo (drawn outline)")
+    model = build_leaf(sp, params, args.seed).model
+    run = Run(model, params, seed=args.seed)
+    keys = key_frames(run, args.frames, args.every)
+    photo = species_photo_rgba(sp, params) if sp.image is not None else None
+    view = LeafView(model, photo, run.sim.state().pigments, photo_colour=sp.photo_colour)
+    rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view,
+                      layers=args.layers, veins=args.veins, texture=args.texture)
+    rep.update(species=sp.key, seed=args.seed, frames=run.state.frame)
+    counts = ", ".join(f"{k} {v['vertices']} vertices / {v['triangles']} triangles" for k, v in rep["meshes"].items())
+    emit(args, rep, f"{sp.key}: {counts}, {rep['targets']} morph targets -> {', '.join(rep['files'])}")

@@ -1,0 +1,15 @@
+"""``leafsim gui`` (and plain ``leafsim``): the interactive application."""
+
+from __future__ import annotations
+
+from leafsim.base.errors import LeafsimError
+from leafsim.commands.common import overrides
+
+
+def cmd_gui(args):
+    if args.screenshot and args.frames is None:
+        raise LeafsimError("--screenshot needs --frames N")
+    from leafsim.gui.app import run_app  # imgui and OpenGL load only when the window opens
+
+    return run_app(species=args.species, config=args.config, seed=args.seed, overrides=overrides(args),
+                   frames=args.frames, screenshot=args.screenshot, play=args.play)

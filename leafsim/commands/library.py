@@ -1,0 +1,37 @@
+"""``leafsim species`` and ``leafsim params``: the species library and every declared parameter."""
+
+from __future__ import annotations
+
+import json
+
+from leafsim.commands.common import emit
+from leafsim.config.params import PARAMS, ParamSet, markdown_table
+from leafsim.config.presets import quality_of, quality_table
+from leafsim.config.species import load_library
+
+
+def cmd_species(args):
+    rows = [sp.summary() for sp in load_library(args.config).values()]
+    lines = [f"{'key':16s} {'name':32s} {'length':>7s}  photo"]
+    for r in rows:
+        lines.append(f"{r['key']:16s} {r['name']:32s} {r['length_m']:6.3f}m  {r['photo'] or '(drawn outline)'}")
+    emit(args, {"species": rows}, "\n".join(lines))
+
+
+def _quality_measured(m: dict) -> str:
+    return (f"worst error {100 * m['worst_rel']:.0f} % of the reference, {m['ms_per_sim_s']:.0f} ms per simulated second "
+            f"({m['particles']} particles, maple)")
+
+
+def cmd_params(args):
+    if args.markdown:
+        print(markdown_table())
+        return
+    rows = [{"name": p.name, "kind": p.kind, "default": p.default, "lo": p.lo, "hi": p.hi, "unit": p.unit,
+             "group": p.group, "rebuild": p.rebuild, "choices": list(p.choices), "help": p.help} for p in PARAMS.values()]
+    text = "\n".join(f"{r['name']:36s} {str(r['default']):>10s} {r['unit']:10s} {'rebuild' if r['rebuild'] else 'live':7s} {r['help']}" for r in rows)
+    quality, default = quality_table(), quality_of(ParamSet())
+    text += "\n\n--quality (measured by the accuracy study, docs/accuracy.md; the defaults are " + f"{default}):\n" + "\n".join(
+        f"  {k:10s} {json.dumps(v['settings']):60s} " + (_quality_measured(v["measured"]) if v["measured"] else "not measured")
+        for k, v in quality.items())
+    emit(args, {"params": rows, "quality": quality}, text)

@@ -1,0 +1,32 @@
+"""``leafsim accuracy`` and ``leafsim bench``: what accuracy costs, and how fast the kernels are."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from leafsim.base.errors import LeafsimError
+from leafsim.commands.common import emit
+from leafsim.measure.accuracy import GROUPS, markdown, study, write_report
+from leafsim.measure.bench import main as bench_main
+
+
+def cmd_accuracy(args):
+    out = Path(args.out) if args.out else None
+    if out is not None and out.exists() and not out.is_dir():
+        raise LeafsimError(f"--out {out}: exists and is not a folder")
+    if out is not None and not out.parent.exists():
+        raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
+    if args.floor < 0:
+        raise LeafsimError(f"--floor {args.floor}: expected a count ≥ 0")
+    groups = None if args.groups is None else [g.strip() for g in args.groups.split(",") if g.strip()]
+    if groups is not None and (not groups or set(groups) - set(GROUPS)):
+        raise LeafsimError(f"--groups {args.groups}: expected a comma list of {', '.join(sorted(GROUPS))}")
+    report = study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json,
+                   floor=args.floor, floor_reference=args.floor_reference, groups=groups)
+    if out is not None:
+        report["files"] = write_report(report, out)
+    emit(args, report, markdown(report))
+
+
+def cmd_bench(args):
+    return bench_main(json_out=args.json, quick=args.quick)

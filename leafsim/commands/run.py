@@ -1,0 +1,157 @@
+"""``leafsim run``: one leaf simulated headless, with per-frame statistics, offscreen PNG
+frames, checkpoints every K frames and ``--resume``; Ctrl-C / SIGTERM finish the frame, save
+a checkpoint and exit with one line."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from leafsim.appearance.photo import species_photo_rgba
+from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import remove_stale_temps
+from leafsim.base.signals import DeferredSignals, Interrupted
+from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
+from leafsim.commands.common import emit, species_params
+from leafsim.pipeline import build_leaf
+from leafsim.render.sequence import FrameWriter
+from leafsim.sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
+from leafsim.sim.run import Run, Stop
+from leafsim.sim.shape import save_npz, shape_metrics
+from leafsim.sim.stats import StatsStream
+
+
+
+def check_run_args(args) -> Path | None:
+    """Validate ``leafsim run``'s options before any work; returns the --out folder (or None)."""
+    if args.frames < 0:
+        raise LeafsimError(f"--frames {args.frames}: expected a non-negative number of frames")
+    if args.every < 0:
+        raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
+    if args.every and not args.out:
+        raise LeafsimError("--every needs --out DIR for the PNG frames")
+    if args.checkpoint_every is not None and args.checkpoint_every < 0:
+        raise LeafsimError(f"--checkpoint-every {args.checkpoint_every}: expected a non-negative frame interval")
+    if (args.checkpoint_every or args.resume) and not args.out:
+        raise LeafsimError(f"{'--resume' if args.resume else '--checkpoint-every'} needs --out DIR (the checkpoint lives there)")
+    out = Path(args.out) if args.out else None
+    if out is not None:
+        if out.exists() and not out.is_dir():
+            raise LeafsimError(f"--out {out}: exists and is not a folder")
+        if not out.parent.exists():
+            raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
+        if args.resume and not (out / CHECKPOINT).is_file():
+            raise LeafsimError(f"--resume: no checkpoint at {out / CHECKPOINT} (run first with --out {out})")
+    if args.stats and not Path(args.stats).parent.exists():
+        raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
+    if args.checkpoint_every is None:
+        args.checkpoint_every = CHECKPOINT_EVERY if out is not None else 0
+    return out
+
+
+def _prepare_out(out: Path | None, ck: Path | None, stats: str | None) -> None:
+    """Create --out and drop temp files a SIGKILLed run left while writing."""
+    if out is not None:
+        out.mkdir(exist_ok=True)
+    for target in ([ck, out / "final.npz", out / "frame_*.png"] if out is not None else []) + ([Path(stats)] if stats else []):
+        remove_stale_temps(target)
+
+
+class _Outputs:
+    """What ``leafsim run`` writes per frame: statistics lines, PNG frames, checkpoints."""
+
+    def __init__(self, args, sp, params, run: Run, ck: Path | None, meta: dict, out: Path | None, start: int):
+        self.args, self.run, self.ck, self.meta = args, run, ck, meta
+        self.stream = StatsStream(args.stats, keep_until=start if args.resume else None) if args.stats else None
+        self.frames = None
+        if args.every:
+            photo = species_photo_rgba(sp, params) if (sp.image is not None and params["render.texture"]) else None
+            self.frames = FrameWriter(run.model, params, photo, out, run.sim.state(), sp.photo_colour)
+            if start == 0:
+                self.frames.write(0, run.state)
+
+    def frame(self, st: dict, stopping: bool) -> None:
+        k, a = self.run.state.frame, self.args
+        if self.stream is not None:
+            self.stream.write(st)
+        if self.frames is not None and k % a.every == 0:
+            self.frames.write(k, self.run.state)
+        if self.ck is not None and a.checkpoint_every and (stopping or k % a.checkpoint_every == 0):
+            save_checkpoint(self.ck, self.run.model, self.run.state, self.meta)
+
+    def close(self) -> None:
+        if self.stream is not None:
+            self.stream.close()
+
+
+def _simulate(run: Run, target: int, outputs: _Outputs) -> tuple[list, int | None]:
+    """Step to frame ``target`` (or NaN, or a signal); returns (statistics, signal or None)."""
+    stats = []
+    try:
+        with DeferredSignals() as stop:
+            for ms in run.frames(Stop(frames=target)):
+                st = run.stats(ms)
+                stats.append(st)
+                outputs.frame(st, stop.signum is not None)
+                if stop.signum is not None or st["nan"]:
+                    break
+    finally:
+        outputs.close()
+    return stats, stop.signum
+
+
+def cmd_run(args):
+    out = check_run_args(args)
+    t0 = time.perf_counter()
+    sp, params = species_params(args, effects=True)
+    # what a checkpoint must have been made with to be resumed by this command
+    meta = {"species": sp.key, "config": str(Path(args.config).resolve()) if args.config else None,
+            "seed": args.seed, "params": params.to_dict()}
+    ck = out / CHECKPOINT if out is not None else None
+    if args.resume:
+        check_meta(ck, meta)  # before the build: a mismatch costs nothing
+    model = build_leaf(sp, params, args.seed).model
+    build_s = time.perf_counter() - t0
+    run = Run(model, params, seed=args.seed)
+    if args.resume:
+        run.state = load_checkpoint(ck, model, meta)
+    start = run.state.frame
+    _prepare_out(out, ck, args.stats)
+    outputs = _Outputs(args, sp, params, run, ck, meta, out, start)
+    t1 = time.perf_counter()
+    stats, signum = _simulate(run, args.frames, outputs)
+    sim_s = time.perf_counter() - t1
+    if signum is not None:
+        where = (f"checkpoint {ck}: continue with the same command and --resume" if ck is not None and args.checkpoint_every
+                 else "no checkpoint (give --out DIR and --checkpoint-every K to be able to resume)")
+        raise Interrupted(signum, f"interrupted at frame {run.state.frame} of {args.frames}"
+                                  + (f", statistics in {args.stats}" if args.stats else "") + f"; {where}")
+    if ck is not None and args.checkpoint_every:
+        save_checkpoint(ck, model, run.state, meta)  # the final state: --resume --frames M continues it
+    if out is not None:
+        save_npz(out / "final.npz", model, run.state)
+    rep = run_report(sp, params, args, run, stats, start, build_s, sim_s, outputs.frames)
+    emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
+
+
+def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames) -> dict:
+    """The ``leafsim run`` report (LeafsimError when the run produced NaN)."""
+    model, state = run.model, run.state
+    ms = [sum(s["ms"].values()) for s in stats]
+    water = float(state.particle_water.sum() / max(model.particle_water0.sum(), 1e-300))
+    rep = {
+        "species": sp.key, "seed": args.seed, "frames": len(stats), "frame": state.frame, "resumed_from": start,
+        "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
+        "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
+        "water_fraction": round(water, 6),
+        "nan": bool(any(s.get("nan") for s in stats)),
+        "png_frames": 0 if frames is None else frames.written,
+        **{f"shape_{k}": v for k, v in shape_metrics(model, state).items()},
+        **model.to_report(),
+    }
+    if rep["nan"]:
+        raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {state.frame} (parameters: {params.changed()})")
+    return rep

@@ -1,0 +1,26 @@
+"""``leafsim scene``: a scene file of many leaves, simulated in parallel (pool or Dask)."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from leafsim.commands.common import emit
+from leafsim.scene.run import load_scene, run_scene
+
+
+def cmd_scene(args):
+    scene = load_scene(args.scene)
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem
+    rep = run_scene(scene, out, workers=workers, scheduler=args.scheduler)
+    bad = rep["failed"]
+    text = (f"{scene.name}: {rep['ran']} leaves simulated, {rep['skipped']} already done, {len(bad)} failed "
+            f"in {rep['total_s']:.1f} s ({rep['leaves_per_s'] or 0:.3g} leaves/s) -> {out}")
+    emit(args, rep, text)
+    if bad:
+        names = ", ".join(f"{b['name']} ({b['error']})" for b in bad)
+        print(f"leafsim: scene {scene.name}: {len(bad)} of {rep['leaves']} leaves failed: {names}", file=sys.stderr)
+        return 1
+    return 0

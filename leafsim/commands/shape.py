@@ -1,0 +1,48 @@
+"""``leafsim outline``, ``veins`` and ``build``: the first three stages, one at a time."""
+
+from __future__ import annotations
+
+import json
+import time
+
+from leafsim.appearance.draw2d import draw_veins
+from leafsim.base.fileio import write_png_atomic
+from leafsim.commands.common import emit, species_params
+from leafsim.config.params import ParamSet, parse_set_args
+from leafsim.outline.image import load_image
+from leafsim.outline.report import draw_outline, outline_report
+from leafsim.outline.trace import trace_outline
+from leafsim.pipeline import build_leaf, leaf_shape, species_veins
+
+
+def cmd_outline(args):
+    params = ParamSet(parse_set_args(args.sets))
+    traced = trace_outline(args.image, params)
+    rep = outline_report(traced)
+    if args.out:
+        draw_outline(traced, load_image(args.image), args.out)
+    emit(args, rep, f"{args.image}: {rep['points']} points, area {rep['area_px']:.0f} px, base {rep['base']}, apex {rep['apex']}, "
+                    f"{len(rep['lobes'])} lobe tips, IoU {rep['iou']:.4f}" + (f" -> {args.out}" if args.out else ""))
+
+
+def cmd_veins(args):
+    sp, params = species_params(args)
+    t0 = time.perf_counter()
+    shape = leaf_shape(sp, params)
+    graph = species_veins(sp, shape, params, args.seed)
+    dt = time.perf_counter() - t0
+    rep = {"species": sp.key, "seed": args.seed, "length_m": sp.length_m, **graph.stats}
+    if args.out:
+        photo = load_image(sp.image) if sp.image is not None else None
+        write_png_atomic(args.out, draw_veins(shape, graph, photo=photo))
+    c = graph.stats["counts"]
+    emit(args, rep, f"{sp.key} seed {args.seed}: main {c['main']}, lateral {c['lateral']}, sublateral {c['sublateral']}, net {c['net']}; "
+                    f"crossings {graph.stats['crossings']}, outside {graph.stats['outside_length']:.3g} m ({dt * 1000:.0f} ms)"
+                    + (f" -> {args.out}" if args.out else ""))
+
+
+def cmd_build(args):
+    sp, params = species_params(args)
+    model = build_leaf(sp, params, args.seed).model
+    rep = {"species": sp.key, "seed": args.seed, **model.to_report()}
+    emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))

@@ -1,0 +1,432 @@
+"""The one declaration of every tunable parameter in leafsim.
+
+Each :class:`Param` names a value once (dotted path such as ``veins.lateral.spacing``) with
+its type, default, range, unit, help text, GUI group and whether changing it needs a rebuild
+(``rebuild=True``: outline, veins or mesh must be regenerated) or applies live while the leaf
+keeps drying.  Validation, species JSON, the CLI ``--set KEY=VALUE`` overrides, the GUI
+widgets and the generated docs all read :data:`PARAMS`, so they cannot drift apart.
+
+Example
+-------
+>>> p = ParamSet().with_overrides({"veins.main.kappa": 4.0})
+>>> p["veins.main.kappa"]
+4.0
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Mapping
+
+from leafsim.base.errors import LeafsimError
+
+
+@dataclass(frozen=True)
+class Param:
+    """Declaration of one parameter.
+
+    Parameters
+    ----------
+    name : dotted key, e.g. ``"osmosis.diffusion"``; the first component is the stage.
+    kind : ``"float"``, ``"int"``, ``"bool"`` or ``"choice"``.
+    default : value used when neither species nor user sets it.
+    lo, hi : inclusive range (numbers only).
+    unit : physical unit shown in the GUI and docs (``""`` for dimensionless).
+    help : one sentence shown as tooltip and in ``docs/parameters.md``.
+    group : GUI panel / docs section.
+    rebuild : True when a change needs outline/veins/mesh to be regenerated.
+    choices : allowed values for ``kind == "choice"``.
+    log : GUI slider on a logarithmic scale.
+    """
+
+    name: str
+    kind: str
+    default: Any
+    lo: float | None = None
+    hi: float | None = None
+    unit: str = ""
+    help: str = ""
+    group: str = ""
+    rebuild: bool = False
+    choices: tuple[str, ...] = ()
+    log: bool = False
+
+    def coerce(self, value: Any, where: str = "") -> Any:
+        """Return ``value`` converted to this parameter's type, or raise LeafsimError."""
+        at = f"{where}: " if where else ""
+        expect = self.describe()
+        if self.kind == "bool":
+            if isinstance(value, bool):
+                return value
+            if isinstance(value, str) and value.lower() in ("true", "false", "1", "0", "on", "off", "yes", "no"):
+                return value.lower() in ("true", "1", "on", "yes")
+            if isinstance(value, (int, float)) and value in (0, 1):
+                return bool(value)
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
+        if self.kind == "choice":
+            if isinstance(value, str) and value in self.choices:
+                return value
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
+        # numbers
+        if isinstance(value, bool):
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
+        try:
+            num = float(value)
+        except (TypeError, ValueError, OverflowError):
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}") from None
+        if not math.isfinite(num):
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected a finite {expect}")
+        if self.kind == "int":
+            if num != int(num):
+                raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
+            num = int(num)
+        if (self.lo is not None and num < self.lo) or (self.hi is not None and num > self.hi):
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)} is out of range: expected {expect}")
+        return num
+
+    def describe(self) -> str:
+        if self.kind == "bool":
+            return "true or false"
+        if self.kind == "choice":
+            return "one of " + ", ".join(self.choices)
+        unit = f" {self.unit}" if self.unit else ""
+        return f"{'an integer' if self.kind == 'int' else 'a number'} in [{self.lo:g}, {self.hi:g}]{unit}"
+
+
+def show(value: Any, limit: int = 40) -> str:
+    """repr of a user-given value, shortened so that a message stays one short line."""
+    r = repr(value)
+    return r if len(r) <= limit else r[: limit - 3] + "..."
+
+
+_DECL: list[Param] = []
+
+
+def _f(name, default, lo, hi, unit="", help="", group="", rebuild=False, log=False):
+    _DECL.append(Param(name, "float", float(default), lo, hi, unit, help, group, rebuild, (), log))
+
+
+def _i(name, default, lo, hi, unit="", help="", group="", rebuild=False):
+    _DECL.append(Param(name, "int", int(default), lo, hi, unit, help, group, rebuild))
+
+
+def _b(name, default, help="", group="", rebuild=False):
+    _DECL.append(Param(name, "bool", bool(default), None, None, "", help, group, rebuild))
+
+
+def _c(name, default, choices, help="", group="", rebuild=False):
+    _DECL.append(Param(name, "choice", default, None, None, "", help, group, rebuild, tuple(choices)))
+
+
+# ---------------------------------------------------------------- outline (rebuild)
+G = "Outline"
+_f("outline.simplify", 0.0005, 0.0, 0.02, "× diagonal", "Douglas–Peucker tolerance as a fraction of the image diagonal (≈ 1 px: keeps the margin's teeth).", G, True)
+_i("outline.points", 2000, 40, 8000, "", "Number of points the traced contour is resampled to (equal arc length); enough to carry a doubly serrate margin.", G, True)
+_f("outline.lobe_depth", 0.06, 0.0, 0.5, "× length", "Minimum sinus depth (relative to leaf length) that separates two lobes.", G, True)
+
+# ---------------------------------------------------------------- veins (rebuild)
+G = "Veins: main"
+_f("veins.main.step", 0.035, 0.005, 0.2, "× length", "Base segment length of main veins, relative to the leaf length.", G, True)
+_f("veins.main.scale_jitter", 0.3, 0.0, 0.9, "", "Random scale of each segment: step × U(1−j, 1+j).", G, True)
+_f("veins.main.kappa", 5.0, 0.0, 45.0, "deg", "κ: local random angle added to each segment's direction, drawn in [−κ, κ].", G, True)
+_f("veins.main.omega", 2.0, -30.0, 30.0, "deg", "ω: global angle that pushes main veins consistently left (+) or right (−).", G, True)
+_f("veins.main.threshold", 0.12, 0.0, 0.6, "× vein", "Threshold zone: the last fraction of each main vein is thin and starts no laterals.", G, True)
+_f("veins.main.width", 0.012, 0.001, 0.05, "× length", "Width of the midrib at the base, relative to the leaf length.", G, True)
+_i("veins.main.max_auto", 7, 1, 15, "", "Maximum number of main veins found automatically from lobe tips.", G, True)
+_f("veins.main.auto_min_angle", 18.0, 0.0, 90.0, "deg", "Automatic targets closer in angle (seen from the base) than this are merged.", G, True)
+
+G = "Veins: lateral"
+_b("veins.lateral.enabled", True, "Grow lateral (secondary) veins.", G, True)
+_i("veins.lateral.spacing", 3, 1, 20, "segments", "Start a lateral on every x-th candidate segment of a main vein.", G, True)
+_c("veins.lateral.alternation", "alternate", ("alternate", "opposite", "left", "right"), "How laterals are placed on the two sides of a main vein.", G, True)
+_f("veins.lateral.angle", 50.0, 10.0, 85.0, "deg", "Angle between a lateral's start–target line and its main vein.", G, True)
+_f("veins.lateral.angle_jitter", 5.0, 0.0, 30.0, "deg", "Random variation of the lateral angle.", G, True)
+_f("veins.lateral.kappa", 4.0, 0.0, 45.0, "deg", "κ for laterals: local random angle per segment.", G, True)
+_f("veins.lateral.step", 0.025, 0.005, 0.2, "× length", "Base segment length of laterals, relative to the leaf length.", G, True)
+_f("veins.lateral.reach", 0.97, 0.3, 1.0, "", "Laterals stop at this fraction of the way to the margin (the margin vein gap).", G, True)
+_f("veins.lateral.width", 0.45, 0.05, 1.0, "× parent", "Width of a lateral at its start relative to the parent vein there.", G, True)
+_b("veins.lateral.curve_apical", True, "Laterals bend toward the apex as they approach the margin (brochidodromous look).", G, True)
+
+G = "Veins: sublateral"
+_b("veins.sub.enabled", True, "Grow sublateral (tertiary branching) veins as Bézier curves.", G, True)
+_i("veins.sub.divisions", 4, 1, 16, "", "n_div: divisions of each lateral that start sublaterals.", G, True)
+_f("veins.sub.angle", 45.0, 5.0, 85.0, "deg", "θ_div: angle of a sublateral to its lateral.", G, True)
+_f("veins.sub.bend", 0.25, 0.0, 0.8, "", "Random perpendicular offset of the Bézier control point, relative to the chord.", G, True)
+_f("veins.sub.reach", 0.92, 0.3, 1.0, "", "Sublaterals end at this fraction of the ray to the margin.", G, True)
+_f("veins.sub.width", 0.5, 0.05, 1.0, "× parent", "Width of a sublateral relative to its lateral.", G, True)
+
+G = "Veins: net"
+_b("veins.net.enabled", False, "Grow a tertiary net: scattered points joined to the nearest vein.", G, True)
+_f("veins.net.spacing", 0.04, 0.01, 0.2, "× length", "Spacing of net points relative to the leaf length.", G, True)
+_f("veins.net.width", 0.35, 0.05, 1.0, "× parent", "Width of net veins relative to the vein they join.", G, True)
+_f("veins.taper", 0.6, 0.0, 1.0, "", "How much a vein thins from its start to its end (0 = constant).", "Veins: main", True)
+
+# ---------------------------------------------------------------- mesh (rebuild)
+G = "Mesh"
+_f("mesh.spacing", 0.0199, 0.002, 0.1, "× length", "Poisson-disk spacing r of surface particles, relative to the leaf length.", G, True, log=True)
+_f("mesh.vein_spacing", 0.75, 0.3, 2.0, "× r", "Spacing of vein particles along veins relative to r.", G, True)
+_f("mesh.contour_spacing", 0.8, 0.3, 2.0, "× r", "Spacing of contour particles along the outline relative to r.", G, True)
+_f("mesh.contour_detail", 0.05, 0.0, 1.0, "× r", "Contour particles also sit on the margin's corners (tooth tips and notches) that stand out more than this × r from a straight edge; 0 = evenly spaced only (teeth smaller than the spacing are cut).", G, True)
+_f("mesh.thickness", 0.0004, 0.00005, 0.005, "m", "Blade thickness h: distance of layer V above layer T.", G, True, log=True)
+_c("mesh.veins_included", "sublateral", ("main", "lateral", "sublateral", "net"), "Highest vein order that gets vein particles.", G, True)
+
+# ---------------------------------------------------------------- mass (rebuild)
+G = "Mass"
+_f("mass.weight_main", 1.0, 0.01, 1e4, "", "Dijkstra edge weight factor of main-vein springs.", G, True, log=True)
+_f("mass.weight_lateral", 50.0, 0.01, 1e4, "", "Dijkstra edge weight factor of lateral springs.", G, True, log=True)
+_f("mass.weight_sub", 200.0, 0.01, 1e4, "", "Dijkstra edge weight factor of sublateral/net springs.", G, True, log=True)
+_f("mass.weight_surface", 1000.0, 0.01, 1e5, "", "Dijkstra edge weight factor of surface springs.", G, True, log=True)
+_i("mass.D", 1, 1, 3, "", "Dispersion exponent D in τ = (1 − d/d_max)^D.", G, True)
+_f("mass.lma", 0.06, 0.005, 0.5, "kg/m²", "Leaf mass per area: dry mass of the blade per m² (deciduous broadleaves 0.03–0.12; the blade's mean, veins add their own).", G, True, log=True)
+_f("mass.profile_min", 0.3, 0.01, 1.0, "", "Areal mass far from the veins relative to its peak near the petiole (Jeong's graph-distance profile τ; 1 = uniform lamina).", G, True)
+_f("mass.vein_density", 1100.0, 100.0, 3000.0, "kg/m³", "Fresh density of vein tissue: a vein adds π w²/4 × this per metre (minus the lamina it replaces).", G, True, log=True)
+_f("mass.water_fraction", 0.7, 0.05, 0.95, "", "Fraction of the fresh mass that is water (rest is dry mass); fresh mass per area = lma / (1 − this).", G, True)
+
+# ---------------------------------------------------------------- osmosis (live)
+G = "Osmosis"
+_f("osmosis.diffusion", 1e-5, 0.0, 1e5, "m²/s", "Osmotic diffusivity D of the water concentration (effective D·τ̄ with Jeong's τ); D·T_dry/L² ≲ 0.1 keeps margin-first drying visible, ≫ 1 dries every layer uniformly.", G, False, log=True)
+_f("osmosis.evaporation_top", 0.014, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the top surface (layer V) per unit leaf area and simulated second (the simulated clock is compressed: see docs/method.md).", G, False, log=True)
+_f("osmosis.evaporation_bottom", 0.0105, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the bottom surface (layer T) per unit leaf area and simulated second.", G, False, log=True)
+_f("osmosis.edge_evaporation", 2.0, 0.0, 20.0, "", "Margin-enhanced evaporation β: a particle at distance d from the margin evaporates 1 + β √(ℓ/(d + ℓ)) times more (the boundary layer is thin at the edge), normalised so the blade's mean stays the declared rate; 0 = uniform.", G, False)
+_f("osmosis.edge_length", 0.003, 0.0, 0.1, "m", "Length scale ℓ of the margin-enhanced evaporation (a few mm: the boundary layer thickness near the edge).", G, False, log=True)
+_f("osmosis.patchiness", 0.0, 0.0, 2.0, "", "Patchy hydraulic failure a: evaporation × exp(a·f) for the blade's seeded smooth patch field f (zero mean, unit spread; patches ≈ 0.12 leaf lengths), normalised so the blade's mean stays the declared rate; 0 = none.", G, False)
+_b("osmosis.through_thickness", True, "Water also flows between the two layers through the blade's thickness (D over h/2: they stay in balance within milliseconds); off = Jeong's separate layers, where the faster-drying top curls the leaf transiently.", G, False)
+_i("osmosis.every", 1, 1, 50, "frames", "Solve osmosis and evaporation every k-th frame over k Δt (water moves far slower than the blade: a cheaper frame for a small error, see docs/accuracy.md).", G, False)
+_c("osmosis.solver", "auto", ("auto", "direct", "cg", "jacobi"), "Linear solver of the implicit osmosis step.", G, False)
+_f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True)
+
+# ---------------------------------------------------------------- shrink (live)
+G = "Shrink"
+_f("shrink.sigma_surface_top", 0.16, 0.0, 3.0, "", "σ of surface springs in the top layer V.", G, False)
+_f("shrink.sigma_surface_bottom", 0.15, 0.0, 3.0, "", "σ of surface springs in the bottom layer T.", G, False)
+_f("shrink.sigma_vein", 0.05, 0.0, 3.0, "", "σ of vein springs.", G, False)
+_f("shrink.alpha", 1.0, 0.1, 4.0, "", "Exponent α of (1 − v_rel) in the shrink law.", G, False)
+_f("shrink.curl_anisotropy", 0.6, 0.0, 1.0, "", "Anisotropy β of the bilayer curl relative to the local main/lateral vein direction: hinges that bend the blade across a vein curl × (1 + β), along it × (1 − β), so lobes cup about their own veins (0: isotropic).", G, False)
+_f("shrink.l_min", 0.5, 0.1, 1.0, "× l⁰", "Rest lengths never go below l_min · l⁰ (≥ 0.1: tissue cannot shrink to nothing; at 0 a leaf collapsed to a point and never came to rest).", G, False)
+
+# ---------------------------------------------------------------- dynamics (live)
+G = "Dynamics"
+_f("dynamics.dt", 0.002, 1e-5, 0.1, "s", "Time step Δt.", G, False, log=True)
+_f("dynamics.gravity", 9.81, 0.0, 50.0, "m/s²", "Gravity magnitude (acts along −z).", G, False)
+_f("dynamics.damping", 25.0, 0.0, 1000.0, "1/s", "Velocity damping rate c (v ← v·e^(−c·Δt); air drag and internal friction of the tissue).", G, False, log=True)
+_i("dynamics.substeps", 40, 1, 200, "", "Dynamics substeps per frame at the default mesh spacing (small steps make stiff constraints converge far better than more iterations).", G, False)
+_b("dynamics.substep_scaling", True, "Scale the substeps with (default spacing / mesh.spacing)² so a finer mesh stays as converged (h ∝ r²; a coarse mesh gets fewer, at least 1).", G, False)
+_i("dynamics.iterations", 2, 1, 200, "", "Maximum constraint-projection iterations per substep.", G, False)
+_f("dynamics.mass_scaling", 64.0, 1.0, 4096.0, "", "Inertia × M with gravity ÷ M (weight and every static force unchanged; motion √M slower).  A constraint's XPBD regime depends on h²/(compliance · mass): scaling the mass by M is, for the quasi-static drying, the same as √M times more substeps at no cost.  64: the drying shape of 160 substeps from 20 (docs/accuracy.md); from ≈ 256 the slowed leaf lags behind its drying; 1 = real inertia (a falling or swinging leaf moves at its real speed).", G, False, log=True)
+_f("dynamics.relaxation", 1.0, 0.5, 1.3, "", "Over-relaxation ω of the bending projections (successive over-relaxation): > 1 carries a steady load across the mesh in fewer sweeps but a free curling leaf may then never come to rest (limit cycles measured from ω 1.3, blow-ups from 1.5 without damping); 1 = plain Gauss–Seidel.", G, False)
+_f("dynamics.tolerance", 1e-4, 1e-9, 1.0, "", "Stop iterating when the largest position change per iteration falls below this × leaf length.", G, False, log=True)
+_c("dynamics.precision", "float64", ("float64", "float32"), "Floating-point type the dynamics frame works in: positions, velocities and constraint records (float32: half the memory, positions rounded to ≈ 4·10⁻⁹ m on a 12 cm leaf; its error and cost are measured in docs/accuracy.md).", G, False)
+_f("dynamics.plasticity", 2.0, 0.0, 100.0, "1/s", "Rate at which drying tissue sets: bending hinges keep the largest bilayer curl they reached (0 = purely elastic, the curl relaxes when both layers are dry).", G, False, log=True)
+
+# ---------------------------------------------------------------- material (live)
+G = "Material"
+_f("material.modulus", 1e7, 1e4, 1e10, "Pa", "Young's modulus E of the fresh lamina: membrane springs E·(h/2)·ΣA/|e|², bending D = E h³ / 12(1 − ν²) on discrete-shell hinges.", G, False, log=True)
+_f("material.poisson", 0.3, 0.0, 0.49, "", "Poisson ratio ν of the lamina (enters the bending stiffness D).", G, False)
+_f("material.dry_stiffening", 20.0, 0.0, 1000.0, "", "Dry tissue is stiffer: the bending modulus grows to E·(1 + this) as the tissue loses its water.", G, False, log=True)
+_f("material.vein_modulus", 5e8, 1e5, 1e11, "Pa", "Young's modulus of vein tissue: vein springs E_v·πw²/4/l, vein bending E_v·πw⁴/64 on the hinges that bend a vein lengthwise.", G, False, log=True)
+_c("dynamics.voronoi", "free", ("free", "replace"), "Layer V: free particles (stable) or re-placed over their triangle each frame (thesis).", G, False)
+_c("dynamics.scene", "ground", ("ground", "hanging", "free"), "Scene: lying on the ground, hanging from a pinned petiole, or free.", G, False)
+_f("dynamics.friction", 0.6, 0.0, 2.0, "", "Coulomb friction coefficient against the ground.", G, False)
+_f("dynamics.collision_radius", 0.45, 0.05, 2.0, "× r", "Self-collision distance between layer-T particles, relative to the mesh spacing r.", G, False)
+_f("dynamics.collision_skip", 2.5, 1.0, 10.0, "× r", "Particle pairs closer than this at rest are sheet neighbours and never collide.", G, False)
+
+# ---------------------------------------------------------------- effects (live)
+G = "Effects"
+for _name, _on, _help in [
+    ("osmosis", True, "Osmotic water flow and evaporation."),
+    ("shrink", True, "Rest lengths shrink as water is lost."),
+    ("gravity", True, "Gravity."),
+    ("pbd", True, "Position-based constraint projection (the blade's elasticity)."),
+    ("bending", True, "Bending stiffness constraints."),
+    ("ground", True, "Ground-plane collision with friction."),
+    ("self_collision", True, "Self-collision so a curling leaf never passes through itself."),
+    ("colour", True, "Pigment aging and colour change."),
+]:
+    _b(f"effects.{_name}", _on, _help, G, False)
+
+# ---------------------------------------------------------------- colour (live)
+G = "Colour"
+_f("colour.age_rate", 0.05, 0.0, 10.0, "1/s", "Senescence clock speed: season units advanced per second of simulated time (age = season + age_rate·t).", G, False, log=True)
+_f("colour.season", 0.0, 0.0, 2.0, "", "Starting season of the age clock: 0 = summer, 1 = late autumn, >1 = dead winter leaf.", G, False)
+_f("colour.onset", 0.25, 0.0, 1.5, "season", "Season at which programmed senescence (chlorophyll breakdown) begins.", G, False)
+_f("colour.chlorophyll", 1.0, 0.0, 3.0, "", "Summer chlorophyll content (1 = typical): how deep the young leaf's green is.", G, False)
+_f("colour.chlorophyll_decay", 4.5, 0.0, 40.0, "1/season", "Chlorophyll breakdown rate per season unit after the onset (fully hydrated tissue).", G, False)
+_f("colour.water_sensitivity", 3.0, 0.0, 20.0, "", "Senescence speed-up by water loss: rates × (1 + s·(1 − water_rel)); makes margins and intercostal areas turn first.", G, False)
+_f("colour.carotenoid", 1.0, 0.0, 3.0, "", "Carotenoid content (yellow/orange) unmasked when chlorophyll breaks down.", G, False)
+_f("colour.carotenoid_decay", 0.6, 0.0, 10.0, "1/season", "Slow carotenoid loss per season unit after the onset.", G, False)
+_f("colour.anthocyanin", 0.0, 0.0, 3.0, "", "Anthocyanin (or betacyanin) made during senescence: reds and purples (maple, pokeweed).", G, False)
+_f("colour.anthocyanin_fade", 1.2, 0.0, 20.0, "1/season", "Anthocyanin breakdown per season unit after the onset (so reds peak, then fade).", G, False)
+_f("colour.browning", 1.0, 0.0, 10.0, "", "Browning rate of dead tissue (oxidised phenolics); high for oak, low for maple.", G, False)
+_f("colour.dry_threshold", 0.35, 0.0, 0.95, "× water₀", "Relative water content at or below which tissue counts as fully dry (dead).", G, False)
+_f("colour.dry_rate", 2.0, 0.0, 100.0, "1/s", "How fast dead dry tissue turns: the chlorophyll it still holds becomes dark pheophytin (necrosis) and it browns, per second of simulated time.", G, False, log=True)
+_f("colour.stress_water", 0.8, 0.05, 1.0, "× water₀", "Relative water content below which living tissue is drought-stressed and runs its senescence program (colour.drought).", G, False)
+_f("colour.drought", 2.0, 0.0, 20.0, "season/s", "Drought-induced senescence: season units of senescence per second of simulated time in fully stressed living tissue (a detached, drying leaf turns this way; fast = yellow before it dies, slow = dies green and turns necrotic).", G, False, log=True)
+_f("colour.necrosis", 1.0, 0.0, 3.0, "", "Darkness of tissue that died before its chlorophyll was broken down (pheophytins, oxidised phenolics: dark necrotic spots); 0 = it just browns.", G, False)
+_f("colour.vein_pallor", 0.3, 0.0, 1.0, "", "Heavy (vein) tissue holds this much less chlorophyll than the thinnest lamina.", G, False)
+_f("colour.variation", 0.1, 0.0, 1.0, "", "Random per-leaf variation of pigment contents, rates and onset (drawn from the seed).", G, False)
+
+# ---------------------------------------------------------------- render (live)
+G = "Render"
+_f("render.vein_alpha", 0.8, 0.0, 1.0, "", "Opacity of drawn veins.", G, False)
+_f("render.translucency", 0.35, 0.0, 1.0, "", "Back-lit translucency of the blade.", G, False)
+_f("render.specular", 0.25, 0.0, 1.0, "", "Specular strength of the blade.", G, False)
+_b("render.texture", True, "Use the species photo as the blade's albedo when the species has one.", G, False)
+
+# ---------------------------------------------------------------- resource limits (rebuild)
+# Guards against parameter combinations or inputs that would take minutes or gigabytes; each
+# error names the limit, so a user who means it can raise it deliberately with --set.
+G = "Limits"
+_i("limits.max_particles", 200_000, 1_000, 50_000_000, "", "Largest blade model (both layers) the builder makes; the count is estimated from outline area / spacing² before anything is built.", G, True)
+_i("limits.vein_tests", 100_000_000, 100_000, 1_000_000_000, "", "Budget of segment-against-segment collision tests while growing the venation (about 10 million per second here); growth stops with an error past it.", G, True)
+_i("limits.image_pixels", 4_000_000, 10_000, 1_000_000_000, "px", "Photos with more pixels are traced on a copy downscaled to this many (coordinates stay in photo pixels).", G, True)
+
+PARAMS: dict[str, Param] = {p.name: p for p in _DECL}
+GROUPS: list[str] = list(dict.fromkeys(p.group for p in _DECL))
+
+
+# ---------------------------------------------------------------- joint constraints
+# Constraints between several parameters, declared once here (after the per-parameter
+# declarations).  ParamSet checks every one after coercing the single values; the error
+# names every key with its value and says which values are still the declared defaults.
+
+@dataclass(frozen=True)
+class Joint:
+    """A constraint over several declared parameters.
+
+    keys : the parameters involved, in the order ``holds`` takes their values.
+    holds : predicate over the values.
+    rule : the rule as shown to users, e.g. ``"dynamics.collision_radius < dynamics.collision_skip"``.
+    """
+
+    keys: tuple[str, ...]
+    holds: Callable[..., bool]
+    rule: str
+
+    def violation(self, values: Mapping[str, Any]) -> str | None:
+        """One-line description of a violation by ``values``, or None when it holds."""
+        vals = [values[k] for k in self.keys]
+        if self.holds(*vals):
+            return None
+        parts = []
+        for k, v in zip(self.keys, vals):
+            default = " (default)" if v == PARAMS[k].default else ""
+            parts.append(f"'{k}' = {v:g}{default}" if isinstance(v, (int, float)) and not isinstance(v, bool)
+                         else f"'{k}' = {show(v)}{default}")
+        return f"parameters {' and '.join(parts)} break the rule {self.rule} (set them together)"
+
+
+JOINTS: list[Joint] = [
+    # a pair closer than the contact radius at rest would start in contact and push the sheet apart
+    Joint(("dynamics.collision_radius", "dynamics.collision_skip"), lambda rad, skip: rad < skip,
+          "dynamics.collision_radius < dynamics.collision_skip"),
+]
+
+
+def unknown_key_message(key: str, where: str = "") -> str:
+    """One-line error for a key that is not declared, with the closest declared names."""
+    import difflib
+
+    near = difflib.get_close_matches(key, PARAMS.keys(), n=3, cutoff=0.6)
+    hint = f" (did you mean {', '.join(near)}?)" if near else f" (see `leafsim params` for the {len(PARAMS)} declared names)"
+    at = f"{where}: " if where else ""
+    return f"{at}unknown parameter '{key}'{hint}"
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Flatten nested dicts ``{"veins": {"main": {"kappa": 5}}}`` to dotted keys."""
+    out: dict[str, Any] = {}
+    for k, v in tree.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if isinstance(v, Mapping) and key not in PARAMS:
+            out.update(flatten(v, key))
+        else:
+            out[key] = v
+    return out
+
+
+class ParamSet(Mapping[str, Any]):
+    """Immutable, validated mapping of every declared parameter to its value."""
+
+    __slots__ = ("_values",)
+
+    def __init__(self, values: Mapping[str, Any] | None = None, where: str = ""):
+        vals = {name: p.default for name, p in PARAMS.items()}
+        for key, value in flatten(values or {}).items():
+            if key not in PARAMS:
+                raise LeafsimError(unknown_key_message(key, where))
+            vals[key] = PARAMS[key].coerce(value, where)
+        for joint in JOINTS:
+            bad = joint.violation(vals)
+            if bad:
+                raise LeafsimError(f"{where + ': ' if where else ''}{bad}")
+        self._values = vals
+
+    def __getitem__(self, key: str) -> Any:
+        try:
+            return self._values[key]
+        except KeyError:
+            raise LeafsimError(unknown_key_message(key)) from None
+
+    def __iter__(self):
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def with_overrides(self, overrides: Mapping[str, Any] | None, where: str = "") -> "ParamSet":
+        """A new ParamSet with ``overrides`` applied and validated."""
+        merged = dict(self._values)
+        merged.update(flatten(overrides or {}))
+        return ParamSet(merged, where)
+
+    def changed(self) -> dict[str, Any]:
+        """Only the values that differ from the declared defaults."""
+        return {k: v for k, v in self._values.items() if v != PARAMS[k].default}
+
+    def rebuild_differs(self, other: "ParamSet") -> bool:
+        """True when any rebuild-needing parameter differs between two sets."""
+        return any(self._values[k] != other._values[k] for k, p in PARAMS.items() if p.rebuild)
+
+    def group(self, prefix: str) -> dict[str, Any]:
+        """Values whose key starts with ``prefix.``, keyed by the remainder."""
+        n = len(prefix) + 1
+        return {k[n:]: v for k, v in self._values.items() if k.startswith(prefix + ".")}
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self._values)
+
+    def __repr__(self) -> str:
+        return f"ParamSet({self.changed()!r})"
+
+
+def parse_set_args(items: Iterable[str]) -> dict[str, Any]:
+    """Parse CLI ``KEY=VALUE`` strings; keys are validated against the declaration."""
+    out: dict[str, Any] = {}
+    for item in items or ():
+        if "=" not in item:
+            raise LeafsimError(f"--set {show(item, 60)}: expected KEY=VALUE, e.g. --set osmosis.diffusion=1e-3")
+        key, value = item.split("=", 1)
+        key = key.strip()
+        if key not in PARAMS:
+            raise LeafsimError("--set: " + unknown_key_message(key))
+        out[key] = PARAMS[key].coerce(value.strip(), "--set")
+    return out
+
+
+def markdown_table() -> str:
+    """The parameter reference (docs/parameters.md) generated from the declaration."""
+    lines = ["# leafsim parameters", "", "Generated from `leafsim/config/params.py` by `leafsim params --markdown`.", ""]
+    for g in GROUPS:
+        lines += [f"## {g}", "", "| name | default | range | unit | rebuild | help |", "|---|---|---|---|---|---|"]
+        for p in _DECL:
+            if p.group != g:
+                continue
+            rng = ", ".join(p.choices) if p.kind == "choice" else ("true/false" if p.kind == "bool" else f"{p.lo:g} … {p.hi:g}")
+            lines.append(f"| `{p.name}` | {p.default} | {rng} | {p.unit} | {'yes' if p.rebuild else 'live'} | {p.help} |")
+        lines.append("")
+    if JOINTS:
+        lines += ["## Joint constraints", "", "Checked after the single values (species values and `--set` together):", ""]
+        lines += [f"- {j.rule}" for j in JOINTS]
+        lines.append("")
+    return "\n".join(lines)

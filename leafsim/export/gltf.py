@@ -1,0 +1,159 @@
+"""A small glTF 2.0 writer for :mod:`leafsim.export.mesh` (binary .glb, or .gltf JSON + .bin).
+
+One node and one mesh per exported surface (blade, veins), a double-sided metallic-roughness
+material each (baked pigment colours as ``COLOR_0``, or the photo as ``baseColorTexture``).
+Several frames become morph targets — one per key frame after the first, with ``POSITION``,
+``NORMAL`` and ``COLOR_0`` deltas — and one animation whose sampler keys the weights one-hot at
+the frames' times (LINEAR interpolation between two one-hot keys is the linear blend of two
+consecutive frames).  The output depends only on the data (no timestamps), so it is
+reproducible byte for byte.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from leafsim import __version__
+from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import atomic_write_bytes
+
+FLOAT, UINT = 5126, 5125
+ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+_TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
+
+
+class GltfBuilder:
+    """Collects buffer views, accessors, meshes and nodes; :meth:`glb` / :meth:`gltf` serialise."""
+
+    def __init__(self):
+        self.bin = bytearray()
+        self.doc = {"asset": {"version": "2.0", "generator": f"leafsim {__version__}"},
+                    "scene": 0, "scenes": [{"name": "leaf", "nodes": []}], "nodes": [], "meshes": [],
+                    "materials": [], "accessors": [], "bufferViews": []}
+
+    def view(self, data: bytes, target: int | None = None) -> int:
+        self.bin += b"\0" * (-len(self.bin) % 4)
+        bv = {"buffer": 0, "byteOffset": len(self.bin), "byteLength": len(data)}
+        if target is not None:
+            bv["target"] = target
+        self.bin += data
+        self.doc["bufferViews"].append(bv)
+        return len(self.doc["bufferViews"]) - 1
+
+    def accessor(self, arr: np.ndarray, target: int | None = ARRAY_BUFFER, bounds: bool = False) -> int:
+        """An accessor of float32 data (n, k) / (n,), or uint32 indices when ``target`` is the
+        element array buffer; ``bounds`` adds min/max (required for positions and times)."""
+        index = target == ELEMENT_ARRAY_BUFFER
+        a = np.ascontiguousarray(arr, np.uint32 if index else np.float32)
+        comps = 1 if a.ndim == 1 else a.shape[1]
+        acc = {"bufferView": self.view(a.tobytes(), target), "componentType": UINT if index else FLOAT,
+               "count": int(a.size if index else a.shape[0]), "type": "SCALAR" if index else _TYPES[comps]}
+        if bounds:
+            a2 = a.reshape(len(a), -1)
+            acc["min"] = [float(x) for x in a2.min(0)]
+            acc["max"] = [float(x) for x in a2.max(0)]
+        self.doc["accessors"].append(acc)
+        return len(self.doc["accessors"]) - 1
+
+    def material(self, name: str, texture: int | None) -> int:
+        pbr = {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.75}
+        if texture is not None:
+            pbr["baseColorTexture"] = {"index": texture}
+        self.doc["materials"].append({"name": name, "pbrMetallicRoughness": pbr, "doubleSided": True})
+        return len(self.doc["materials"]) - 1
+
+    def texture(self, png: bytes) -> int:
+        d = self.doc
+        d["images"] = [{"bufferView": self.view(png), "mimeType": "image/png", "name": "photo"}]
+        d["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}]
+        d["textures"] = [{"sampler": 0, "source": 0}]
+        return 0
+
+    def mesh(self, name: str, frames: list, material: int, target_names: list[str] | None = None) -> int:
+        """A node + mesh from one :class:`~leafsim.export.mesh.Surface` per frame (frame 0 is the base)."""
+        s0 = frames[0]
+        attrs = {"POSITION": self.accessor(s0.positions, bounds=True), "NORMAL": self.accessor(s0.normals)}
+        if s0.uv is not None:
+            attrs["TEXCOORD_0"] = self.accessor(s0.uv)
+        if s0.colours is not None:
+            attrs["COLOR_0"] = self.accessor(s0.colours)
+        if s0.thickness is not None:
+            attrs["_THICKNESS"] = self.accessor(s0.thickness)
+        prim = {"attributes": attrs, "indices": self.accessor(s0.triangles.ravel(), ELEMENT_ARRAY_BUFFER),
+                "material": material, "mode": 4}
+        mesh = {"name": name, "primitives": [prim]}
+        if len(frames) > 1:
+            prim["targets"] = [self._target(s0, s) for s in frames[1:]]
+            mesh["weights"] = [0.0] * (len(frames) - 1)
+            if target_names:
+                mesh["extras"] = {"targetNames": list(target_names)}
+        self.doc["meshes"].append(mesh)
+        self.doc["nodes"].append({"name": name, "mesh": len(self.doc["meshes"]) - 1})
+        node = len(self.doc["nodes"]) - 1
+        self.doc["scenes"][0]["nodes"].append(node)
+        return node
+
+    def _target(self, s0, s) -> dict:
+        t = {"POSITION": self.accessor(s.positions - s0.positions, bounds=True),
+             "NORMAL": self.accessor(s.normals - s0.normals)}
+        if s0.colours is not None:
+            t["COLOR_0"] = self.accessor(s.colours - s0.colours)
+        return t
+
+    def animation(self, nodes: list[int], times: list[float]) -> None:
+        """Weights of every node's morph targets keyed one-hot at ``times`` (frame 0: all zero)."""
+        k = len(times) - 1
+        t = np.asarray(times, np.float64) - times[0]
+        if (np.diff(t) <= 0).any():
+            raise LeafsimError("export: key frame times must increase strictly")
+        w = np.zeros((k + 1, k), np.float32)
+        w[np.arange(1, k + 1), np.arange(k)] = 1.0
+        sampler = {"input": self.accessor(t, None, bounds=True), "output": self.accessor(w.ravel(), None),
+                   "interpolation": "LINEAR"}
+        channels = [{"sampler": 0, "target": {"node": n, "path": "weights"}} for n in nodes]
+        self.doc["animations"] = [{"name": "drying", "samplers": [sampler], "channels": channels}]
+
+    def _json(self, uri: str | None) -> bytes:
+        buf = {"byteLength": len(self.bin)}
+        if uri is not None:
+            buf["uri"] = uri
+        self.doc["buffers"] = [buf]
+        return json.dumps(self.doc, separators=(",", ":")).encode()
+
+    def glb(self) -> bytes:
+        js = self._json(None)
+        js += b" " * (-len(js) % 4)
+        bn = bytes(self.bin) + b"\0" * (-len(self.bin) % 4)
+        total = 12 + 8 + len(js) + 8 + len(bn)
+        return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(js), b"JSON") + js
+                + struct.pack("<I4s", len(bn), b"BIN\0") + bn)
+
+    def gltf(self, bin_name: str) -> tuple[bytes, bytes]:
+        return self._json(bin_name), bytes(self.bin)
+
+
+def build_gltf(frames: list[dict], times: list[float], photo_png: bytes | None = None) -> GltfBuilder:
+    """A :class:`GltfBuilder` holding every surface of ``frames`` (one dict name → Surface per
+    key frame), animated over ``times`` when there is more than one frame."""
+    g = GltfBuilder()
+    tex = g.texture(photo_png) if photo_png is not None else None
+    names = [f"t = {t - times[0]:.4g} s" for t in times[1:]]
+    nodes = [g.mesh(name, [f[name] for f in frames], g.material(name, tex), names) for name in frames[0]]
+    if len(frames) > 1:
+        g.animation(nodes, times)
+    return g
+
+
+def write_gltf(path: Path, frames: list[dict], times: list[float], photo_png: bytes | None = None,
+               binary: bool = True) -> list[Path]:
+    """Write ``frames`` as ``path`` (.glb, or .gltf + a .bin beside it); returns the files."""
+    g = build_gltf(frames, times, photo_png)
+    if binary:
+        return [atomic_write_bytes(path, g.glb(), "glTF binary")]
+    bin_path = path.with_suffix(".bin")
+    js, bn = g.gltf(bin_path.name)
+    return [atomic_write_bytes(bin_path, bn, "glTF buffer"), atomic_write_bytes(path, js, "glTF")]

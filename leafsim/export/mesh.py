@@ -1,0 +1,297 @@
+"""Mesh export of a simulated leaf: glTF 2.0 (.glb / .gltf + .bin), OBJ + MTL, PLY (core: no OpenGL).
+
+The blade is written either as a **closed thin shell** (``layers="shell"``: the bottom layer T,
+a top surface at the current layer separation measured from the V particles, and a side wall
+along the margin — watertight) or as the **mid-surface** (``layers="mid"``: one sheet halfway
+between the layers, with the local thickness as a vertex attribute).  Colours are the baked
+pigment colours (linear RGB per vertex) or the species photo as a texture.  Veins are an
+optional second mesh (flat ribbons of the vein width on the upper surface).  Several states
+become a glTF animation: one morph target per key frame and an animation channel driving
+their weights (static formats take one state).  Every file is written atomically.
+
+Coordinates: leafsim is z-up; every format gets glTF's y-up convention ``(x, z, −y)``, metres.
+
+Example
+-------
+>>> export_mesh(model, [state], "leaf.glb", view=LeafView(model), params=params)   # doctest: +SKIP
+>>> export_mesh(model, states, "drying.glb", params=params, times=[s.time for s in states])  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import atomic_write_bytes
+from leafsim.sim.model import Model, State
+from leafsim.sim.frame import _unit, blade_frame
+
+FORMATS = ("glb", "gltf", "obj", "ply")
+LAYERS = ("shell", "mid")
+TEXTURES = ("colours", "photo")
+#: veins are drawn this much lighter than the blade under them (multiplier of the albedo)
+VEIN_LIGHTEN = 1.35
+#: largest photo side embedded as a texture (pixels)
+TEXTURE_MAX = 1024
+
+
+@dataclass
+class Surface:
+    """One exported triangle mesh.
+
+    positions, normals : (n, 3) float32 (y-up); uv : (n, 2) float32 or None;
+    colours : (n, 3) float32 linear RGB or None; thickness : (n,) float32 or None (mid-surface);
+    triangles : (m, 3) uint32, counter-clockwise seen from outside.
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray
+    triangles: np.ndarray
+    uv: np.ndarray | None = None
+    colours: np.ndarray | None = None
+    thickness: np.ndarray | None = None
+
+
+def to_y_up(p: np.ndarray) -> np.ndarray:
+    """(n, 3) z-up → y-up: (x, y, z) → (x, z, −y)."""
+    p = np.asarray(p, np.float64)
+    return np.column_stack([p[:, 0], p[:, 2], -p[:, 1]])
+
+
+def boundary_edges(tri: np.ndarray) -> np.ndarray:
+    """(b, 2) edges used by one triangle only, oriented as in that triangle."""
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    key = np.sort(e, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return e[cnt[inv.ravel()] == 1]
+
+
+def _surface(pos, nrm, tri, uv, col, thick=None) -> Surface:
+    return Surface(positions=to_y_up(pos).astype(np.float32), normals=_unit(to_y_up(nrm)).astype(np.float32),
+                   triangles=np.ascontiguousarray(tri, np.uint32), uv=None if uv is None else uv.astype(np.float32),
+                   colours=None if col is None else np.clip(col, 0.0, 1.0).astype(np.float32),
+                   thickness=None if thick is None else thick.astype(np.float32))
+
+
+def blade_surface(model, state, T, remap, layers, uv, col) -> tuple[Surface, np.ndarray, np.ndarray]:
+    """The blade as a :class:`Surface`; also the upper-surface points and normals (z-up) the
+    veins lie on."""
+    p, tri, n, h = blade_frame(model, state, T, remap)
+    if layers == "mid":
+        mid = p + 0.5 * h[:, None] * n
+        return _surface(mid, n, tri, uv, col, h), mid + 0.5 * h[:, None] * n, n
+    top = p + h[:, None] * n
+    nT = len(p)
+    be = boundary_edges(tri)
+    a, b = be[:, 0], be[:, 1]
+    sides = np.concatenate([np.column_stack([a, b, b + nT]), np.column_stack([a, b + nT, a + nT])])
+    faces = np.concatenate([tri[:, ::-1], tri + nT, sides])
+    twice = lambda x: None if x is None else np.concatenate([x, x])
+    return _surface(np.concatenate([p, top]), np.concatenate([-n, n]), faces, twice(uv), twice(col)), top, n
+
+
+def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray, uv, col) -> Surface | None:
+    """Flat ribbons of the vein widths on the upper surface ``top`` (nT, 3) with normals ``n``;
+    2 vertices per vein point, 2 triangles per segment.  None when the model has no veins."""
+    pos, nrm, tris, uvs, cols = [], [], [], [], []
+    base = 0
+    lift = 0.02 * model.thickness
+    for idx, width, _order in model.vein_polylines():
+        if len(idx) < 2:
+            continue
+        i = remap[idx]
+        c = top[i] + lift * n[i]
+        t = np.gradient(c, axis=0)
+        side = _unit(np.cross(n[i], t), fallback=(1.0, 0.0, 0.0)) * (0.5 * np.asarray(width))[:, None]
+        pos.append(np.concatenate([c - side, c + side]))
+        nrm.append(np.concatenate([n[i], n[i]]))
+        k = len(i)
+        s = np.arange(k - 1)
+        l0, l1, r0, r1 = s, s + 1, s + k, s + k + 1
+        tris.append(base + np.concatenate([np.column_stack([l0, r0, r1]), np.column_stack([l0, r1, l1])]))
+        if uv is not None:
+            uvs.append(np.concatenate([uv[i], uv[i]]))
+        if col is not None:
+            cols.append(np.concatenate([col[i], col[i]]) * VEIN_LIGHTEN)
+        base += 2 * k
+    if not pos:
+        return None
+    cat = lambda x: np.concatenate(x) if x else None
+    return _surface(cat(pos), cat(nrm), cat(tris), cat(uvs), cat(cols))
+
+
+class MeshSource:
+    """What an export needs from one leaf: the model, its :class:`~leafsim.appearance.view.LeafView` (the
+    colours from the pigments, the photo) and the options; :meth:`surfaces` gives the meshes
+    of one state (same topology for every state of the model)."""
+
+    def __init__(self, model: Model, params, view=None, layers: str = "shell", veins: bool = False,
+                 texture: str = "colours"):
+        from leafsim.appearance.view import LeafView
+
+        if layers not in LAYERS:
+            raise LeafsimError(f"export: layers {layers!r}: expected one of {', '.join(LAYERS)}")
+        if texture not in TEXTURES:
+            raise LeafsimError(f"export: texture {texture!r}: expected one of {', '.join(TEXTURES)}")
+        self.model, self.params = model, params
+        self.view = view if view is not None else LeafView(model)
+        if texture == "photo" and self.view.photo_rgba is None:
+            raise LeafsimError("export: texture 'photo' needs a species with a photo (this one has a drawn outline)")
+        self.layers, self.veins, self.texture = layers, bool(veins), texture
+        self.uv = model.particle_texcoord[self.view.T].astype(np.float64)
+
+    def surfaces(self, state: State) -> dict[str, Surface]:
+        """``{"blade": Surface, "veins": Surface}`` (veins only when asked for and present)."""
+        col = None
+        if self.texture == "colours":
+            col = np.asarray(self.view.colours(state, self.params)[0], np.float64)
+        blade, top, n = blade_surface(self.model, state, self.view.T, self.view.remap, self.layers, self.uv, col)
+        out = {"blade": blade}
+        if self.veins:
+            v = vein_surface(self.model, self.view.remap, top, n, self.uv, col)
+            if v is not None:
+                out["veins"] = v
+        return out
+
+    def photo_png(self) -> bytes | None:
+        """The photo (RGB, at most TEXTURE_MAX px a side) as PNG bytes, or None for vertex colours."""
+        if self.texture != "photo":
+            return None
+        import cv2
+
+        rgba = np.asarray(self.view.photo_rgba)
+        h, w = rgba.shape[:2]
+        f = min(1.0, TEXTURE_MAX / max(h, w))
+        bgr = cv2.cvtColor(np.ascontiguousarray(rgba[:, :, :3]), cv2.COLOR_RGB2BGR)
+        if f < 1.0:
+            bgr = cv2.resize(bgr, (max(1, round(w * f)), max(1, round(h * f))), interpolation=cv2.INTER_AREA)
+        ok, buf = cv2.imencode(".png", bgr)
+        if not ok:
+            raise LeafsimError("export: cannot encode the photo texture as PNG")
+        return buf.tobytes()
+
+
+def format_of(path, fmt: str | None) -> str:
+    """The export format: ``fmt`` when given, else the file's suffix; LeafsimError otherwise."""
+    fmt = fmt or Path(path).suffix.lstrip(".").lower()
+    if fmt not in FORMATS:
+        raise LeafsimError(f"{path}: unknown mesh format {fmt!r} (expected one of {', '.join(FORMATS)})")
+    return fmt
+
+
+def export_mesh(model: Model, states, path, format: str | None = None, params=None, view=None,
+                layers: str = "shell", veins: bool = False, texture: str = "colours", times=None) -> dict:
+    """Write the leaf ``model`` in ``states`` (a State or a list; several = a glTF animation with
+    one morph target per state after the first) to ``path``.
+
+    Parameters
+    ----------
+    format : "glb", "gltf", "obj" or "ply" (default: from the suffix of ``path``).
+    params : the ParamSet the colours are made with (default: the declared defaults).
+    view : a :class:`~leafsim.appearance.view.LeafView` (carries the photo); default a photo-less one.
+    layers : "shell" (closed thin shell from both layers) or "mid" (mid-surface + thickness).
+    veins : add the veins as a second mesh.
+    texture : "colours" (baked pigment colours) or "photo" (the species photo, glTF/OBJ).
+    times : key times [s] of the states (default: their simulated times).
+
+    Returns a summary: format, path, files written, vertex and triangle counts per mesh, targets.
+    """
+    from leafsim.config.params import ParamSet
+
+    states = [states] if isinstance(states, State) else list(states)
+    if not states:
+        raise LeafsimError("export: no state to write")
+    fmt = format_of(path, format)
+    if fmt in ("obj", "ply") and len(states) > 1:
+        raise LeafsimError(f"{path}: {fmt.upper()} holds one static shape; use glb or gltf for the drying animation")
+    if fmt == "ply" and texture == "photo":
+        raise LeafsimError(f"{path}: PLY carries vertex colours, not a photo texture (use --texture colours)")
+    src = MeshSource(model, params if params is not None else ParamSet(), view, layers, veins, texture)
+    frames = [src.surfaces(s) for s in states]
+    times = [s.time for s in states] if times is None else [float(t) for t in times]
+    if fmt in ("glb", "gltf"):
+        from leafsim.export.gltf import write_gltf
+
+        files = write_gltf(Path(path), frames, times, src.photo_png(), binary=fmt == "glb")
+    elif fmt == "obj":
+        files = write_obj(Path(path), frames[0], src.photo_png())
+    else:
+        files = write_ply(Path(path), frames[0])
+    return {"format": fmt, "path": str(path), "files": [str(f) for f in files], "targets": len(states) - 1,
+            "meshes": {k: {"vertices": len(s.positions), "triangles": len(s.triangles)} for k, s in frames[0].items()}}
+
+
+# ------------------------------------------------------------------ static formats
+
+def _srgb8(c: np.ndarray) -> np.ndarray:
+    from leafsim.appearance.reflectance import linear_to_srgb
+
+    return np.clip(np.round(np.asarray(linear_to_srgb(np.clip(c, 0, 1)), np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None = None) -> list[Path]:
+    """OBJ + MTL (+ the photo PNG): one object per mesh, ``v x y z r g b`` vertex colours (sRGB,
+    the common extension trimesh, Blender and MeshLab read), ``vt``, ``vn``."""
+    stem = path.stem
+    mtl, png = path.with_suffix(".mtl"), path.with_name(stem + "_photo.png")
+    lines = ["# leafsim mesh export", f"mtllib {mtl.name}"]
+    mat = ["# leafsim materials"]
+    base = 0
+    for name, s in surfaces.items():
+        lines.append(f"o {name}")
+        lines.append(f"usemtl {name}")
+        mat += [f"newmtl {name}", "Ka 0 0 0", "Kd 0.8 0.8 0.8", "Ks 0.05 0.05 0.05", "d 1", "illum 2"]
+        if photo_png is not None:
+            mat.append(f"map_Kd {png.name}")
+        rgb = None if s.colours is None else _srgb8(s.colours) / 255.0
+        for i, p in enumerate(s.positions):
+            lines.append(f"v {p[0]:.7g} {p[1]:.7g} {p[2]:.7g}" + ("" if rgb is None else f" {rgb[i, 0]:.4f} {rgb[i, 1]:.4f} {rgb[i, 2]:.4f}"))
+        uv = s.uv if s.uv is not None else np.zeros((len(s.positions), 2), np.float32)
+        lines += [f"vt {u:.7g} {1.0 - v:.7g}" for u, v in uv]
+        lines += [f"vn {n[0]:.6f} {n[1]:.6f} {n[2]:.6f}" for n in s.normals]
+        f = s.triangles.astype(np.int64) + base + 1
+        lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}" for a, b, c in f]
+        base += len(s.positions)
+    written = []
+    if photo_png is not None:
+        written.append(atomic_write_bytes(png, photo_png, "texture"))
+    written.append(atomic_write_bytes(mtl, ("\n".join(mat) + "\n").encode(), "material"))
+    written.append(atomic_write_bytes(path, ("\n".join(lines) + "\n").encode(), "mesh"))
+    return written
+
+
+def write_ply(path: Path, surfaces: dict[str, Surface]) -> list[Path]:
+    """Binary little-endian PLY of every mesh merged (positions, normals, s/t, 8-bit sRGB colours,
+    and ``thickness`` [m] for a mid-surface)."""
+    ss = list(surfaces.values())
+    pos = np.concatenate([s.positions for s in ss])
+    nrm = np.concatenate([s.normals for s in ss])
+    uv = np.concatenate([s.uv if s.uv is not None else np.zeros((len(s.positions), 2), np.float32) for s in ss])
+    col = np.concatenate([s.colours if s.colours is not None else np.full((len(s.positions), 3), 0.5, np.float32) for s in ss])
+    thick = None if ss[0].thickness is None else np.concatenate(
+        [s.thickness if s.thickness is not None else np.zeros(len(s.positions), np.float32) for s in ss])
+    offs = np.cumsum([0] + [len(s.positions) for s in ss])[:-1]
+    tri = np.concatenate([s.triangles.astype(np.int64) + o for s, o in zip(ss, offs)])
+    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
+              ("s", "<f4"), ("t", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    if thick is not None:
+        fields.append(("thickness", "<f4"))
+    v = np.zeros(len(pos), dtype=fields)
+    for k, name in enumerate("xyz"):
+        v[name], v["n" + name] = pos[:, k], nrm[:, k]
+    v["s"], v["t"] = uv[:, 0], 1.0 - uv[:, 1]
+    c8 = _srgb8(col)
+    v["red"], v["green"], v["blue"] = c8[:, 0], c8[:, 1], c8[:, 2]
+    if thick is not None:
+        v["thickness"] = thick
+    f = np.zeros(len(tri), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    f["n"], f["i"] = 3, tri
+    ptype = {"<f4": "float", "u1": "uchar"}
+    header = ["ply", "format binary_little_endian 1.0", "comment leafsim mesh export (y up, metres)",
+              f"element vertex {len(v)}", *[f"property {ptype[t]} {n}" for n, t in fields],
+              f"element face {len(f)}", "property list uchar int vertex_indices", "end_header"]
+    data = ("\n".join(header) + "\n").encode() + v.tobytes() + f.tobytes()
+    return [atomic_write_bytes(path, data, "mesh")]

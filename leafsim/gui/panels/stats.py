@@ -1,0 +1,89 @@
+"""The Stats panel: frame rate, simulation rate, counts, timings per stage, water, live plots
+of water and constraint residual, and the species photo turned as the leaf is shown."""
+
+from __future__ import annotations
+
+import numpy as np
+from imgui_bundle import imgui, implot
+
+from leafsim.gui.photo import UV_CORNERS, panel_quad, screen_rotation
+
+
+class StatsPanel:
+    def __init__(self, app):
+        self.app = app
+
+    def draw(self) -> None:
+        app = self.app
+        s, pb = app.session, app.session.playback
+        ft = np.asarray(app.frame_ms[-120:])
+        fps = 1000.0 / ft.mean() if ft.size else 0.0
+        p90 = float(np.percentile(ft, 90)) if ft.size else 0.0
+        imgui.text(f"{fps:5.1f} fps   frame p90 {p90:5.1f} ms")
+        imgui.text(f"simulation {pb.sim_rate:6.3g} sim s / wall s")
+        if not s.ready:
+            imgui.text("building the first leaf ...")
+            return
+        c = s.counts()
+        imgui.text(f"frame {s.frame}   t = {s.time:.3f} s   {'playing' if pb.playing else 'paused'}")
+        imgui.text(f"particles {c['particles']} (T {c['particles_T']}, V {c['particles_V']})")
+        imgui.text(f"springs {c['springs']}   triangles {c['triangles']}   hinges {c['hinges']}")
+        ms = pb.last_ms
+        imgui.text(f"step ms (total {sum(ms.values()):.2f}): " + " ".join(f"{k[:4]} {v:.1f}" for k, v in ms.items()))
+        if app.timing:
+            imgui.text_disabled("frame: " + "  ".join(f"{k} {v:.1f}" for k, v in app.timing.items()) + " ms")
+        h = pb.history
+        imgui.text(f"water {1e3 * s.total_water():.4g} g ({100 * s.water_fraction():.1f} %)")  # kg in the model
+        if h["residual"]:
+            imgui.text(f"residual {h['residual'][-1]:.3g}   kinetic {h['kinetic'][-1]:.3g} J")
+        self.plots()
+        self.photo()
+
+    def plots(self) -> None:
+        h = self.app.session.playback.history
+        x = np.asarray(h["frame"], np.float64)
+        if len(x) == 0:
+            return
+        step = max(1, len(x) // 300)  # ≤ 300 points per line: llvmpipe pays per triangle
+        sl = slice(None, None, step)
+        x = np.ascontiguousarray(x[sl])
+        pw = imgui.get_content_region_avail().x
+        fit = implot.AxisFlags_.auto_fit
+        if implot.begin_plot("water", (pw, 140)):
+            implot.setup_axes("frame", "water / initial", fit, 0)
+            implot.setup_axis_limits(implot.ImAxis_.y1, 0.0, 1.05, imgui.Cond_.once)
+            implot.setup_legend(implot.Location_.north_east)
+            implot.plot_line("total", x, np.ascontiguousarray(np.asarray(h["water"], np.float64)[sl]))
+            for key, label in (("water_T", "bottom T"), ("water_V", "top V")):
+                v = np.asarray(h[key], np.float64)
+                implot.plot_line(label, x, np.ascontiguousarray(v[sl] / max(v[0], 1e-300)))
+            implot.end_plot()
+        if implot.begin_plot("constraint residual", (pw, 120)):
+            implot.setup_axes("frame", "log10 max |C|/l", fit, fit)
+            r = np.nan_to_num(np.asarray(h["residual"], np.float64), nan=1.0)[sl]
+            ok = r > 0  # the fresh leaf (frame 0) has none
+            implot.plot_line("residual", np.ascontiguousarray(x[ok]), np.log10(r[ok]))
+            implot.end_plot()
+
+    def photo(self) -> None:
+        """The photo turned as the leaf appears on screen (base→apex as shown)."""
+        app = self.app
+        s = app.session
+        imgui.separator()
+        imgui.text("Photo (turned as the leaf is shown)")
+        if app.photo_tex is None or app.photo_affine is None:
+            if s.photo_error:
+                imgui.text_colored((0.9, 0.3, 0.3, 1.0), f"photo unreadable: {s.photo_error}")
+            else:
+                imgui.text_disabled("no photo (drawn outline species)")
+            return
+        avail = imgui.get_content_region_avail()
+        size = (avail.x, max(avail.y - 4.0, 80.0))
+        p0 = imgui.get_cursor_screen_pos()
+        r = app.renderer
+        R = screen_rotation(app.view_proj(), app.leaf_rect_px, r.center, max(r.radius, 1e-4))
+        quad, _ = panel_quad(app.photo_affine, R, (p0.x, p0.y, size[0], size[1]))
+        dl = imgui.get_window_draw_list()
+        dl.add_image_quad(imgui.ImTextureRef(app.photo_tex.glo), *[tuple(map(float, q)) for q in quad],
+                          *[tuple(map(float, c)) for c in UV_CORNERS])
+        imgui.dummy(size)

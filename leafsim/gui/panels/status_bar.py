@@ -1,0 +1,62 @@
+"""The status bar: the newest message (errors first, with dismiss and copy-path buttons; the
+full text in a tooltip) and the progress of a build or of "dry to end"."""
+
+from __future__ import annotations
+
+from imgui_bundle import imgui
+
+from leafsim.gui.layout import tip
+
+#: width of the progress bar on the right [px]
+PROGRESS_W = 300.0
+
+
+class StatusBar:
+    def __init__(self, app):
+        self.app = app
+
+    def draw(self) -> None:
+        status = self.app.status
+        msgs = status.messages()
+        avail = imgui.get_content_region_avail().x
+        x_left = imgui.get_cursor_screen_pos().x
+        m = msgs[0] if msgs else None
+        if m is not None:
+            colour = (0.95, 0.35, 0.3, 1.0) if m.level == "error" else (0.85, 0.85, 0.85, 1.0)
+            if m.level == "error":
+                if imgui.small_button("x###dismiss"):
+                    status.clear(m.topic)
+                tip("Dismiss this message")
+                imgui.same_line()
+            if m.path:
+                if imgui.small_button("copy path###copy"):
+                    imgui.set_clipboard_text(m.path)
+                tip(f"Copy {m.path}")
+                imgui.same_line()
+            more = f"  (+{len(msgs) - 1})" if len(msgs) > 1 else ""
+            imgui.push_style_color(imgui.Col_.text, colour)
+            x_end = x_left + avail - PROGRESS_W - 12  # long text is cut here (full text: tooltip)
+            imgui.push_clip_rect(imgui.get_cursor_screen_pos(), (x_end, 1e5), True)
+            imgui.text_unformatted(("Error: " if m.level == "error" else "") + m.text + more)
+            imgui.pop_clip_rect()
+            imgui.pop_style_color()
+            if imgui.is_item_hovered():
+                imgui.set_tooltip("\n".join(("Error: " if x.level == "error" else "") + x.text for x in msgs))
+        imgui.same_line(avail - PROGRESS_W)
+        self.progress(PROGRESS_W)
+
+    def progress(self, width: float) -> None:
+        s = self.app.session
+        pb = s.playback
+        if s.building:
+            frac, text = max(s.progress, 0.01), f"building {s.species_key}: {s.progress_text}"
+        elif pb.drying:
+            frac, text = max(pb.dry_progress(), 0.01), f"drying to the end: {100 * pb.dry_progress():.0f} %"
+        elif s.ready:
+            state = "playing" if pb.playing else "paused"
+            frac, text = 0.0, f"{state}  {pb.sim_rate:.3g} sim s / s"
+        else:
+            frac, text = 0.0, "starting"
+        imgui.progress_bar(frac, (width, 0), text)
+        if pb.drying:
+            tip("Fast-forward until 2 % of the water is left; press Stop drying to cancel")

@@ -1,0 +1,43 @@
+"""The live plots' data: one record per published frame (water per layer, residual, kinetic
+energy, iterations, ms per stage), kept for the last :data:`HISTORY` frames."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from leafsim.sim.kernels.pbd import residual
+from leafsim.sim.model import LAYER_T, LAYER_V
+
+#: stats history length (frames kept for the live plots)
+HISTORY = 2000
+#: the record's fields
+KEYS = ("frame", "time", "water_T", "water_V", "water", "residual", "kinetic", "iterations",
+        "ms_osmosis", "ms_shrink", "ms_dynamics", "ms_colour", "ms_total")
+
+
+def new_history() -> dict[str, deque]:
+    """An empty history: one bounded deque per field."""
+    return {k: deque(maxlen=HISTORY) for k in KEYS}
+
+
+def history_record(model, simulator, state, ms: dict) -> dict:
+    """One history record of a state (runs on the worker thread)."""
+    w = state.particle_water
+    lay = model.particle_layer
+    finite = bool(np.isfinite(state.particle_q).all() and np.isfinite(w).all())
+    mass = model.particle_cytosol + w
+    qd = state.particle_qd
+    rec = {"frame": state.frame, "time": state.time, "water_T": float(w[lay == LAYER_T].sum()),
+           "water_V": float(w[lay == LAYER_V].sum()), "water": float(w.sum() / max(model.particle_water0.sum(), 1e-300)),
+           "residual": float(residual(state.particle_q, model.spring_ij, state.spring_rest)) if finite else float("nan"),
+           "kinetic": float(0.5 * (mass * (qd * qd).sum(1)).sum()) if finite else float("nan"),
+           "iterations": simulator.iterations}
+    tot = 0.0
+    for k in ("osmosis", "shrink", "dynamics", "colour"):
+        v = float(ms.get(k, 0.0))
+        rec["ms_" + k] = v
+        tot += v
+    rec["ms_total"] = tot
+    return rec

@@ -1,0 +1,367 @@
+"""The simulation worker: one leaf's :class:`~leafsim.sim.run.Run` stepped on a background
+thread, so the window never waits for a step (core: no OpenGL, no imgui).
+
+Double buffering: the worker steps its own :class:`~leafsim.sim.model.State` (the back
+buffer) and publishes :class:`Snapshot` objects -- a ``State.copy()`` plus the renderer's
+per-frame arrays made from that copy -- that nobody mutates afterwards (the front buffer).
+The UI thread only ever reads the latest snapshot, so what it draws is one consistent frame.
+
+Everything the UI asks for goes through a lock-protected mailbox the worker reads between
+two steps: new live parameters (applied to the simulator on the worker thread, never in the
+middle of a step), play/pause, a speed (simulated seconds per wall second, or ``None`` = as
+fast as possible), a number of single steps, "dry to end", reset.  The numba kernels release
+the GIL (``nogil=True``), so a step in the worker leaves the UI thread free; the worker thread
+also runs at a lower scheduling priority (``WORKER_NICE``), so on a small machine the
+rasteriser and the UI thread get the cores first and "as fast as possible" means as fast as
+the UI leaves room for.
+
+Example
+-------
+>>> w = SimWorker(Run(model, params), record=lambda state, ms: {})   # doctest: +SKIP
+>>> w.start(); w.play(True)                                        # doctest: +SKIP
+>>> snap = w.snapshot()            # latest consistent frame: snap.state, snap.render, snap.frame
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from leafsim.sim.run import Run
+
+#: nice increment of the worker thread (Linux: per thread); the UI and llvmpipe keep priority
+WORKER_NICE = 5
+#: the worker publishes at most this many snapshots per wall second while it runs freely
+PUBLISH_HZ = 60.0
+#: "dry to end" stops when the water left falls to this fraction of the initial water
+DRY_END_FRACTION = 0.02
+#: ... or after this many frames (a leaf that never dries, e.g. evaporation switched off)
+DRY_MAX_FRAMES = 200000
+
+
+@dataclass
+class Snapshot:
+    """One published frame.  ``state`` is a private copy (never mutated); ``render`` the
+    ``LeafView.update`` arrays of that copy (or None); ``records`` the history entries made
+    since the previous snapshot; ``sim_rate`` simulated seconds per wall second (recent)."""
+
+    seq: int
+    state: Any
+    render: dict | None = None
+    render_key: Any = None
+    ms: dict = field(default_factory=dict)
+    records: list = field(default_factory=list)
+    sim_rate: float = 0.0
+    error: str | None = None
+    epoch: int = 0  # increments at every reset of the stepped state
+
+    @property
+    def frame(self) -> int:
+        return self.state.frame
+
+    @property
+    def time(self) -> float:
+        return self.state.time
+
+
+def name_thread(name: str) -> None:
+    """Give the calling thread an OS-level name (Linux; shows in top -H and /proc)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).prctl(15, name.encode()[:15], 0, 0, 0)  # PR_SET_NAME
+    except (OSError, AttributeError):
+        pass
+
+
+def lower_priority(nice: int = WORKER_NICE) -> None:
+    """Lower the calling thread's scheduling priority (Linux: nice is per thread); no-op where
+    unsupported or not permitted."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), min(19, os.getpriority(os.PRIO_PROCESS, 0) + nice))
+    except (AttributeError, OSError):
+        pass
+
+
+class SimWorker:
+    """Steps ``run`` in a daemon thread (see the module docstring).
+
+    Parameters
+    ----------
+    run : Run (owned by the worker from now on: change its simulator's parameters only
+        through :meth:`set_params`; the UI gets copies of its state).
+    record : ``record(state, ms) -> dict`` history entry (called on the worker thread).
+    render : optional ``render(state) -> (dict, key)`` per-frame renderer arrays of a snapshot
+        (made on the worker thread, so the UI thread only uploads).
+    """
+
+    def __init__(self, run: Run, record: Callable, render: Callable | None = None):
+        self.run = run
+        self.simulator = run.sim
+        self._record = record
+        self._render = render
+        self.water0 = float(run.model.particle_water0.sum())
+        self._cond = threading.Condition()
+        self._step_lock = threading.Lock()
+        self._params = None        # pending live parameters (latest wins)
+        self._playing = False
+        self._speed: float | None = None
+        self._steps = 0            # single steps requested
+        self._dry = False
+        self._dry_until = 0
+        self._stop = False
+        self._thread: threading.Thread | None = None
+        self._records: list = []
+        self._rate = deque(maxlen=64)  # (wall, sim time) samples
+        self._seq = 0
+        self.epoch = 0
+        self._reset_wanted = 0
+        self.error: str | None = None
+        self.dry_done = False
+        self._snap = self._make_snapshot({})
+        self._snap_taken = False  # the first snapshot's record (frame 0) is handed out too
+
+    # ------------------------------------------------------------------ thread
+    def start(self) -> "SimWorker":
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="leafsim-sim", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self, join: float | None = None) -> None:
+        """Ask the thread to end after its current step (``join`` seconds to wait, or none)."""
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        if join is not None and self._thread is not None:
+            self._thread.join(join)
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def _wanted(self) -> bool:
+        return (self._stop or self._steps > 0 or self._reset_wanted > self.epoch
+                or ((self._playing or self._dry) and self.error is None))
+
+    def _run(self) -> None:
+        name_thread("leafsim-sim")
+        lower_priority()
+        t_next = time.perf_counter()
+        while True:
+            with self._cond:
+                while not self._wanted():
+                    self._cond.wait(0.25)
+                    self._apply_params()  # parameters change while paused too
+                if self._stop:
+                    return
+                reset = self._reset_wanted > self.epoch
+            if reset:
+                with self._step_lock:
+                    self._reset_locked(self.simulator.state())
+                continue
+            with self._cond:
+                free = (self._playing or self._dry) and self.error is None
+                if not free:
+                    self._steps -= 1
+                speed = None if self._dry else self._speed
+                last_single = not free and self._steps == 0
+            self._step_once(publish_now=last_single)
+            t_next = self._pace(speed, t_next) if free else time.perf_counter()
+
+    def _pace(self, speed: float | None, t_next: float) -> float:
+        """Sleep so that simulated time advances at ``speed`` s per wall second."""
+        now = time.perf_counter()
+        if speed is None or speed <= 0:
+            return now
+        t_next = max(t_next + float(self.simulator.dt) / speed, now - 0.25)  # no debt build-up
+        if t_next > now:
+            with self._cond:
+                self._cond.wait(t_next - now)  # woken early by any new request
+        return t_next
+
+    # ------------------------------------------------------------------ stepping
+    def _apply_params(self) -> None:
+        p, self._params = self._params, None
+        if p is not None:
+            self.simulator.set_params(p)
+
+    def _step_once(self, publish_now: bool = False) -> dict:
+        with self._step_lock:
+            with self._cond:
+                self._apply_params()
+            if self.error is not None:
+                return {}
+            ms = self._advance(1)
+            self._after_step(ms, publish_now)
+        return ms
+
+    def _advance(self, n: int) -> dict:
+        """``n`` steps; a step that raises (a kernel meeting NaN, a solver failing) ends the
+        run with an error instead of killing the thread."""
+        ms: dict = {}
+        s = self.run.state
+        try:
+            for _ in range(n):
+                ms = self.run.step()
+                if not np.isfinite(s.particle_q[:1]).all():
+                    break
+        except Exception as e:  # the worker must survive anything: the UI shows it
+            finite = bool(np.isfinite(s.particle_q).all())
+            why = "diverged (NaN/Inf)" if not finite else f"failed ({type(e).__name__}: {e})"
+            self.error = f"simulation {why} at frame {s.frame}: press Reset or lower dynamics.dt"
+        self._rate.append((time.perf_counter(), s.time))
+        return ms
+
+    def _after_step(self, ms: dict, publish_now: bool) -> None:
+        s = self.run.state
+        if not np.isfinite(s.particle_q).all() and self.error is None:
+            self.error = f"simulation diverged (NaN/Inf) at frame {s.frame}: press Reset or lower dynamics.dt"
+        done = self._dry and (self.water_fraction(s) <= DRY_END_FRACTION or self.error is not None
+                              or s.frame >= self._dry_until)
+        if done or publish_now or self.error is not None or time.perf_counter() - self._t_pub >= 1.0 / PUBLISH_HZ:
+            self._publish(ms)  # before the flags change: whoever sees "done" sees its frame
+        if done:
+            with self._cond:
+                self._dry = self._playing = False
+                self.dry_done = True
+
+    def water_fraction(self, state=None) -> float:
+        s = self.run.state if state is None else state
+        return float(s.particle_water.sum() / max(self.water0, 1e-300))
+
+    def sim_rate(self) -> float:
+        """Simulated seconds per wall second over the last samples (0 when not running)."""
+        r = list(self._rate)
+        if len(r) < 2 or time.perf_counter() - r[-1][0] > 1.0:
+            return 0.0
+        (w0, s0), (w1, s1) = r[0], r[-1]
+        return (s1 - s0) / max(w1 - w0, 1e-9)
+
+    def _make_snapshot(self, ms: dict, epoch: int | None = None) -> Snapshot:
+        st = self.run.state.copy()
+        rec = self._record(st, ms)
+        render, key = self._render(st) if self._render is not None else (None, None)
+        self._t_pub = time.perf_counter()
+        self._seq += 1
+        return Snapshot(self._seq, st, render, key, dict(ms), [rec] if rec else [], 0.0, self.error,
+                        self.epoch if epoch is None else epoch)
+
+    def _publish(self, ms: dict, epoch: int | None = None) -> None:
+        snap = self._make_snapshot(ms, epoch)
+        snap.sim_rate = self.sim_rate()
+        with self._cond:
+            if not self._snap_taken:  # the UI has not seen the previous one: keep its records
+                snap.records = self._snap.records + snap.records
+            self._snap = snap
+            self._snap_taken = False
+            self.epoch = snap.epoch  # whoever sees the new epoch finds its snapshot published
+
+    # ------------------------------------------------------------------ UI side
+    def snapshot(self) -> Snapshot:
+        """The latest published frame (its ``records`` are handed out once)."""
+        with self._cond:
+            snap = self._snap
+            if not self._snap_taken:
+                self._snap_taken = True
+                return snap
+            return Snapshot(snap.seq, snap.state, snap.render, snap.render_key, snap.ms, [], snap.sim_rate, snap.error,
+                            snap.epoch)
+
+    def set_params(self, params) -> None:
+        """Hand new live parameters to the worker: applied before its next step (at once when
+        no step is running)."""
+        with self._cond:
+            self._params = params
+            self._cond.notify_all()
+        if self._step_lock.acquire(blocking=False):
+            try:
+                with self._cond:
+                    self._apply_params()
+            finally:
+                self._step_lock.release()
+
+    def play(self, on: bool) -> None:
+        with self._cond:
+            self._playing = bool(on)
+            self._cond.notify_all()
+
+    @property
+    def playing(self) -> bool:
+        return self._playing or self._dry
+
+    def set_speed(self, speed: float | None) -> None:
+        """Simulated seconds per wall second, or None = as fast as possible."""
+        with self._cond:
+            self._speed = None if speed is None else max(float(speed), 1e-6)
+            self._cond.notify_all()
+
+    @property
+    def speed(self) -> float | None:
+        return self._speed
+
+    def request_steps(self, n: int = 1) -> None:
+        """Advance ``n`` single frames in the background (while paused)."""
+        with self._cond:
+            self._steps += max(int(n), 0)
+            self._cond.notify_all()
+
+    def dry_to_end(self, on: bool = True) -> None:
+        """Run as fast as possible until the water left is at most ``DRY_END_FRACTION`` of the
+        initial water (then pause), or stop doing so (``on=False``)."""
+        with self._cond:
+            self._dry = bool(on) and self.error is None
+            self._dry_until = self.run.state.frame + DRY_MAX_FRAMES
+            self.dry_done = False
+            self._cond.notify_all()
+
+    @property
+    def drying(self) -> bool:
+        return self._dry
+
+    def dry_progress(self) -> float:
+        """0 at full water, 1 at the "dry to end" threshold."""
+        wf = self.water_fraction(self._snap.state)
+        return float(min(max((1.0 - wf) / (1.0 - DRY_END_FRACTION), 0.0), 1.0))
+
+    def step_sync(self, n: int = 1) -> dict:
+        """Advance ``n`` frames on the caller's thread (scripts, tests); waits for a running step."""
+        with self._step_lock:
+            with self._cond:
+                self._apply_params()
+            if self.error is not None or n <= 0:
+                return {}
+            ms = self._advance(n)
+            self._after_step(ms, True)
+        return ms
+
+    def request_reset(self) -> int:
+        """Ask the worker thread for a fresh leaf (made by its simulator between two steps);
+        returns the epoch whose first snapshot shows it."""
+        with self._cond:
+            self._reset_wanted = max(self._reset_wanted, self.epoch) + 1
+            self._cond.notify_all()
+            return self._reset_wanted
+
+    def reset(self, state) -> None:
+        """Replace the stepped state (a fresh leaf) and publish it (caller's thread)."""
+        with self._step_lock:
+            self._reset_locked(state)
+
+    def _reset_locked(self, state) -> None:
+        self.run.state = state
+        self.error = None
+        self._dry = False
+        self.dry_done = False
+        self._rate.clear()
+        with self._cond:
+            self._apply_params()
+            self._snap_taken = True
+            epoch = max(self.epoch + 1, self._reset_wanted)
+        self._publish({}, epoch)

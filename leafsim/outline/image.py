@@ -1,0 +1,89 @@
+"""image."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+import cv2
+import numpy as np
+from leafsim.base.errors import LeafsimError
+
+
+_DEBUG = False
+
+
+def load_image(path: str | os.PathLike) -> np.ndarray:
+    """Read a photo as uint8 BGR (h, w, 3) or BGRA (h, w, 4).
+
+    Raises LeafsimError ``<path>: cannot read image (<reason>)`` for a missing, unreadable,
+    empty or corrupt file.
+    """
+    p = Path(path)
+    where = str(path)
+    if not p.exists():
+        raise LeafsimError(f"{where}: cannot read image (file not found)")
+    if p.is_dir():
+        raise LeafsimError(f"{where}: cannot read image (is a folder, expected an image file)")
+    try:
+        data = np.fromfile(str(p), dtype=np.uint8)
+    except OSError as exc:
+        raise LeafsimError(f"{where}: cannot read image ({exc.strerror or exc})") from None
+    if data.size == 0:
+        raise LeafsimError(f"{where}: cannot read image (empty file)")
+    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise LeafsimError(f"{where}: cannot read image (not a PNG/JPEG/TIFF/BMP image or corrupt data)")
+    if img.size == 0 or img.shape[0] == 0 or img.shape[1] == 0:
+        raise LeafsimError(f"{where}: cannot read image (image has no pixels)")
+    if img.dtype != np.uint8:
+        if img.dtype == np.uint16:
+            img = (img >> 8).astype(np.uint8)
+        elif np.issubdtype(img.dtype, np.floating):
+            img = np.clip(np.nan_to_num(img) * 255.0, 0, 255).astype(np.uint8)
+        else:
+            img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    if img.ndim == 2:
+        img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    elif img.shape[2] == 2:  # grey + alpha
+        g, a = img[..., 0], img[..., 1]
+        img = np.dstack([g, g, g, a])
+    elif img.shape[2] > 4:
+        img = img[..., :4]
+    if min(img.shape[:2]) < 8:
+        raise LeafsimError(f"{where}: cannot read image (too small: {img.shape[1]}×{img.shape[0]} pixels)")
+    return np.ascontiguousarray(img)
+
+
+def _disk(d: int) -> np.ndarray:
+    d = max(1, int(d) | 1)
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (d, d))
+
+
+def _fill_holes(mask: np.ndarray) -> np.ndarray:
+    cnts, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    out = np.zeros_like(mask)
+    if cnts:
+        cv2.drawContours(out, cnts, -1, 255, thickness=cv2.FILLED)
+    return out
+
+
+def _largest_component(mask: np.ndarray) -> np.ndarray:
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if n <= 1:
+        return np.zeros_like(mask)
+    k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    return np.where(lab == k, 255, 0).astype(np.uint8)
+
+
+def working_image(img: np.ndarray, max_pixels: int) -> tuple[np.ndarray, float]:
+    """``img`` downscaled (area averaging) to at most ``max_pixels`` pixels, and the factor f
+    (working = photo × f; 1.0 when it is small enough).  Segmenting a 20000×20000 photo at full
+    size takes minutes and >10 GB; the outline's accuracy needs far fewer pixels."""
+    h, w = img.shape[:2]
+    if h * w <= max_pixels:
+        return img, 1.0
+    f = math.sqrt(max_pixels / float(h * w))
+    size = (max(8, int(w * f)), max(8, int(h * f)))
+    small = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+    return small, size[0] / float(w)

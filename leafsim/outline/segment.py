@@ -1,0 +1,194 @@
+"""segment."""
+
+from __future__ import annotations
+
+import math
+import cv2
+import numpy as np
+from leafsim.base.errors import LeafsimError
+from leafsim.outline.holes import kept_holes
+from leafsim.outline.image import _disk, _fill_holes
+
+
+#: A component smaller than this fraction of the image is not a leaf.
+MIN_LEAF_FRACTION = 0.005
+
+
+#: A second region at least this fraction of the leaf's area makes the photo ambiguous.
+SECOND_LEAF_FRACTION = 0.25
+
+
+#: A hole in the blade at least this fraction of the leaf's area is kept (a closed sinus).
+HOLE_MIN_FRACTION = 0.001
+
+
+def _alpha_informative(a: np.ndarray) -> bool:
+    transparent = float(np.count_nonzero(a < 128)) / a.size
+    return 0.01 < transparent < 0.99
+
+
+#: Lab distance under which two colours count as the same background
+_SAME_COLOUR = 12.0
+
+
+#: a border strip with more than this share of pixels off the background colour is "mixed"
+_MIXED_BORDER = 0.25
+
+
+def _border_strip(a: np.ndarray, b: int) -> np.ndarray:
+    return np.concatenate([a[:b].reshape(-1, 3), a[-b:].reshape(-1, 3),
+                           a[b:-b, :b].reshape(-1, 3), a[b:-b, -b:].reshape(-1, 3)])
+
+
+def _background_lab(lab: np.ndarray, path: str) -> np.ndarray:
+    """Background colour (Lab) of a photo: the median of a border strip.
+
+    When the leaf covers much of the border (it touches the frame), the strip's median can be
+    the leaf's colour; the background is then the colour the four corners agree on.
+    """
+    h, w = lab.shape[:2]
+    b = max(2, int(round(0.03 * min(h, w))))
+    strip = _border_strip(lab, b)
+    bg = np.median(strip, axis=0)
+    if np.mean(np.linalg.norm(strip - bg, axis=1) > _SAME_COLOUR) <= _MIXED_BORDER:
+        return bg
+    corners = [lab[:b, :b], lab[:b, -b:], lab[-b:, :b], lab[-b:, -b:]]
+    med = np.array([np.median(c.reshape(-1, 3), axis=0) for c in corners])
+    agree = np.linalg.norm(med[:, None] - med[None], axis=2) < _SAME_COLOUR
+    k = int(np.argmax(agree.sum(1)))
+    if agree[k].sum() < 2:
+        raise LeafsimError(f"{path}: cannot tell the background from the leaf (neither the image border nor its "
+                           "corners show one background colour; expected a leaf on a plain background)")
+    return np.median(np.concatenate([corners[i].reshape(-1, 3) for i in np.flatnonzero(agree[k])]), axis=0)
+
+
+def _shadow(lab: np.ndarray, bg: np.ndarray) -> np.ndarray:
+    """Pixels that look like the background in shadow: darker, with the background's hue and
+    no more of its saturation (chroma (a, b) on the segment from grey to the background's)."""
+    ab = lab[..., 1:]
+    g = bg[1:]
+    gg = float(g @ g)
+    s = np.clip((ab @ g) / gg, 0.0, 1.15) if gg > 1e-6 else np.zeros(lab.shape[:2], np.float32)
+    off = np.linalg.norm(ab - s[..., None] * g, axis=2)
+    return (lab[..., 0] < bg[0] - 3.0) & (off < 8.0)
+
+
+def _colour_foreground(bgr: np.ndarray, path: str = "image") -> tuple[np.ndarray, float, np.ndarray]:
+    """Foreground = pixels whose Lab colour is far from the background (Otsu), cast shadows
+    (darker, less saturated background) excluded unless they would be most of it.
+    Returns (mask, 99.5th percentile of the colour distance, Lab image)."""
+    h, w = bgr.shape[:2]
+    lab = cv2.cvtColor(bgr.astype(np.float32) * (1.0 / 255.0), cv2.COLOR_BGR2Lab)
+    bg = _background_lab(lab, path)
+    dist = np.sqrt(((lab - bg) ** 2).sum(axis=2))
+    hi = float(np.percentile(dist, 99.5))
+    if hi < 8.0:  # nothing stands out from the background by more than a faint shade
+        return np.zeros((h, w), np.uint8), hi, lab
+    d8 = np.clip(dist * (255.0 / hi), 0, 255).astype(np.uint8)
+    t8, _ = cv2.threshold(d8, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    thr = max(t8 * hi / 255.0, 6.0)
+    fg = dist > thr
+    shade = fg & _shadow(lab, bg)
+    if np.count_nonzero(shade) < 0.5 * np.count_nonzero(fg):  # a grey leaf is not its own shadow
+        fg &= ~shade
+    return np.where(fg, 255, 0).astype(np.uint8), hi, lab
+
+
+def _restore_petiole(raw: np.ndarray, opened: np.ndarray, leaf: np.ndarray, lab: np.ndarray | None) -> np.ndarray:
+    """Give back thin pieces the clean-up opening cut off the leaf (a petiole thinner than the
+    opening disk): a removed piece touching the leaf, away from the image border, at least 3×
+    longer than wide, longer than 5 % of the leaf size and (in a colour photo) of the leaf's
+    colour — a grid line of graph paper touching the margin is not a petiole."""
+    removed = cv2.bitwise_and(raw, cv2.bitwise_not(opened))
+    if not removed.any():
+        return leaf
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(removed, connectivity=8)
+    ring = cv2.dilate(leaf, _disk(5))
+    size = math.sqrt(max(np.count_nonzero(leaf), 1))
+    H, W = leaf.shape
+    out = leaf.copy()
+    leaf_colour = None if lab is None else np.median(lab[leaf > 0][:: max(1, np.count_nonzero(leaf) // 20000)], axis=0)
+    for k in range(1, n):
+        x, y, w, h, area = stats[k]
+        if x == 0 or y == 0 or x + w >= W or y + h >= H or area < 6:
+            continue
+        piece = lab[y : y + h, x : x + w] == k
+        if not np.any(piece & (ring[y : y + h, x : x + w] > 0)):
+            continue
+        (_, _), (a, b), _ = cv2.minAreaRect(np.column_stack(np.nonzero(piece)[::-1]).astype(np.float32))
+        long, short = max(a, b), max(min(a, b), 1.0)
+        if long < 3.0 * short or long < 0.05 * size:
+            continue
+        if leaf_colour is not None and np.linalg.norm(np.median(lab[y : y + h, x : x + w][piece], axis=0) - leaf_colour) > 25.0:
+            continue
+        out[y : y + h, x : x + w][piece] = 255
+    return out
+
+
+def segment_leaf(img: np.ndarray, path: str = "image") -> np.ndarray:
+    """Binary mask (uint8 0/255) of the one leaf in ``img`` (BGR or BGRA uint8).
+
+    Uses the alpha channel when it is informative, else the Lab colour distance to the
+    background (estimated from a border strip, or from the corners when the leaf touches the
+    frame), thresholded with Otsu; cast shadows are background.  Thin clutter (graph paper
+    grid lines, specks) is removed by a small opening (a petiole it cuts off is given back),
+    small gaps are closed, the largest component that does not run along the image border wins
+    (a ruler or colour chart lying at the edge loses), and its holes are filled.
+
+    Raises LeafsimError ``<path>: no leaf found (...)`` when nothing leaf-sized stands out, and
+    ``<path>: ... leaf-sized regions`` when there is more than one leaf.
+    """
+    return segment_with_holes(img, path)[0]
+
+
+def segment_with_holes(img: np.ndarray, path: str = "image") -> tuple[np.ndarray, np.ndarray]:
+    """:func:`segment_leaf` and the holes it filled that are real openings of the blade:
+    (filled mask, hole mask), both uint8 0/255.  A hole is kept when the cleaned foreground
+    (thin clutter removed, small gaps closed) leaves it open and it covers at least
+    ``HOLE_MIN_FRACTION`` of the leaf (closed sinuses where lobes overlap; specks and glints
+    are filled)."""
+    if img is None or img.ndim != 3 or img.shape[2] not in (3, 4):
+        raise LeafsimError(f"{path}: no leaf found (expected a colour image)")
+    h, w = img.shape[:2]
+    diag = math.hypot(w, h)
+    fg = lab = None
+    if img.shape[2] == 4 and _alpha_informative(img[..., 3]):
+        fg = np.where(img[..., 3] >= 128, 255, 0).astype(np.uint8)
+        k_open = max(3, int(round(0.003 * diag)))
+    if fg is None:
+        fg, spread, lab = _colour_foreground(np.ascontiguousarray(img[..., :3]), path)
+        if not fg.any():
+            raise LeafsimError(f"{path}: no leaf found (the image is blank: nothing differs from the background colour)")
+        k_open = max(3, int(round(0.005 * diag)))
+    k_close = max(3, int(round(0.006 * diag)))
+    opened = cv2.morphologyEx(fg, cv2.MORPH_OPEN, _disk(k_open))
+    leaf = _pick_leaf(cv2.morphologyEx(opened, cv2.MORPH_CLOSE, _disk(k_close)), path)
+    filled = _fill_holes(_restore_petiole(fg, opened, leaf, lab))
+    return filled, kept_holes(filled, leaf, HOLE_MIN_FRACTION)
+
+
+def _pick_leaf(fg: np.ndarray, path: str) -> np.ndarray:
+    """The leaf component of a cleaned foreground mask (see :func:`segment_leaf`)."""
+    h, w = fg.shape
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
+    if n <= 1:
+        raise LeafsimError(f"{path}: no leaf found (no region stands out from the background)")
+    areas = stats[1:, cv2.CC_STAT_AREA].astype(float)
+    min_area = MIN_LEAF_FRACTION * h * w
+    # share of the image border each component covers
+    border = np.concatenate([lab[0, :], lab[-1, :], lab[1:-1, 0], lab[1:-1, -1]])
+    border_frac = np.bincount(border, minlength=n)[1:].astype(float) / border.size
+    big = areas >= min_area
+    if not big.any():
+        raise LeafsimError(
+            f"{path}: no leaf found (largest region covers {100 * areas.max() / (h * w):.2f} % of the image, "
+            f"expected at least {100 * MIN_LEAF_FRACTION:g} %)")
+    inner = big & (border_frac < 0.08)
+    pool = inner if inner.any() else big
+    ranked = np.argsort(np.where(pool, -areas, np.inf), kind="stable")
+    k = 1 + int(ranked[0])
+    if pool.sum() > 1 and areas[ranked[1]] >= SECOND_LEAF_FRACTION * areas[ranked[0]]:
+        raise LeafsimError(
+            f"{path}: found {int(np.count_nonzero(pool & (areas >= SECOND_LEAF_FRACTION * areas[ranked[0]])))} leaf-sized "
+            f"regions ({areas[ranked[0]]:.0f} and {areas[ranked[1]]:.0f} px); expected one leaf per photo (crop it to one leaf)")
+    return np.where(lab == k, 255, 0).astype(np.uint8)

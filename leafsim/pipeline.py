@@ -1,0 +1,144 @@
+"""The pipeline's stage order, in one place: species entry → outline in metres (stage 1,
+:mod:`leafsim.outline`) → vein graph (stage 2, :mod:`leafsim.veins`) → blade model (stage 3,
+:mod:`leafsim.blade`).  Every driver (the CLI, scenes, compare, export, the accuracy study,
+the GUI's session) builds a leaf with :func:`build_leaf` and simulates it with
+:class:`leafsim.sim.run.Run`.
+
+>>> leaf = build_leaf(get_species("oak"), params, seed=0)   # doctest: +SKIP
+>>> leaf.model.particle_count                                # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from leafsim.base.geometry import (
+    OUTLINE_END_TOLERANCE, LeafShape, distance_to_polygon, holes_problem, outline_problem, points_in_polygon,
+    polygon_area, resample_closed, targets_problem,
+)
+from leafsim.blade.budget import check_mesh_budget
+from leafsim.blade.build import build_blade
+from leafsim.config.params import ParamSet
+from leafsim.config.species import Species
+from leafsim.outline.drawn import drawn_contour
+from leafsim.outline.trace import to_leaf_shape, trace_outline
+from leafsim.sim.model import Model
+from leafsim.veins.graph import VeinGraph
+from leafsim.veins.grow import grow_veins
+
+
+def leaf_shape(sp: Species, params: ParamSet | None = None) -> LeafShape:
+    """The species' outline in world metres (photo traced, or drawn outline scaled).
+
+    Raises LeafsimError naming the config, species and key when the outline cannot be a leaf
+    blade (see :func:`leafsim.base.geometry.outline_problem`).
+    """
+    params = params if params is not None else sp.params
+    n = params["outline.points"]
+    if sp.image is None:
+        c = drawn_contour(sp) * sp.length_m
+        c = resample_closed(c, n)
+        if polygon_area(c) < 0:
+            c = c[::-1]
+        apex = np.array([0.0, sp.length_m])
+        shape = LeafShape(contour=c, base=np.zeros(2), apex=apex, lobes=np.empty((0, 2)), length=sp.length_m,
+                          px_to_world=np.array([[1.0, 0, 0], [0, 1.0, 0]]), image=None, image_size=None)
+        key = "outline.teeth" if sp.teeth else "outline"
+    else:
+        traced = species_trace(sp, params)
+        _check_given_ends(sp, traced)
+        shape = to_leaf_shape(traced, sp.length_m)
+        key = "image"
+    problem = outline_problem(shape.contour, shape.base, shape.apex) or holes_problem(shape.holes, shape.contour)
+    if problem:
+        raise sp.error(key, f"the outline {problem}")
+    return shape
+
+
+#: traced photos kept for reuse (outline, texture and compare trace the same photo)
+_TRACES: dict = {}
+_TRACE_KEYS = ("outline.simplify", "outline.points", "outline.lobe_depth", "limits.image_pixels")
+
+
+def trace_photo(path, params: ParamSet, base_px=None, apex_px=None):
+    """:func:`leafsim.outline.trace.trace_outline`, remembered per file (path, size, modification
+    time), given ends and outline parameters; the last few traces are kept."""
+    import os
+
+    try:
+        st = os.stat(path)
+        stamp = (st.st_size, st.st_mtime_ns)
+    except OSError:
+        stamp = None  # trace_outline reports the missing file
+    key = (str(path), stamp, base_px, apex_px, tuple(params[k] for k in _TRACE_KEYS))
+    if stamp is None or key not in _TRACES:
+        traced = trace_outline(path, params, base_px=base_px, apex_px=apex_px)
+        if stamp is None:
+            return traced
+        while len(_TRACES) >= 8:
+            _TRACES.pop(next(iter(_TRACES)))
+        _TRACES[key] = traced
+    return _TRACES[key]
+
+
+def species_trace(sp: Species, params: ParamSet | None = None):
+    """The species photo traced with its config's base and apex."""
+    return trace_photo(sp.image, params if params is not None else sp.params, sp.base_px, sp.apex_px)
+
+
+def _check_given_ends(sp: Species, traced) -> None:
+    """``base_px`` / ``apex_px`` of a photo species must lie on (or inside) the traced leaf."""
+    c = traced.contour_px
+    size = float(np.ptp(c, axis=0).max())
+    for name, given in (("base_px", sp.base_px), ("apex_px", sp.apex_px)):
+        if given is None:
+            continue
+        q = np.asarray(given, float).reshape(1, 2)
+        if points_in_polygon(q, c)[0]:
+            continue
+        d = float(distance_to_polygon(q, c)[0])
+        if d > OUTLINE_END_TOLERANCE * size:
+            raise sp.error(name, f"({q[0, 0]:.6g}, {q[0, 1]:.6g}) lies {d:.4g} px outside the leaf traced in {sp.image} "
+                                 f"({traced.image_size[0]}×{traced.image_size[1]} px; expected a pixel on its margin)")
+
+
+def species_veins(sp: Species, shape: LeafShape, params: ParamSet, seed: int) -> VeinGraph:
+    """Grow the venation of a species (config targets win over automatic ones)."""
+    targets = None if sp.targets is None else sp.targets * sp.length_m
+    if targets is not None:
+        problem = targets_problem(targets, shape.contour, shape.length)
+        if problem:
+            raise sp.error("targets", problem)
+    return grow_veins(shape, params, seed, targets=targets, main_origin=sp.main_origin, lateral_profile=sp.lateral_profile)
+
+
+def resolve_params(sp: Species, overrides: dict | None = None) -> ParamSet:
+    """Species parameters with user overrides applied (validated)."""
+    return sp.params.with_overrides(overrides or {}, where="--set")
+
+
+class BuiltLeaf(NamedTuple):
+    """What :func:`build_leaf` makes: the outline in metres, the vein graph, the blade model."""
+
+    shape: LeafShape
+    veins: VeinGraph
+    model: Model
+
+
+def build_leaf(sp: Species, params: ParamSet, seed: int, report=None) -> BuiltLeaf:
+    """Species entry → :class:`BuiltLeaf` (shape, veins, model): outline in metres, vein graph,
+    blade Model.
+
+    ``report(fraction, text)`` is called before each stage (progress bars; it may raise to
+    cancel a build between stages)."""
+    report = report or (lambda p, t: None)
+    report(0.02, "outline: tracing the leaf contour")
+    shape = leaf_shape(sp, params)
+    check_mesh_budget(shape, params)  # refuse a too-large model before growing the veins
+    report(0.2, "veins: growing the venation")
+    veins = species_veins(sp, shape, params, seed)
+    report(0.5, "blade: particles, Delaunay/Voronoi layers, springs")
+    model = build_blade(shape, veins, params, seed)
+    return BuiltLeaf(shape, veins, model)

@@ -1,0 +1,9 @@
+"""layout."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def leaf_dir(out: Path, name: str) -> Path:
+    return Path(out) / "leaves" / name

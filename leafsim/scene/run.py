@@ -1,0 +1,389 @@
+"""Scenes: many leaves, only the effects they call for, run in parallel (core: no OpenGL).
+
+A scene file (JSON, strictly validated: every error names the file and the key) declares leaf
+groups — species, count, seeds, effects, the stage at which to stop, level of detail and
+outputs — and a layout that places the finished leaves (``docs/scenes.md`` has the format).
+:func:`run_scene` turns the groups into one :class:`~leafsim.scene.job.LeafJob` per leaf,
+skips the leaves a previous run finished, runs the rest on a local process pool or a Dask
+cluster (same code, same bytes), then places the leaves (:mod:`leafsim.scene.placement`) and
+renders an overview image offscreen (the only part that imports the renderer).
+
+Example
+-------
+>>> scene = load_scene("configs/scenes/forest_floor.json")          # doctest: +SKIP
+>>> report = run_scene(scene, "out/floor", workers=2)               # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from leafsim.base.errors import LeafsimError
+from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
+from leafsim.base.fileio import atomic_write_bytes, read_json
+from leafsim.scene.job import LeafJob, is_done, run_leaf
+from leafsim.scene.layout import leaf_dir
+
+_TOP_KEYS = {"name", "description", "seed", "config", "layout", "overview", "groups"}
+_GROUP_KEYS = {"name", "species", "count", "seed", "seeds", "params", "effects", "stop", "lod", "output"}
+_STOP_KEYS = {"frames", "water_left", "season", "max_frames"}
+_LOD_KEYS = {"simulate", "show", "check"}
+_OUTPUT_KEYS = {"end_state", "every", "mesh", "layers", "veins", "texture", "stats"}
+_OVERVIEW_KEYS = {"width", "height", "pitch", "yaw"}
+_LAYOUT_KEYS = {"floor": {"kind", "size", "cell", "clearance"},
+                "canopy": {"kind", "radius", "height", "tilt"},
+                "row": {"kind", "gap"}}
+_NAME = re.compile(r"^[A-Za-z0-9_-]{1,40}$")
+DEFAULT_MAX_FRAMES = 100_000
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene file: ``jobs`` (one per leaf, in placement order), ``layout`` and
+    ``overview`` (dicts with every default filled in, or None for no image)."""
+
+    path: Path
+    name: str
+    seed: int
+    layout: dict
+    overview: dict | None
+    jobs: tuple
+
+
+class _Where:
+    """Builds one-line errors: ``FILE: group 'oak', key 'count': expected …``."""
+
+    def __init__(self, path: Path, ctx: str = ""):
+        self.path, self.ctx = path, ctx
+
+    def sub(self, ctx: str) -> "_Where":
+        return _Where(self.path, ctx)
+
+    def err(self, key: str | None, msg: str) -> LeafsimError:
+        where = ", ".join(x for x in (self.ctx, f"key '{key}'" if key else "") if x)
+        return LeafsimError(f"{self.path}: {where + ': ' if where else ''}{msg}")
+
+    def keys(self, obj, allowed: set, what: str, prefix: str = "") -> dict:
+        if not isinstance(obj, dict):
+            raise self.err(prefix.rstrip(".") or None, f"expected an object ({what})")
+        bad = sorted(set(obj) - allowed)
+        if bad:
+            raise self.err(prefix + bad[0], f"unknown key (expected one of {', '.join(sorted(allowed))})")
+        return obj
+
+    def int(self, obj: dict, key: str, default, lo: int, hi: int | None = None, prefix: str = "") -> int:
+        v = obj.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
+            rng = f"an integer ≥ {lo}" if hi is None else f"an integer in [{lo}, {hi}]"
+            raise self.err(prefix + key, f"expected {rng}, got {v!r}")
+        return v
+
+    def num(self, obj: dict, key: str, default, lo: float, hi: float, prefix: str = "") -> float:
+        v = obj.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi):
+            raise self.err(prefix + key, f"expected a number in [{lo:g}, {hi:g}], got {v!r}")
+        return float(v)
+
+    def range(self, obj: dict, key: str, default, lo: float, hi: float, prefix: str = "") -> tuple:
+        """A number or an increasing [low, high] pair within [lo, hi]."""
+        v = obj.get(key, default)
+        pair = v if isinstance(v, list) else [v, v]
+        ok = len(pair) == 2 and all(not isinstance(x, bool) and isinstance(x, (int, float)) and lo <= x <= hi for x in pair)
+        if not ok or pair[0] > pair[1]:
+            raise self.err(prefix + key, f"expected a number or a [low, high] pair in [{lo:g}, {hi:g}], got {v!r}")
+        return float(pair[0]), float(pair[1])
+
+    def choice(self, obj: dict, key: str, default, choices, prefix: str = ""):
+        v = obj.get(key, default)
+        if v not in choices:
+            raise self.err(prefix + key, f"expected one of {', '.join(str(c) for c in choices)}, got {v!r}")
+        return v
+
+    def bool(self, obj: dict, key: str, default: bool, prefix: str = "") -> bool:
+        v = obj.get(key, default)
+        if not isinstance(v, bool):
+            raise self.err(prefix + key, f"expected true or false, got {v!r}")
+        return v
+
+
+def _read_json(path: Path) -> dict:
+    data = read_json(path, "scene file")
+    if not isinstance(data, dict):
+        raise LeafsimError(f"{path}: expected a JSON object with 'groups'")
+    return data
+
+
+def load_scene(path) -> Scene:
+    """Read and validate a scene file (LeafsimError naming the file and key otherwise)."""
+    from leafsim.config.species import load_library
+
+    path = Path(path)
+    data = _read_json(path)
+    w = _Where(path)
+    w.keys(data, _TOP_KEYS, "a scene")
+    seed = w.int(data, "seed", 0, 0)
+    config = data.get("config")
+    if config is not None and not isinstance(config, str):
+        raise w.err("config", "expected the path of a species config (relative to the scene file)")
+    config_path = None if config is None else str((path.parent / config).resolve())
+    lib = load_library(config_path)
+    digest = hashlib.sha256(Path(config_path or _default_config()).read_bytes()).hexdigest()[:16]
+    groups = data.get("groups")
+    if not isinstance(groups, list) or not groups:
+        raise w.err("groups", "expected a non-empty list of leaf groups")
+    jobs, names = [], set()
+    for i, g in enumerate(groups):
+        gw = w.sub(f"group {i + 1}" if not isinstance(g, dict) or not isinstance(g.get("name"), str) else f"group '{g['name']}'")
+        jobs += _group_jobs(gw, g, lib, config_path, digest, names)
+    name = data.get("name", path.stem)
+    if not isinstance(name, str):
+        raise w.err("name", "expected a string")
+    return Scene(path=path, name=name, seed=seed, layout=_layout(w, data.get("layout", {"kind": "row"})),
+                 overview=_overview(w, data.get("overview", {})), jobs=tuple(jobs))
+
+
+def _default_config() -> Path:
+    from leafsim.base.resources import default_config
+
+    return default_config()
+
+
+def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names: set) -> list[LeafJob]:
+    from leafsim.sim.effects import EFFECTS
+
+    w.keys(g, _GROUP_KEYS, "a leaf group")
+    name = g.get("name")
+    if not isinstance(name, str) or not _NAME.match(name) or name in names:
+        raise w.err("name", f"expected a unique group name of letters, digits, '_' or '-' (used in file names), got {name!r}")
+    names.add(name)
+    sp = g.get("species")
+    if sp not in lib:
+        raise w.err("species", f"unknown species {sp!r} (known: {', '.join(sorted(lib))})")
+    count = w.int(g, "count", None, 1)
+    seeds = _seeds(w, g, count)
+    params = g.get("params", {})
+    if not isinstance(params, dict):
+        raise w.err("params", "expected an object of parameter values")
+    lib[sp].params.with_overrides(params, where=f"{w.path}: {w.ctx}, key 'params'")
+    effects = g.get("effects")
+    if effects is not None:
+        if not isinstance(effects, list) or any(e not in EFFECTS for e in effects):
+            raise w.err("effects", f"expected a list of effect names from {', '.join(EFFECTS)}, got {effects!r}")
+        effects = tuple(effects)
+    stop = _stop(w, g.get("stop"))
+    lod, check = _lod(w, g.get("lod"))
+    output = _output(w, g.get("output", {}))
+    jobs = []
+    for k, s in enumerate(seeds):
+        st = dict(stop)
+        if st["kind"] == "season":  # a [low, high] range: each leaf's own season from its seed
+            lo, hi = st["value"]
+            st["value"] = float(lo + (hi - lo) * np.random.default_rng([s, 7]).random())
+        jobs.append(LeafJob(name=f"{name}-{k:03d}", species=sp, config=config, overrides=dict(params), seed=s,
+                            effects=effects, stop=st, lod=lod, check_lod=lod is not None and k < check,
+                            output=output, config_digest=digest, meta={"group": name}))
+    return jobs
+
+
+def _seeds(w: _Where, g: dict, count: int) -> list[int]:
+    if "seeds" in g:
+        s = g["seeds"]
+        if "seed" in g:
+            raise w.err("seeds", "give either 'seed' (the first of count consecutive seeds) or 'seeds', not both")
+        if not isinstance(s, list) or len(s) != count or any(isinstance(x, bool) or not isinstance(x, int) or x < 0 for x in s):
+            raise w.err("seeds", f"expected a list of {count} non-negative integers (one per leaf)")
+        return list(s)
+    first = w.int(g, "seed", 0, 0)
+    return list(range(first, first + count))
+
+
+def _stop(w: _Where, s) -> dict:
+    if s is None:
+        raise w.err("stop", "missing: give one of frames, water_left (dried to that water fraction) or season")
+    w.keys(s, _STOP_KEYS, "a stopping criterion", "stop.")
+    kinds = [k for k in ("frames", "water_left", "season") if k in s]
+    if len(kinds) != 1:
+        raise w.err("stop", f"expected exactly one of frames, water_left, season (got {', '.join(kinds) or 'none'})")
+    k = kinds[0]
+    mf = w.int(s, "max_frames", DEFAULT_MAX_FRAMES, 1, None, "stop.")
+    if k == "frames":
+        v = w.int(s, "frames", None, 0, None, "stop.")
+    elif k == "water_left":
+        v = w.num(s, "water_left", None, 0.0, 1.0, "stop.")
+    else:
+        v = w.range(s, "season", None, 0.0, 10.0, "stop.")
+    return {"kind": k, "value": v, "max_frames": max(mf, v) if k == "frames" else mf}
+
+
+def _lod(w: _Where, lod) -> tuple[dict | None, int]:
+    if lod is None:
+        return None, 0
+    w.keys(lod, _LOD_KEYS, "a level of detail", "lod.")
+    sim = w.num(lod, "simulate", None, 0.002, 0.1, "lod.")
+    show = w.num(lod, "show", None, 0.002, 0.1, "lod.")
+    if show >= sim:
+        raise w.err("lod.show", f"expected a finer mesh spacing than lod.simulate = {sim:g}, got {show:g}")
+    return {"simulate": sim, "show": show}, w.int(lod, "check", 1, 0, None, "lod.")
+
+
+def _output(w: _Where, o) -> dict:
+    w.keys(o, _OUTPUT_KEYS, "the outputs", "output.")
+    mesh = o.get("mesh")
+    if mesh is not None and mesh not in FORMATS:
+        raise w.err("output.mesh", f"expected null or one of {', '.join(FORMATS)}, got {mesh!r}")
+    every = w.int(o, "every", 0, 0, None, "output.")
+    if every and mesh in ("obj", "ply"):
+        raise w.err("output.mesh", f"{mesh} holds one static shape; frames every K need glb or gltf")
+    out = {"end_state": w.bool(o, "end_state", True, "output."), "every": every, "mesh": mesh,
+           "layers": w.choice(o, "layers", "shell", LAYERS, "output."), "veins": w.bool(o, "veins", False, "output."),
+           "texture": w.choice(o, "texture", "colours", TEXTURES, "output."), "stats": w.bool(o, "stats", False, "output.")}
+    if out["texture"] == "photo" and mesh == "ply":
+        raise w.err("output.texture", "PLY carries vertex colours, not a photo texture")
+    return out
+
+
+def _layout(w: _Where, lay) -> dict:
+    if not isinstance(lay, dict) or lay.get("kind") not in _LAYOUT_KEYS:
+        raise w.err("layout.kind", f"expected one of {', '.join(_LAYOUT_KEYS)}")
+    kind = lay["kind"]
+    w.keys(lay, _LAYOUT_KEYS[kind], f"a {kind} layout", "layout.")
+    if kind == "floor":
+        size = lay.get("size", [0.5, 0.5])
+        if not isinstance(size, list) or len(size) != 2 or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not 0.01 <= x <= 100 for x in size):
+            raise w.err("layout.size", f"expected [x, y] in metres (0.01–100), got {size!r}")
+        return {"kind": kind, "size": [float(x) for x in size], "cell": w.num(lay, "cell", 0.002, 1e-4, 0.05, "layout."),
+                "clearance": w.num(lay, "clearance", 0.0005, 0.0, 0.05, "layout.")}
+    if kind == "canopy":
+        return {"kind": kind, "radius": w.num(lay, "radius", 1.0, 0.05, 50.0, "layout."),
+                "height": w.num(lay, "height", 3.0, 0.0, 100.0, "layout."),
+                "tilt": list(w.range(lay, "tilt", [20.0, 70.0], 0.0, 90.0, "layout."))}
+    return {"kind": kind, "gap": w.num(lay, "gap", 0.01, 0.0, 10.0, "layout.")}
+
+
+def _overview(w: _Where, ov) -> dict | None:
+    if ov is False:
+        return None
+    w.keys(ov, _OVERVIEW_KEYS, "the overview image (or false)", "overview.")
+    return {"width": w.int(ov, "width", 1600, 64, 8192, "overview."), "height": w.int(ov, "height", 1000, 64, 8192, "overview."),
+            "pitch": w.num(ov, "pitch", 55.0, -89.0, 90.0, "overview."), "yaw": w.num(ov, "yaw", -90.0, -360.0, 360.0, "overview.")}
+
+
+# ------------------------------------------------------------------ running
+
+def check_out_dir(out) -> Path:
+    """The output folder, created if its parent exists; LeafsimError if it cannot be written."""
+    import os
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise LeafsimError(f"--out {out}: exists and is not a folder")
+    try:
+        (out / "leaves").mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise LeafsimError(f"--out {out}: cannot create the output folder ({e.strerror or e})") from None
+    if not os.access(out, os.W_OK) or not os.access(out / "leaves", os.W_OK):
+        raise LeafsimError(f"--out {out}: folder is not writable")
+    return out
+
+
+def _local_results(jobs: list, out: Path, workers: int):
+    """Yield results of ``jobs`` from a local process pool (spawned workers: no forked
+    numba/OpenGL state)."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+        futs = {pool.submit(run_leaf, j, str(out)): j for j in jobs}
+        for f in as_completed(futs):
+            try:
+                yield f.result()
+            except Exception as e:  # a worker process died: this leaf failed, the pool may go on
+                yield {"name": futs[f].name, "ok": False, "error": f"worker process failed: {type(e).__name__}: {e}"}
+
+
+def _dask_results(jobs: list, out: Path, address: str):
+    """Yield results of ``jobs`` from the Dask cluster at ``address`` (its workers must see ``out``)."""
+    from distributed import Client, as_completed
+
+    try:
+        client = Client(address, timeout="20s")
+    except Exception as e:
+        raise LeafsimError(f"--scheduler {address}: cannot connect to the Dask scheduler ({type(e).__name__}: {e})") from None
+    try:
+        futs = client.map(run_leaf, jobs, out=str(out.resolve()), pure=False, key=[f"leaf-{j.name}-{j.key}" for j in jobs])
+        names = {f.key: j.name for f, j in zip(futs, jobs)}
+        for f in as_completed(futs):
+            try:
+                yield f.result()
+            except Exception as e:
+                yield {"name": names[f.key], "ok": False, "error": f"dask worker failed: {type(e).__name__}: {e}"}
+    finally:
+        client.close()
+
+
+def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None, progress: bool = True,
+              render: bool = True) -> dict:
+    """Run every leaf of ``scene`` not already done in ``out``, then place the leaves, write
+    ``placement.json``, ``summary.json`` and the overview image; returns the run report
+    (also written as ``run.json``: the only file with timings)."""
+    from tqdm import tqdm
+
+    if workers < 1:
+        raise LeafsimError(f"--workers {workers}: expected at least 1")
+    out = check_out_dir(out)
+    t0 = time.perf_counter()
+    todo = [j for j in scene.jobs if not is_done(j, out)]
+    results = []
+    if todo:
+        gen = _dask_results(todo, out, scheduler) if scheduler else _local_results(todo, out, min(workers, len(todo)))
+        with tqdm(total=len(todo), desc=scene.name, unit="leaf", disable=None if progress else True) as bar:
+            for r in gen:
+                results.append(r)
+                bar.update(1)
+                if not r["ok"]:
+                    bar.write(f"leafsim: leaf {r['name']} failed: {r['error']}", file=sys.stderr)
+    sim_s = time.perf_counter() - t0
+    failed = sorted((r for r in results if not r["ok"]), key=lambda r: r["name"])
+    report = {"scene": scene.name, "out": str(out), "leaves": len(scene.jobs), "ran": len(todo) - len(failed),
+              "skipped": len(scene.jobs) - len(todo), "failed": [{"name": r["name"], "error": r["error"]} for r in failed],
+              "workers": None if scheduler else workers, "scheduler": scheduler, "simulate_s": round(sim_s, 3),
+              "leaves_per_s": round(len(todo) / sim_s, 4) if todo and sim_s > 0 else None,
+              "leaf_s": {r["name"]: round(r["seconds"], 3) for r in sorted(results, key=lambda r: r["name"])},
+              "leaf_cpu_s": round(sum(r.get("cpu_s", 0.0) for r in results), 3)}
+    t1 = time.perf_counter()
+    compose(scene, out, render=render)
+    report["compose_s"] = round(time.perf_counter() - t1, 3)
+    report["total_s"] = round(time.perf_counter() - t0, 3)
+    atomic_write_bytes(out / "run.json", (json.dumps(report, indent=1, sort_keys=True) + "\n").encode(), "run report")
+    return report
+
+
+def compose(scene: Scene, out: Path, render: bool = True) -> None:
+    """Place the finished leaves (in scene order), write ``placement.json`` and ``summary.json``
+    and render ``overview.png`` (when the scene asks for one)."""
+    from leafsim.scene.placement import load_views, merge_views, place
+
+    done = [j for j in scene.jobs if is_done(j, out)]
+    views = load_views(out, done)
+    placed = place(scene.layout, scene.seed, done, views)
+    summary = {"scene": scene.name, "leaves": {}, "lod": {}}
+    for j in done:
+        d = json.loads((leaf_dir(out, j.name) / "done.json").read_text())
+        summary["leaves"][j.name] = {k: v for k, v in d.items() if k != "key"}
+        lod = leaf_dir(out, j.name) / "lod.json"
+        if lod.exists():
+            summary["lod"][j.name] = json.loads(lod.read_text())
+    atomic_write_bytes(out / "placement.json", (json.dumps(placed, indent=1, sort_keys=True) + "\n").encode(), "placement")
+    atomic_write_bytes(out / "summary.json", (json.dumps(summary, indent=1, sort_keys=True) + "\n").encode(), "summary")
+    if render and scene.overview is not None and done:
+        from leafsim.render.overview import render_overview
+
+        render_overview(merge_views(views, placed), scene.layout, scene.overview, out / "overview.png")

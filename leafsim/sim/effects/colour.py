@@ -1,0 +1,38 @@
+"""The colour effect (SPEC §9): pigment kinetics per particle, driven by the season clock and
+the local relative water (:mod:`leafsim.sim.pigments`)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from leafsim.sim.model import Model, State
+from leafsim.sim.pigments import age_at, init_pigments, step_pigments
+
+
+class Colour:
+    """Pigment aging (SPEC §9): chlorophyll, carotenoids, anthocyanins and browning per
+    particle, driven by the season clock and the local relative water.  The pigments live in
+    ``State.pigments`` (made by :meth:`init`), so a state snapshot carries its colour."""
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.w_rel = np.zeros(model.particle_count, np.float32)
+        self.inv_w0 = 1.0 / np.maximum(model.particle_water0, 1e-300)
+
+    def configure(self, params):
+        self.params = params
+
+    def init(self, state: State, seed: int) -> State:
+        """``state`` with summer pigments (aged to the clock's start, ``colour.season``)."""
+        m = self.model
+        state = replace(state, pigments=init_pigments(m.particle_count, self.params, seed=seed,
+                                                      rest_relative_mass=m.areal_mass0))
+        self.apply(state, 0.0)
+        return state
+
+    def apply(self, state: State, dt: float) -> None:
+        np.multiply(state.particle_water, self.inv_w0, out=self.w_rel, casting="unsafe")
+        np.clip(self.w_rel, 0.0, 1.0, out=self.w_rel)
+        step_pigments(state.pigments, self.w_rel, age_at(state.time, self.params), dt, self.params)

@@ -1,0 +1,267 @@
+"""The dynamics effect: XPBD substeps with springs, bending hinges, thickness volumes, ground
+contact with friction and self-contacts, over coloured constraint sets (numba kernels of
+:mod:`leafsim.sim.kernels.pbd`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from leafsim.sim.kernels import blocked as kb
+from leafsim.sim.kernels import pbd as kp
+from leafsim.sim.model import (
+    LAYER_T, Model, State,
+)
+
+#: self-contact candidates are searched (spatial hash) at (1 + this) × the contact radius and
+#: kept until the particles have moved against each other by what is left of that skin; the
+#: projections walk only the near list filtered from it (:data:`CONTACT_NEAR_SKIN`).  The
+#: results do not depend on either skin (canonical pair order; tests/test_kernels.py).
+#: Measured on the bench's folded leaf: docs/performance.md.
+CONTACT_SKIN = 3.0
+#: the near list holds the searched pairs closer than (1.05 + this) × the contact radius
+CONTACT_NEAR_SKIN = 0.25
+
+
+def effective_substeps(params) -> int:
+    """Substeps per frame: ``dynamics.substeps`` at the default mesh spacing r₀, scaled by
+    (r₀ / r)² with ``dynamics.substep_scaling``.  A bending hinge's XPBD stiffness relative to
+    its particles' inertia per substep, k h² / (m ℓ²), falls like h² / r⁴; Gauss–Seidel carries
+    a steady load (the blade's weight) across the mesh only while that number is not small,
+    so h ∝ r² keeps a refined mesh converging (measured in docs/accuracy.md)."""
+    from leafsim.config.params import PARAMS
+
+    n = int(params["dynamics.substeps"])
+    if params["dynamics.substep_scaling"]:
+        n = round(n * (PARAMS["mesh.spacing"].default / params["mesh.spacing"]) ** 2)
+    return int(min(max(n, 1), 1000))
+
+
+class Dynamics:
+    """Gravity, XPBD constraints (distance, bending hinges, thickness), ground contact with
+    friction, self-collision, damping and the Voronoi-layer handling (SPEC §8).
+
+    The kernels see every constraint in *projection order*: the model's colour order, sorted by
+    largest particle index inside each colour (no two constraints of one colour share a
+    particle, so this changes no result and keeps the particle accesses nearly sequential),
+    with uint32 indices.
+    Per frame every constraint gets a record in that order (springs: rest length, compliance,
+    1/W and both inverse masses; hinges: rest angle, compliance and four inverse masses;
+    volumes: rest volume and four inverse masses), and the hinges and volumes are projected in
+    SIMD blocks of one colour (:mod:`.kernels.blocked`)."""
+
+    def __init__(self, model: Model):
+        self.model = model
+        n = model.particle_count
+        self.q_old = np.zeros((n, 3))
+        self.invm = np.zeros(n)
+        self.pen = np.zeros(n)
+        self.sperm = projection_order(model.spring_ij, model.spring_colour_start)
+        self.sij = model.spring_ij[self.sperm].astype(np.uint32)
+        self.srec = np.zeros((model.spring_count, 5))
+        self.slam = np.zeros(model.spring_count)
+        self.hperm = projection_order(model.hinge_idx, model.hinge_colour_start)
+        self.hidx = model.hinge_idx[self.hperm].astype(np.uint32)
+        self.hrest = np.zeros(model.hinge_count)
+        self.hlam = np.zeros(model.hinge_count)
+        self.hrec = np.zeros((6, model.hinge_count))
+        self.hblocks = kb.block_starts(model.hinge_colour_start)
+        self.vperm = projection_order(model.vol_idx, model.vol_colour_start)
+        self.vidx = model.vol_idx[self.vperm].astype(np.uint32)
+        self.vrest = np.zeros(model.vol_count)
+        self.vrec = np.zeros((5, model.vol_count))
+        self.vblocks = kb.block_starts(model.vol_colour_start)
+        self.blockbuf = kb.block_buffer()
+        self.no_hinges = (np.zeros((0, 4), np.uint32), np.zeros((6, 0)), np.zeros(0), np.zeros(1, np.int64))
+        self.hgt = np.zeros(model.vol_count)
+        self.qa = np.zeros((n, 3))
+        self.dint = np.zeros((n, 3))
+        # hinge stiffness geometry factor 3|e|²/(A1+A2) (discrete shells), projection order
+        self.hgeom = (3.0 * model.hinge_edge_len ** 2 / np.maximum(model.hinge_area, 1e-30))[self.hperm]
+        self.halpha = np.zeros(model.hinge_count)
+        self.hrod = np.zeros(model.hinge_count)  # vein bending stiffness of the hinges that bend a vein
+        T = np.flatnonzero(model.particle_layer == LAYER_T)
+        self.T_idx = T.astype(np.int64)
+        self.T_springs = np.flatnonzero(model.spring_layer == 0)
+        # power of two ≥ 2 × |T| buckets: the contact hash uses a bit mask, not a 64-bit modulo
+        self.table = np.zeros(1 << max(2 * len(T) - 1, 1).bit_length(), np.int64)
+        self.out = np.zeros(3, np.int64)
+        self.nxt = np.zeros(len(T), np.int64)
+        # the contact lists (kp.update_contacts): searched pairs and the near ones, with the T
+        # positions (and rest positions) at the search and at the filtering, in T order (ascending,
+        # as kp.find_contacts needs); the lists double when a search fills them (the folded bench
+        # leaf needs 2.3 pairs per T particle)
+        self.pairs = np.zeros((4 * len(T) + 64, 2), np.int32)
+        self.near = np.zeros_like(self.pairs)
+        self.qc = np.zeros((len(T), 5))
+        self.qn = np.zeros((len(T), 3))
+        # search radius, search pairs (−1: none), searches, near reach, near pairs (−1: none),
+        # filterings, a search overflowed its list, pairs within reach were missed
+        self.cstate = np.array([0.0, -1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0])
+        self.last_iterations = 0
+        self.last_contacts = 0
+        self.last_uninverted = 0
+
+    @property
+    def contact_searches(self) -> int:
+        """Spatial-hash contact searches made so far (the Verlet skin skips the others)."""
+        return int(self.cstate[2])
+
+    def configure(self, params, effects):
+        m = self.model
+        dt = params["dynamics.dt"]
+        self.dt = dt
+        self.substeps = effective_substeps(params)
+        self.h = dt / self.substeps
+        # mass scaling (inertia × M, gravity ÷ M: the weight and every static force unchanged)
+        self.mscale = float(params["dynamics.mass_scaling"])
+        self.g = (-params["dynamics.gravity"] if effects["gravity"] else 0.0) / self.mscale
+        # damping ÷ √M with the inertia × M: the scaled leaf moves exactly like the real one in
+        # √M-stretched time (the same damping ratio); at the full rate the slowed modes were
+        # overdamped ×√M more and a curled leaf took M times, not √M, longer to settle
+        self.keep = math.exp(-params["dynamics.damping"] / math.sqrt(self.mscale) * self.h)
+        self.iters = params["dynamics.iterations"]
+        self.omega = params["dynamics.relaxation"]
+        self.tol = params["dynamics.tolerance"] * m.length
+        # membranes: k = E (h/2) ΣA/|e|² per layer (Van Gelder), veins add their rod E_v A_c / l
+        E, Ev, h = params["material.modulus"], params["material.vein_modulus"], m.thickness
+        k = E * 0.5 * h * m.spring_weight + Ev * m.spring_rod
+        self.salpha = 1.0 / np.maximum(k, 1e-300) / (self.h * self.h)
+        # bending: D = E h³ / 12(1 − ν²) on discrete-shell hinges, veins add E_v I / ℓ̄
+        self.kbend = E * h ** 3 / (12.0 * (1.0 - params["material.poisson"] ** 2))
+        self.kdry = params["material.dry_stiffening"]
+        np.multiply(Ev, m.hinge_rod[self.hperm], out=self.hrod)
+        self.replace = params["dynamics.voronoi"] == "replace"
+        self.scene = params["dynamics.scene"]
+        self.mu = params["dynamics.friction"]
+        self.radius = params["dynamics.collision_radius"] * m.spacing
+        self.skip2 = (params["dynamics.collision_skip"] * m.spacing) ** 2
+        self.cstate[1] = -1.0  # search again
+        self.pbd = effects["pbd"]
+        self.f32 = params["dynamics.precision"] == "float32"
+        self.bending = effects["bending"] and m.hinge_count > 0 and self.kbend > 0
+        self.ground = effects["ground"] and self.scene == "ground"
+        self.self_coll = effects["self_collision"]
+
+    def gather(self, state) -> tuple:
+        """This frame's inverse masses and constraint records in projection order (springs:
+        :func:`~.kernels.pbd.pack_springs`; hinges, from their compliances and rest angles:
+        :func:`~.kernels.blocked.pack_hinges`; volumes: :func:`~.kernels.blocked.pack_volumes`).
+        Returns the constraint tuple ``cons`` of :func:`~.kernels.pbd.iteration`."""
+        m = self.model
+        np.divide(1.0 / self.mscale, m.particle_cytosol + state.particle_water, out=self.invm)
+        if self.scene == "hanging":
+            self.invm[m.particle_pinned] = 0.0
+        kp.pack_springs(self.sperm, self.sij, self.invm, state.spring_rest, self.salpha, self.srec)
+        np.take(state.vol_rest, self.vperm, out=self.vrest)
+        kb.pack_volumes(self.vidx, self.invm, self.vrest, self.vrec)
+        if self.pbd and self.bending:
+            kp.hinge_compliance(self.hidx, state.particle_water, m.particle_water0, self.kbend, self.kdry, self.hgeom,
+                                self.hrod, 1.0 / (self.h * self.h), self.halpha)
+            np.take(state.hinge_rest, self.hperm, out=self.hrest)
+            kb.pack_hinges(self.hidx, self.invm, self.hrest, self.halpha, self.hrec)
+            hinges = (self.hidx, self.hrec, self.hlam, self.hblocks)
+        else:
+            hinges = self.no_hinges
+        return (self.sij, self.srec, self.slam) + hinges + (self.vidx, self.vrec, self.vblocks, self.blockbuf)
+
+    def apply(self, state: State):
+        m = self.model
+        cons = self.gather(state)
+        # contacts and the un-inversion keep to the tissue's size: as it shrinks (in the plane and
+        # through the thickness) so do the contact radius and the thickness (fixed values would
+        # hold a strongly shrunken leaf apart against its own springs)
+        shrunk = max(float(np.mean(state.spring_rest[self.T_springs] / m.spring_rest0[self.T_springs])), 0.1)
+        radius = self.radius * shrunk
+        # a snapshot to run the frame again from if a contact list overflowed so badly that
+        # pairs within reach were missed (cstate[7]; a list that merely filled is handled inside
+        # the frame and only grows before the next one)
+        snap = (state.particle_q.copy(), state.particle_qd.copy()) if self.pbd and self.self_coll else None
+        while True:
+            if self.cstate[6]:
+                self._grow_contact_lists()
+            out = self._frame(state, cons, radius, shrunk)
+            if not self.cstate[7]:
+                break
+            state.particle_q[:] = snap[0]
+            state.particle_qd[:] = snap[1]
+        self.last_iterations = int(out[0])
+        self.last_contacts = int(out[1])
+        self.last_uninverted = int(out[2])
+
+    def _grow_contact_lists(self) -> None:
+        """Twice the room for the contact lists, searched afresh."""
+        self.pairs = np.zeros((2 * len(self.pairs), 2), np.int32)
+        self.near = np.zeros_like(self.pairs)
+        self.cstate[1] = -1.0
+        self.cstate[4] = -1.0
+        self.cstate[6] = 0.0
+        self.cstate[7] = 0.0
+
+    def _frame(self, state: State, cons: tuple, radius: float, shrunk: float) -> np.ndarray:
+        """One :func:`~.kernels.pbd.frame` call on ``state`` (on float32 copies with
+        ``dynamics.precision`` float32); returns its counters."""
+        m = self.model
+        contact = (m.particle_rest, self.T_idx, radius, CONTACT_SKIN * radius, CONTACT_NEAR_SKIN * radius, self.skip2,
+                   self.table, self.nxt, self.pairs, self.qc, self.near, self.qn, self.cstate)
+        out = self.out
+        out[:] = 0
+        out[1] = self.last_contacts
+        out[2] = self.last_uninverted
+        q, qd, q_old, invm, pen, hgt, qa, dint = (state.particle_q, state.particle_qd, self.q_old, self.invm, self.pen,
+                                                  self.hgt, self.qa, self.dint)
+        if self.f32:  # the frame on float32 copies (the state stays float64 and holds their values)
+            w = self._f32_buffers()
+            cons = tuple(w.get(id(a), a) if a.dtype == np.float64 else a for a in cons)
+            for a in cons:
+                if a.dtype == np.float32:
+                    np.copyto(a, self._f64_of[id(a)], casting="same_kind")
+            contact = contact[:9] + (w["qc"], self.near, w["qn"], self.cstate)
+            np.copyto(w["q"], q, casting="same_kind")
+            np.copyto(w["qd"], qd, casting="same_kind")
+            np.copyto(w["invm"], invm, casting="same_kind")
+            q, qd, q_old, invm, pen, hgt, qa, dint = (w[k] for k in ("q", "qd", "q_old", "invm", "pen", "hgt", "qa", "dint"))
+        # the whole frame (all substeps and iterations) in one numba call
+        kp.frame(q, qd, q_old, invm, self.g, self.h, self.substeps,
+                 self.keep, self.iters, self.tol, cons, m.vol_idx,
+                 self.pbd, self.ground, pen, self.mu, self.self_coll, contact,
+                 self.replace, hgt, m.thickness * shrunk, self.scene != "hanging",
+                 qa, dint, self.omega, out)
+        if self.f32:
+            state.particle_q[:] = q
+            state.particle_qd[:] = qd
+        return out
+
+    def _f32_buffers(self) -> dict:
+        """float32 twins of the frame's float arrays (made once): by name for the per-particle
+        ones, by ``id`` of the float64 array for the constraint records (``_f64_of`` maps back);
+        the contact lists' positions ``qc`` and ``qn`` persist between frames like the float64
+        ones."""
+        if getattr(self, "_w32", None) is None:
+            n = self.model.particle_count
+            w = {k: np.zeros((n, 3), np.float32) for k in ("q", "qd", "q_old", "qa", "dint")}
+            w.update(invm=np.zeros(n, np.float32), pen=np.zeros(n, np.float32), hgt=np.zeros(len(self.hgt), np.float32),
+                     qc=self.qc.astype(np.float32), qn=self.qn.astype(np.float32))
+            self._f64_of = {}
+            for a in (self.srec, self.slam, self.hrec, self.hlam, self.vrec, self.blockbuf, self.no_hinges[1],
+                      self.no_hinges[2]):
+                b = a.astype(np.float32)
+                w[id(a)] = b
+                self._f64_of[id(b)] = a
+            self._w32 = w
+            self.cstate[1] = -1.0  # the float32 list is searched afresh
+        return self._w32
+
+
+def projection_order(idx: np.ndarray, colour_start: np.ndarray) -> np.ndarray:
+    """Permutation of constraints ``idx`` (k, p) that keeps the colour order ``colour_start``
+    and sorts each colour by its largest particle index (no two constraints of a colour share a
+    particle, so the order inside a colour changes no result).  Measured at 100 k particles,
+    interleaved: springs 9.9 → 9.0 ns and hinges 24.7 → 23.0 ns against the smallest index
+    (the largest-index particles are then visited in order; no difference on the maple leaf)."""
+    key = idx.max(axis=1) if len(idx) else np.zeros(0, np.int64)
+    parts = [a + np.argsort(key[a:b], kind="stable") for a, b in zip(colour_start[:-1], colour_start[1:])]
+    return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, np.int64)
+
+

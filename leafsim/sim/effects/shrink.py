@@ -1,0 +1,83 @@
+"""The shrink effect [Jeong eq. 2.10–2.11]: rest lengths, hinge rest angles (the bilayer
+curvature), thickness volumes and the Voronoi layer follow the tissue strain as water is lost."""
+
+from __future__ import annotations
+
+import numpy as np
+from leafsim.sim.kernels import shrink as ks
+from leafsim.sim.veinframe import hinge_alignment
+from leafsim.sim.model import (
+    LAYER_T, SPRING_LINK, SPRING_SURFACE, SPRING_VEIN, Model, State,
+)
+from leafsim.sim.kernels import PARALLEL_MIN_PARTICLES
+
+
+#: bilayer curvature gain κ = gain · Δε / h (prototype measured 1.3; Timoshenko equal layers 1.5)
+BILAYER_GAIN = 1.3
+
+
+#: largest rest angle a bending hinge may ask for [rad]: a curvature the mesh cannot resolve
+#: (radius below a few edge lengths) is clamped instead of fighting the stretch constraints
+HINGE_MAX_ANGLE = 0.35
+
+
+class Shrink:
+    """The rest shape as the tissue dries (SPEC §7), one consistent bent state:
+
+    * T springs (surface, veins): Jeong's law, σ per type, from the mass ratio;
+    * bending hinges: the bilayer rest angle θ0 = gain (ε_top − ε_bottom)/h × d (Timoshenko;
+      d the dual edge), which drying tissue keeps (plasticity); clamped, and 0 on hinges that
+      bend a main/lateral vein lengthwise;
+    * V springs: the top surface of that bent state, d (1 − h θ0 / d) × the T layer's shrink;
+    * links and thickness volumes: the tissue shrinks isotropically with its bottom layer, the
+      thickness too (h f), so the cross-section keeps its shape.
+
+    So every constraint agrees with one shape whenever the bilayer curvature is developable;
+    what remains is the physical frustration of a curvature that is not (cups), resolved by
+    the energy, not by the solver's order (two layers and hinges each demanding their own
+    curl made the result depend on the iteration count)."""
+
+    def __init__(self, model: Model):
+        self.model = model
+        t = model.spring_type
+        self.links = np.flatnonzero(t == SPRING_LINK).astype(np.int64)
+        ij = model.spring_ij[self.links]
+        # the triangle of each V particle → that triangle's three T springs
+        nT = int((model.particle_layer == LAYER_T).sum())
+        self.nT = nT
+        self.tri_springs = np.ascontiguousarray(model.vol_springs[np.argsort(model.vol_idx[:, 0])])
+        self.link_tri_springs = self.tri_springs[ij[:, 0] - nT]
+        # veins stay straight along their length: no bilayer curl on hinges that bend them;
+        # elsewhere the curl is resolved in the local vein frame (veinframe.py)
+        self.hinge_align = hinge_alignment(model)
+        self.hinge_curl = np.where(model.hinge_vein, 0.0, 1.0)
+
+    def configure(self, params):
+        t = self.model.spring_type
+        sig = np.zeros(len(t))
+        sig[t == SPRING_SURFACE] = params["shrink.sigma_surface_bottom"]
+        sig[t == SPRING_VEIN] = params["shrink.sigma_vein"]
+        self.sigma = sig
+        self.sig_top = params["shrink.sigma_surface_top"]
+        self.sig_bot = params["shrink.sigma_surface_bottom"]
+        self.alpha = params["shrink.alpha"]
+        self.l_min = params["shrink.l_min"]
+        self.setw = min(params["dynamics.plasticity"] * params["dynamics.dt"], 1.0)
+        beta = params["shrink.curl_anisotropy"]
+        self.hinge_curl = np.where(self.model.hinge_vein, 0.0, 1.0 + beta * self.hinge_align)
+
+    def apply(self, state: State):
+        m = self.model
+        fn = ks.shrink_springs_par if m.particle_count >= PARALLEL_MIN_PARTICLES else ks.shrink_springs
+        fn(m.spring_ij, m.spring_rest0, self.sigma, self.alpha, self.l_min,
+           m.particle_cytosol, state.particle_water, m.particle_mass0, state.spring_rest)
+        if m.hinge_count:
+            ks.hinge_targets(m.hinge_idx, m.hinge_spring_V, m.spring_ij, m.spring_rest0, self.sig_top, self.sig_bot,
+                             self.alpha, self.l_min, m.particle_cytosol, state.particle_water, m.particle_water0,
+                             m.particle_mass0, m.thickness, BILAYER_GAIN, self.setw, state.hinge_plastic, state.hinge_rest)
+            np.multiply(state.hinge_rest, self.hinge_curl, out=state.hinge_rest)
+            np.clip(state.hinge_rest, -HINGE_MAX_ANGLE, HINGE_MAX_ANGLE, out=state.hinge_rest)
+            ks.dual_targets(m.hinge_spring_V, m.spring_ij, self.tri_springs, self.nT, m.spring_rest0,
+                            state.hinge_rest, m.thickness, state.spring_rest)
+        ks.link_targets(self.links, self.link_tri_springs, m.spring_rest0, state.spring_rest)
+        ks.vol_targets(m.vol_springs, m.spring_rest0, state.spring_rest, m.vol_rest0, state.vol_rest)

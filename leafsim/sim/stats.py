@@ -1,0 +1,88 @@
+"""Per-frame statistics of a run: :func:`frame_stats` (water per layer, constraint residual,
+kinetic energy, NaN flag, ms per stage) and :class:`StatsStream`, the JSON-lines file that
+survives any kill."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import atomic_write_bytes
+from leafsim.sim.kernels.pbd import residual
+from leafsim.sim.model import LAYER_T, LAYER_V, Model, State
+
+
+def frame_stats(model: Model, state: State, ms: dict, sim=None) -> dict:
+    """Total water per layer, max residual |C|/l, kinetic energy [J], NaN flag, ms per stage."""
+    w = state.particle_water
+    lay = model.particle_layer
+    q, qd = state.particle_q, state.particle_qd
+    finite = bool(np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(w).all())
+    m = model.particle_cytosol + w
+    out = {
+        "frame": state.frame,
+        "time": state.time,
+        "water_T": float(w[lay == LAYER_T].sum()),
+        "water_V": float(w[lay == LAYER_V].sum()),
+        "residual": float(residual(q, model.spring_ij, state.spring_rest)) if finite else float("nan"),
+        "kinetic": float(0.5 * (m * (qd * qd).sum(1)).sum()) if finite else float("nan"),
+        "nan": not finite,
+        "ms": {k: round(v, 4) for k, v in ms.items()},
+    }
+    if sim is not None:
+        out["iterations"] = sim.iterations
+    return out
+
+
+class StatsStream:
+    """Per-frame statistics as JSON lines, written and flushed frame by frame, so that a run
+    killed at any moment (even SIGKILL) keeps every frame it finished.
+
+    ``keep_until``: continue an earlier file (``--resume``): its lines up to that frame are kept
+    (the rest, computed after the checkpoint, are dropped; they are computed again), then new
+    lines are appended.  Without it the file is started afresh.  Errors name the path.
+    """
+
+    def __init__(self, path, keep_until: int | None = None):
+        self.path = Path(path)
+        try:
+            if keep_until is not None:
+                self._keep(keep_until)
+                self.f = open(self.path, "a", encoding="utf-8")
+            else:
+                self.f = open(self.path, "w", encoding="utf-8")
+        except OSError as e:
+            raise LeafsimError(f"--stats {self.path}: cannot write statistics ({e.strerror or e})") from None
+
+    def _keep(self, frame: int) -> None:
+        kept = []
+        if self.path.exists():
+            for line in self.path.read_text(encoding="utf-8", errors="replace").splitlines():
+                try:
+                    st = json.loads(line)
+                except ValueError:
+                    break  # a line cut by a kill
+                if not isinstance(st, dict) or st.get("frame", frame + 1) > frame:
+                    break
+                kept.append(line + "\n")
+        atomic_write_bytes(self.path, "".join(kept).encode(), "statistics")
+
+    def write(self, st: dict) -> None:
+        self.f.write(json.dumps(st, sort_keys=True) + "\n")
+        self.f.flush()
+
+    def close(self) -> None:
+        if not self.f.closed:
+            self.f.flush()
+            os.fsync(self.f.fileno())
+            self.f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,241 @@
+"""The stages of vein growth, in the order :func:`leafsim.veins.grow.grow_veins` runs them:
+main-vein targets → main veins → laterals → sublaterals → tertiary net [Kim 2017; thesis
+§3.2–3.5].  Each stage appends its veins to the :class:`~leafsim.veins.graph.VeinGraph` and
+its segments to the :class:`~leafsim.veins.grower.Grower`'s obstacles; each reads the random
+generator in a fixed order, so the same seed gives the same leaf.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from leafsim.base.geometry import LeafShape, ray_polygon_hit
+from leafsim.config.params import ParamSet
+from leafsim.veins.graph import LATERAL, MAIN, NET, SUB, Vein, VeinGraph
+from leafsim.veins.grower import Grower, arc_fraction, inside_point, palmate_root, rot, taper_widths, unit
+from leafsim.veins.lobes import detect_lobe_tips
+from leafsim.veins.stats import _proper
+
+#: main-vein targets sit this far (× L) inside the margin
+TARGET_INSET = 0.035
+
+
+def main_targets(shape: LeafShape, p: ParamSet, targets: np.ndarray | None, main_origin: str):
+    """(apex target (2,), other main-vein targets [(2,)], automatic?): the config's targets
+    (the one nearest the apex leads), or the apex plus the detected lobe tips."""
+    L = shape.length
+    apex_t = inside_point(shape, shape.apex, np.zeros(2), TARGET_INSET * L)
+    if targets is not None:
+        t_arr = np.asarray(targets, float)
+        i_apex = int(np.argmin(np.linalg.norm(t_arr - shape.apex, axis=1)))
+        return t_arr[i_apex], [t for i, t in enumerate(t_arr) if i != i_apex], False
+    tips = detect_lobe_tips(shape.contour, L, p["outline.lobe_depth"], radial=main_origin == "base")
+    others = []
+    min_ang = p["veins.main.auto_min_angle"]
+    ang_apex = 0.0
+    for t in tips:
+        ang = np.degrees(np.arctan2(t[0], t[1]))
+        if np.linalg.norm(t - shape.apex) < 0.08 * L:
+            continue
+        if main_origin == "base" and abs(ang - ang_apex) < min_ang:
+            continue
+        if main_origin == "base" and any(abs(ang - np.degrees(np.arctan2(o[0], o[1]))) < min_ang for o in others):
+            continue
+        others.append(t)
+    return apex_t, others[: max(0, p["veins.main.max_auto"] - 1)], True
+
+
+def _midrib_branch(p: ParamSet, mid: np.ndarray, mid_frac: np.ndarray, t: np.ndarray, thr: float) -> int:
+    """Index of the midrib point where a pinnate lobe's main vein leaves at the lateral angle."""
+    ang = p["veins.lateral.angle"]
+    best, best_err = 1, np.inf
+    for i in range(1, len(mid) - 1):
+        if mid_frac[i] > 1 - thr:
+            break
+        fwd = unit(mid[min(i + 1, len(mid) - 1)] - mid[i - 1])
+        a = np.degrees(np.arccos(np.clip(np.dot(fwd, unit(t - mid[i])), -1, 1)))
+        if abs(a - ang) < best_err:
+            best, best_err = i, abs(a - ang)
+    return best
+
+
+def grow_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, apex_t: np.ndarray, others,
+                    main_origin: str, taper: float) -> list[np.ndarray]:
+    """The midrib to the apex target, then one main vein per other target (from the base, or
+    from the midrib for ``main_origin == "midrib"``); a lobe vein that cannot reach its
+    target without crossing is skipped.  Returns the targets reached (the apex's first)."""
+    L = shape.length
+    inset = TARGET_INSET * L
+    step_m = p["veins.main.step"] * L
+    jit = p["veins.main.scale_jitter"]
+    kappa, omega = p["veins.main.kappa"], p["veins.main.omega"]
+    w_main = p["veins.main.width"] * L
+    thr = p["veins.main.threshold"]
+    # main veins leave the petiole junction straight into the blade for half a step, so that
+    # no vein can slip out through the margin next to the base
+    root = shape.base + unit(apex_t - shape.base) * 0.5 * step_m
+    mid = g.grow_main(root, apex_t, step_m, kappa, omega, jit)
+    mid = np.vstack([shape.base[None].astype(float), mid])
+    g.add(mid)
+    graph.veins.append(Vein(MAIN, mid, taper_widths(mid, w_main, taper, 1 - thr), -1, apex_t))
+    mid_frac = arc_fraction(mid)
+    reached = [apex_t]
+    for t in others:
+        if main_origin == "midrib":
+            best = _midrib_branch(p, mid, mid_frac, t, thr)
+            start = mid[best]
+            tgt = inside_point(shape, t, start, inset)
+            parent = 0
+            w0 = np.interp(mid_frac[best], mid_frac, graph.veins[0].widths) * 0.7
+        else:
+            tgt = inside_point(shape, t, np.zeros(2), inset)
+            start = palmate_root(shape, g, unit(tgt - shape.base), unit(apex_t - shape.base), 0.5 * step_m)
+            if start is None:
+                continue
+            parent = -1
+            w0 = w_main * 0.75
+        pts = g.grow_main(start, tgt, step_m, kappa, np.sign(t[0]) * abs(omega) * 0.5, jit)
+        if main_origin != "midrib":
+            pts = np.vstack([shape.base[None].astype(float), pts])
+        if g.first_hit(pts[0], pts[1]) is not None or any(g.first_hit(a, b) is not None for a, b in zip(pts[:-1], pts[1:])):
+            continue  # could not reach without crossing: skip this lobe vein rather than cross
+        g.add(pts)
+        graph.veins.append(Vein(MAIN, pts, taper_widths(pts, w0, taper, 1 - thr), parent, tgt))
+        reached.append(tgt)
+    return reached
+
+
+def _lateral_sides(mode: str, counter: int) -> tuple:
+    if mode == "opposite":
+        return (1, -1)
+    if mode == "left":
+        return (1,)
+    if mode == "right":
+        return (-1,)
+    return (1 if counter % 2 == 0 else -1,)
+
+
+def grow_laterals(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, rng: np.random.Generator,
+                  profile: np.ndarray, taper: float) -> None:
+    """Laterals from every ``veins.lateral.spacing``-th candidate segment of each main vein:
+    target at the lateral angle, length from the species' profile × the ray to the margin; a
+    lateral whose start–target line crosses an accepted one is skipped (thesis §3.3)."""
+    L = shape.length
+    lat_lines: list[tuple[np.ndarray, np.ndarray]] = []
+    spacing = p["veins.lateral.spacing"]
+    mode = p["veins.lateral.alternation"]
+    lstep = p["veins.lateral.step"] * L
+    lk = p["veins.lateral.kappa"]
+    jit = p["veins.main.scale_jitter"]
+    thr = p["veins.main.threshold"]
+    counter = 0
+    for mi in range(len(graph.veins)):
+        mv = graph.veins[mi]
+        pts = mv.points
+        frac = arc_fraction(pts)
+        cand = [i for i in range(1, len(pts) - 1) if frac[i] <= 1 - thr]
+        for i in cand[spacing - 1 :: spacing] if spacing > 1 else cand:
+            fwd = unit(pts[i + 1] - pts[i - 1])
+            sides = _lateral_sides(mode, counter)
+            counter += 1
+            for side in sides:
+                ang = p["veins.lateral.angle"] + rng.uniform(-1, 1) * p["veins.lateral.angle_jitter"]
+                d = rot(fwd, side * ang)
+                hit = ray_polygon_hit(pts[i], d, shape.contour, shape.holes)
+                if hit is None:
+                    continue
+                length = hit * p["veins.lateral.reach"] * float(np.interp(frac[i] * 100, profile[:, 0], profile[:, 1]))
+                tgt = pts[i] + d * length
+                th = g.first_hit(pts[i], tgt, skip_contour=True)
+                if th is not None:
+                    tgt = pts[i] + (tgt - pts[i]) * th * 0.8
+                    length *= th * 0.8
+                if length < 2 * lstep:
+                    continue
+                g.charge(len(lat_lines))
+                if any(_proper(pts[i], tgt, a, b) for a, b in lat_lines):
+                    continue  # start–target line test (thesis §3.3)
+                # arching laterals leave the main vein more steeply and bend toward the apex
+                d0 = rot(fwd, side * min(ang + 25.0, 88.0)) if p["veins.lateral.curve_apical"] else None
+                lv, _ = g.grow(pts[i], tgt, lstep, lk, 0.0, jit, True, d0)
+                if len(lv) < 3:
+                    continue
+                g.add(lv)
+                lat_lines.append((pts[i], tgt))
+                w0 = float(mv.widths[i]) * p["veins.lateral.width"]
+                graph.veins.append(Vein(LATERAL, lv, taper_widths(lv, w0, taper), mi, tgt))
+
+
+def _bezier_toward(g: Grower, a: np.ndarray, b: np.ndarray, d: np.ndarray, bend: float, step: float,
+                   rng: np.random.Generator) -> np.ndarray | None:
+    """A quadratic Bézier a → b through a control point pushed sideways by up to ``bend`` ×
+    the chord, cut at its first blocked segment; None when fewer than 3 points remain."""
+    chord = np.linalg.norm(b - a)
+    perp = np.array([-d[1], d[0]])
+    c = (a + b) / 2 + perp * rng.uniform(-1, 1) * bend * chord
+    n = max(3, int(np.ceil(chord / step)) + 1)
+    t = np.linspace(0, 1, n)[:, None]
+    curve = (1 - t) ** 2 * a + 2 * (1 - t) * t * c + t**2 * b
+    keep = [curve[0]]
+    for q0, q1 in zip(curve[:-1], curve[1:]):
+        if g.blocked(q0, q1):
+            break
+        keep.append(q1)
+    return np.array(keep) if len(keep) >= 3 else None
+
+
+def grow_sublaterals(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, rng: np.random.Generator,
+                     taper: float) -> None:
+    """Sublaterals at the ``veins.sub.divisions`` division points of each lateral, alternating
+    sides, aimed at the margin along a ray and grown as quadratic Bézier curves (Kim)."""
+    ndiv = p["veins.sub.divisions"]
+    sstep = p["veins.lateral.step"] * shape.length * 0.8
+    for li in [k for k, v in enumerate(graph.veins) if v.order == LATERAL]:
+        lv = graph.veins[li]
+        frac = arc_fraction(lv.points)
+        for k in range(1, ndiv):
+            i = int(np.argmin(np.abs(frac - k / ndiv)))
+            if i <= 0 or i >= len(lv.points) - 1:
+                continue
+            fwd = unit(lv.points[i + 1] - lv.points[i - 1])
+            side = 1 if (k + li) % 2 == 0 else -1
+            d = rot(fwd, side * p["veins.sub.angle"])
+            hit = ray_polygon_hit(lv.points[i], d, shape.contour, shape.holes)
+            if hit is None:
+                continue
+            a = lv.points[i]
+            b = a + d * hit * p["veins.sub.reach"]
+            if np.linalg.norm(b - a) < 2 * sstep:
+                continue
+            sv = _bezier_toward(g, a, b, d, p["veins.sub.bend"], sstep, rng)
+            if sv is None:
+                continue
+            g.add(sv)
+            w0 = float(np.interp(frac[i], frac, lv.widths)) * p["veins.sub.width"]
+            graph.veins.append(Vein(SUB, sv, taper_widths(sv, w0, taper), li, b))
+
+
+def grow_net(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, rng: np.random.Generator,
+             taper: float) -> None:
+    """Tertiary net (Kim's "hair" veins): jittered grid points inside the blade, each joined to
+    the nearest vein point between 0.5 and 2.5 grid spacings away when nothing blocks it."""
+    sp = p["veins.net.spacing"] * shape.length
+    lo, hi = shape.contour.min(0), shape.contour.max(0)
+    gx, gy = np.meshgrid(np.arange(lo[0], hi[0], sp), np.arange(lo[1], hi[1], sp))
+    pts = np.column_stack([gx.ravel(), gy.ravel()]) + rng.uniform(-0.35, 0.35, (gx.size, 2)) * sp
+    pts = pts[shape.inside(pts)]
+    allp = np.vstack([v.points for v in graph.veins])
+    alli = np.concatenate([np.full(len(v.points), vi) for vi, v in enumerate(graph.veins)])
+    allw = np.concatenate([v.widths for v in graph.veins])
+    tree = cKDTree(allp)
+    for q in pts:
+        d, j = tree.query(q)
+        if d < 0.5 * sp or d > 2.5 * sp:
+            continue
+        a = allp[j]
+        if g.blocked(a, q):
+            continue
+        nv = np.array([a, q])
+        g.add(nv)
+        graph.veins.append(Vein(NET, nv, taper_widths(nv, float(allw[j]) * p["veins.net.width"], taper), int(alli[j]), q))

@@ -1,0 +1,113 @@
+import numpy as np
+import pytest
+
+from leafsim.blade.build import build_blade
+from leafsim.base.errors import LeafsimError
+from leafsim.base.geometry import points_in_polygon
+from leafsim.config.params import ParamSet
+from leafsim.sim.model import LAYER_T, LAYER_V, SPRING_LINK, SPRING_V
+
+from helpers.synthetic import ellipse_shape, lobed_shape, synthetic_veins
+
+P = ParamSet({"mesh.spacing": 0.04})
+
+
+@pytest.fixture(scope="module", params=["ellipse", "lobed"])
+def model(request):
+    s = ellipse_shape() if request.param == "ellipse" else lobed_shape()
+    return s, build_blade(s, synthetic_veins(s), P, seed=3)
+
+
+def test_vein_edge_share(model):
+    _, m = model
+    assert m.vein_edge_share >= 0.99
+    assert m.to_report()["vein_edge_share"] >= 0.99
+
+
+def test_layers_and_counts(model):
+    s, m = model
+    rep = m.to_report()
+    assert rep["particles_V"] == m.tri_count == len(m.tri_V)
+    assert rep["springs_link"] == 3 * m.tri_count
+    assert rep["springs_V"] == m.hinge_count
+    assert (m.particle_layer[m.tri_T] == LAYER_T).all()
+    assert (m.particle_layer[m.tri_V] == LAYER_V).all()
+    r = m.particle_rest
+    a, b, c = r[m.tri_T[:, 0]], r[m.tri_T[:, 1]], r[m.tri_T[:, 2]]
+    area = np.cross(b - a, c - a)[:, 2]
+    assert (area > 0).all()  # CCW, no degenerate triangle
+    assert points_in_polygon(r[m.tri_T].mean(1)[:, :2], s.contour).all()
+    assert np.allclose(r[m.tri_V, 2], m.thickness)
+    assert np.allclose(r[m.tri_V, :2], r[m.tri_T].mean(1)[:, :2])
+    # every colour class touches each particle at most once
+    for ij, cs in ((m.spring_ij, m.spring_colour_start), (m.hinge_idx, m.hinge_colour_start), (m.vol_idx, m.vol_colour_start)):
+        for k in range(len(cs) - 1):
+            blk = ij[cs[k]:cs[k + 1]].ravel()
+            assert len(np.unique(blk)) == len(blk)
+    st = m.spring_type
+    assert (m.spring_layer[st == SPRING_V] == 1).all() and (m.spring_layer[st == SPRING_LINK] == 2).all()
+    assert m.spring_count == rep["springs"] and (m.spring_rest0 > 0).all()
+
+
+def test_mass_init(model):
+    shape, m = model
+    p = P
+    assert 0 <= m.particle_tau.min() and m.particle_tau.max() <= 1
+    assert m.particle_tau[m.base_particle] == pytest.approx(1.0)
+    T = m.particle_layer == LAYER_T
+    assert np.allclose(m.particle_water0, p["mass.water_fraction"] * m.particle_mass0)
+    assert np.allclose(m.particle_water0 + m.particle_cytosol, m.particle_mass0)
+    # each layer covers the blade once
+    A = m.particle_area[T].sum()
+    assert m.particle_area[~T].sum() == pytest.approx(A, rel=1e-12)
+    # Jeong's profile per area: between profile_min and 1 of its peak, heavier along the veins
+    vein = m.particle_kind == 2
+    lam = m.particle_kind == 0  # surface particles: lamina only
+    rho = m.particle_mass0 / m.particle_area
+    assert (rho[lam] / rho[lam].max()).min() >= p["mass.profile_min"] - 1e-9
+    assert rho[vein].mean() > rho[lam].mean()
+    # the lamina carries lma / (1 − water fraction) per m²: with veins lighter than the lamina
+    # under them (no rod added) the total is exactly that; denser veins add their rod
+    light = build_blade(shape, synthetic_veins(shape), P.with_overrides({"mass.vein_density": 100.0}), seed=3)
+    fresh = p["mass.lma"] / (1 - p["mass.water_fraction"])
+    assert light.particle_mass0.sum() == pytest.approx(fresh * A, rel=1e-9)
+    rods = sum(float((p["mass.vein_density"] * np.pi / 4 * (w[:-1] ** 2 + w[1:] ** 2) / 2
+                      * np.linalg.norm(np.diff(m.particle_rest[i], axis=0), axis=1)).sum()) for i, w, _ in m.vein_polylines())
+    extra = m.particle_mass0.sum() - light.particle_mass0.sum()
+    assert 0 < extra < rods  # the rod less the lamina it replaces
+
+
+def test_renderer_data(model):
+    _, m = model
+    polys = m.vein_polylines()
+    assert polys and all(len(i) == len(w) and len(i) >= 2 for i, w, _ in polys)
+    assert {o for _, _, o in polys} <= {0, 1, 2, 3}
+    assert m.particle_texcoord.min() >= -1e-9 and m.particle_texcoord.max() <= 1 + 1e-9
+    assert len(m.contour_particles) > 10
+
+
+def test_seeded():
+    s = ellipse_shape()
+    v = synthetic_veins(s)
+    a = build_blade(s, v, P, seed=5)
+    b = build_blade(s, v, P, seed=5)
+    c = build_blade(s, v, P, seed=6)
+    assert np.array_equal(a.particle_rest, b.particle_rest)
+    assert a.particle_count != c.particle_count or not np.array_equal(a.particle_rest, c.particle_rest)
+
+
+@pytest.mark.parametrize("bad", [
+    {"mesh.spacing": -0.01}, {"mesh.spacing": float("nan")}, {"dynamics.tolerance": 0.0},
+    {"mesh.thickness": 0.0}, {"dynamics.dt": 0.0}, {"dynamics.substeps": 0}, {"osmosis.diffusion": -1.0},
+    {"shrink.l_min": 1.5}, {"osmosis.evaporation_top": float("inf")}, {"dynamics.iterations": 0},
+])
+def test_bad_params_rejected(bad):
+    with pytest.raises(LeafsimError):
+        ParamSet(bad)
+
+
+def test_thesis_table_size():
+    """Default spacing on a maple-like lobed outline lands near the thesis's model size."""
+    s = lobed_shape()
+    m = build_blade(s, synthetic_veins(s), ParamSet(), seed=1)
+    assert 1000 < m.particle_count < 20000

@@ -1,0 +1,93 @@
+import math
+
+import pytest
+
+from leafsim.base.errors import LeafsimError
+from leafsim.config.params import GROUPS, PARAMS, ParamSet, markdown_table, parse_set_args
+
+
+@pytest.mark.parametrize("name", sorted(PARAMS))
+def test_default_in_range_and_described(name):
+    p = PARAMS[name]
+    assert p.help and p.group in GROUPS
+    assert p.coerce(p.default) == p.default
+    if p.kind in ("float", "int"):
+        assert p.lo <= p.default <= p.hi
+        assert math.isfinite(p.lo) and math.isfinite(p.hi) and p.lo < p.hi
+    if p.kind == "choice":
+        assert p.default in p.choices
+
+
+def test_names_are_dotted_and_unique():
+    assert len(PARAMS) > 60
+    for name in PARAMS:
+        assert name.count(".") >= 1 and name == name.strip()
+
+
+def test_unknown_key_rejected_with_suggestion():
+    with pytest.raises(LeafsimError, match=r"unknown parameter 'veins.main.kapa'.*veins.main.kappa"):
+        ParamSet({"veins.main.kapa": 1})
+
+
+@pytest.mark.parametrize("key,value", [
+    ("mesh.spacing", -0.01), ("mesh.spacing", float("nan")), ("dynamics.tolerance", 0.0),
+    ("veins.lateral.spacing", 2.5), ("veins.lateral.alternation", "zigzag"), ("effects.pbd", "maybe"),
+    ("veins.main.kappa", "abc"), ("dynamics.dt", float("inf")), ("mass.D", True),
+])
+def test_bad_values_rejected_naming_the_key(key, value):
+    with pytest.raises(LeafsimError) as e:
+        ParamSet({key: value})
+    msg = str(e.value)
+    assert key in msg and "expected" in msg and "\n" not in msg
+
+
+def test_nested_and_flat_keys_agree_and_overrides_validate():
+    a = ParamSet({"veins": {"main": {"kappa": 7}}})
+    b = ParamSet({"veins.main.kappa": 7})
+    assert a == b and a["veins.main.kappa"] == 7.0
+    c = b.with_overrides({"osmosis.diffusion": 5e-4})
+    assert c["osmosis.diffusion"] == 5e-4 and c.changed() == {"veins.main.kappa": 7.0, "osmosis.diffusion": 5e-4}
+    assert b.rebuild_differs(ParamSet()) and not c.with_overrides({"veins.main.kappa": 7}).rebuild_differs(c)
+
+
+
+def test_set_args_parse_types():
+    d = parse_set_args(["veins.lateral.spacing=4", "effects.pbd=off", "dynamics.voronoi=replace"])
+    assert d == {"veins.lateral.spacing": 4, "effects.pbd": False, "dynamics.voronoi": "replace"}
+    with pytest.raises(LeafsimError, match="KEY=VALUE"):
+        parse_set_args(["novalue"])
+
+
+def test_markdown_lists_every_parameter():
+    md = markdown_table()
+    for name in PARAMS:
+        assert f"`{name}`" in md
+
+
+def test_docs_parameters_md_is_generated_from_the_declarations():
+    """docs/parameters.md is `leafsim params --markdown` (regenerate it when a parameter changes)."""
+    from helpers.paths import REPO as ROOT
+
+    assert (ROOT / "docs" / "parameters.md").read_text(encoding="utf-8") == markdown_table() + "\n"
+
+
+def test_integer_ranges_fit_an_int_slider():
+    """The GUI's integer slider (imgui) takes ranges within ±(2³¹−1)/2 only (it aborts otherwise)."""
+    for p in PARAMS.values():
+        if p.kind == "int":
+            assert -(2**31 - 1) // 2 <= p.lo < p.hi <= (2**31 - 1) // 2, p.name
+
+
+def test_quality_levels_set_every_quality_key_and_are_recognised():
+    from leafsim.config.presets import QUALITY, QUALITY_KEYS, quality_of, quality_overrides, quality_table
+
+    assert quality_of(ParamSet()) == "fine"  # the declared defaults are the fine level (within 10 %)
+    for name in QUALITY:
+        o = quality_overrides(name)
+        assert set(o) == set(QUALITY_KEYS)
+        assert quality_of(ParamSet(o)) == name
+    assert quality_of(ParamSet({"dynamics.substeps": 7})) is None
+    t = quality_table()
+    assert set(t) == set(QUALITY) and all(v["measured"] is None or v["measured"]["ms_per_sim_s"] > 0 for v in t.values())
+    with pytest.raises(LeafsimError, match="expected one of draft"):
+        quality_overrides("best")

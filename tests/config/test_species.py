@@ -1,0 +1,89 @@
+import json
+
+import numpy as np
+import pytest
+
+from leafsim.base.errors import LeafsimError
+from leafsim.base.geometry import points_in_polygon, polygon_area
+from leafsim.pipeline import leaf_shape
+from leafsim.base.resources import data_dir
+from leafsim.config.species import get_species, load_library
+
+LIB = load_library()
+
+
+def test_library_has_the_required_species():
+    assert len(LIB) >= 8
+    photos = {k for k, s in LIB.items() if s.has_photo}
+    drawn = {k for k, s in LIB.items() if not s.has_photo}
+    assert {"grapevine", "oak", "aspen", "hornbeam"} <= photos
+    assert {"maple", "chestnut", "walnut", "pokeweed"} <= drawn
+    for s in LIB.values():
+        if s.has_photo:
+            assert s.image.is_file()
+
+
+def test_every_photo_is_attributed():
+    text = (data_dir("images") / "SOURCES.md").read_text()
+    for s in LIB.values():
+        if s.has_photo:
+            assert s.image.name in text
+
+
+@pytest.mark.parametrize("key", sorted(LIB))
+def test_shape_in_metres(key):
+    sp = LIB[key]
+    sh = leaf_shape(sp)
+    assert sh.contour.shape[1] == 2 and len(sh.contour) >= 40
+    assert polygon_area(sh.contour) > 0  # counter-clockwise
+    assert np.allclose(sh.base, 0) and np.isclose(sh.apex[1], sp.length_m) and np.isclose(sh.apex[0], 0)
+    # the blade lies around the base-apex axis and the apex is inside or on the outline
+    assert 0.05 * sp.length_m**2 < sh.area < 1.5 * sp.length_m**2
+    mid = np.array([[0.0, 0.5 * sp.length_m]])
+    assert points_in_polygon(mid, sh.contour)[0]
+
+
+def _write(tmp_path, data):
+    p = tmp_path / "leaves.json"
+    p.write_text(json.dumps(data) if not isinstance(data, str) else data)
+    return p
+
+
+def _entry(**kw):
+    e = {"length_m": 0.1, "outline": {"points": [[0, 0], [0.3, 0.5], [0, 1], [-0.3, 0.5]]}}
+    e.update(kw)
+    return e
+
+
+@pytest.mark.parametrize("data,needle", [
+    ("{ not json", "malformed JSON at line 1"),
+    ({"nospecies": {}}, "'species'"),
+    ({"species": {"x": _entry(length_m=-1)}}, "species 'x', key 'length_m'"),
+    ({"species": {"x": _entry(colour="red")}}, "species 'x', key 'colour'"),
+    ({"species": {"x": _entry(params={"veins.main.kappa": 99})}}, "species 'x': parameter 'veins.main.kappa'"),
+    ({"species": {"x": _entry(params={"veins.nope": 1})}}, "species 'x': unknown parameter 'veins.nope'"),
+    ({"species": {"x": _entry(image="images/missing.png")}}, "species 'x', key 'image'"),
+    ({"species": {"x": {"length_m": 0.1}}}, "needs either 'image'"),
+    ({"species": {"x": _entry(outline={"points": [[0, 0], [1]]})}}, "key 'outline.points'"),
+    ({"species": {"x": _entry(lateral_profile=[[50, 1], [10, 1]])}}, "key 'lateral_profile'"),
+])
+def test_bad_entries_name_file_species_and_key(tmp_path, data, needle):
+    p = _write(tmp_path, data)
+    with pytest.raises(LeafsimError) as e:
+        load_library(p)
+    assert str(p) in str(e.value) and needle in str(e.value) and "\n" not in str(e.value)
+
+
+def test_missing_config_and_unknown_species(tmp_path):
+    with pytest.raises(LeafsimError, match="not found"):
+        load_library(tmp_path / "nope.json")
+    with pytest.raises(LeafsimError, match="unknown species 'fern'.*maple"):
+        get_species("fern")
+
+
+def test_user_adds_a_species(tmp_path):
+    p = _write(tmp_path, {"species": {"kite": _entry(params={"veins.main.kappa": 2})}})
+    sp = get_species("kite", p)
+    assert sp.params["veins.main.kappa"] == 2.0 and not sp.has_photo
+    sh = leaf_shape(sp)
+    assert np.isclose(sh.length, 0.1)

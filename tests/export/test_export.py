@@ -1,0 +1,157 @@
+"""Mesh export checked by real clients: the Khronos glTF-Validator and trimesh (SPEC §17)."""
+
+from __future__ import annotations
+
+import json
+import struct
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+
+from leafsim.base.errors import LeafsimError
+from leafsim.export.mesh import boundary_edges, export_mesh
+from leafsim.pipeline import build_leaf
+from leafsim.appearance.photo import load_photo_rgba
+from leafsim.sim.model import LAYER_T
+from leafsim.sim.simulator import Simulator
+from leafsim.config.species import get_species
+from leafsim.appearance.view import LeafView
+
+from helpers.gltf import assert_clean
+
+
+@pytest.fixture(scope="module")
+def leaf():
+    """Oak on a tiny mesh, its photo, and states at frames 0, 40, 80."""
+    sp = get_species("oak")
+    params = sp.params.with_overrides({"mesh.spacing": 0.08, "colour.age_rate": 5.0})
+    _, _, model = build_leaf(sp, params, 0)
+    sim = Simulator(model, params, seed=0)
+    st = sim.state()
+    states = [st.copy()]
+    for _ in range(2):
+        for _ in range(40):
+            sim.step(st)
+        states.append(st.copy())
+    return model, params, LeafView(model, load_photo_rgba(sp.image)), states
+
+
+def _counts(model):
+    T = model.particle_layer == LAYER_T
+    n, m = int(T.sum()), len(model.tri_T)
+    return n, m, len(boundary_edges(model.tri_T))
+
+
+def _vein_counts(model):
+    lines = [i for i, _, _ in model.vein_polylines() if len(i) >= 2]
+    return 2 * sum(len(i) for i in lines), 2 * sum(len(i) - 1 for i in lines)
+
+
+def test_animated_glb_is_valid_and_loads_with_expected_counts(leaf, tmp_path):
+    model, params, view, states = leaf
+    path = tmp_path / "oak.glb"
+    rep = export_mesh(model, states, path, params=params, view=view, veins=True)
+    val = assert_clean(path)
+    info = val["info"]
+    n, m, b = _counts(model)
+    vn, vt = _vein_counts(model)
+    assert info["animationCount"] == 1 and info["hasMorphTargets"] and info["materialCount"] == 2
+    assert info["totalVertexCount"] == 2 * n + vn and info["totalTriangleCount"] == 2 * m + 2 * b + vt
+    assert rep["meshes"]["blade"] == {"vertices": 2 * n, "triangles": 2 * m + 2 * b}
+    scene = trimesh.load(path, process=False)
+    blade, veins = scene.geometry["blade"], scene.geometry["veins"]
+    assert (len(blade.vertices), len(blade.faces)) == (2 * n, 2 * m + 2 * b)
+    assert blade.is_watertight and blade.is_winding_consistent and blade.volume > 0  # a closed shell, outward
+    assert (len(veins.vertices), len(veins.faces)) == _vein_counts(model)
+    # the morph targets and the animation: one target per key frame after the first, keyed one-hot
+    doc = _glb_json(path)
+    prim = doc["meshes"][0]["primitives"][0]
+    assert len(prim["targets"]) == 2 and set(prim["targets"][0]) == {"POSITION", "NORMAL", "COLOR_0"}
+    anim = doc["animations"][0]
+    times = doc["accessors"][anim["samplers"][0]["input"]]
+    assert times["count"] == 3 and times["max"][0] == pytest.approx(states[-1].time - states[0].time, rel=1e-6)
+    assert doc["materials"][0]["doubleSided"] and "pbrMetallicRoughness" in doc["materials"][0]
+
+
+def _glb_json(path) -> dict:
+    data = path.read_bytes()
+    magic, version, total = struct.unpack("<4sII", data[:12])
+    assert magic == b"glTF" and version == 2 and total == len(data)
+    n, kind = struct.unpack("<I4s", data[12:20])
+    assert kind == b"JSON"
+    return json.loads(data[20:20 + n])
+
+
+def test_gltf_mid_surface_with_thickness_and_photo(leaf, tmp_path):
+    model, params, view, states = leaf
+    path = tmp_path / "oak.gltf"
+    rep = export_mesh(model, states, path, params=params, view=view, layers="mid", texture="photo")
+    assert sorted(rep["files"]) == sorted([str(tmp_path / "oak.bin"), str(path)])
+    assert_clean(path)
+    n, m, _ = _counts(model)
+    doc = json.loads(path.read_text())
+    attrs = doc["meshes"][0]["primitives"][0]["attributes"]
+    assert "_THICKNESS" in attrs and "COLOR_0" not in attrs and doc["images"][0]["mimeType"] == "image/png"
+    thick = doc["accessors"][attrs["_THICKNESS"]]
+    assert thick["count"] == n
+    g = trimesh.load(path, process=False).geometry["blade"]
+    assert (len(g.vertices), len(g.faces)) == (n, m)
+
+
+def test_static_obj_and_ply_load_in_trimesh(leaf, tmp_path):
+    model, params, view, states = leaf
+    n, m, b = _counts(model)
+    export_mesh(model, states[-1], tmp_path / "oak.obj", params=params, view=view, veins=True)
+    assert (tmp_path / "oak.mtl").exists()
+    obj = trimesh.load(tmp_path / "oak.obj", process=False, group_material=False)
+    got = sorted((len(g.vertices), len(g.faces)) for g in obj.geometry.values())
+    assert got == sorted([(2 * n, 2 * m + 2 * b), _vein_counts(model)])
+    export_mesh(model, states[-1], tmp_path / "oak.ply", params=params, view=view, layers="mid")
+    ply = trimesh.load(tmp_path / "oak.ply", process=False)
+    assert (len(ply.vertices), len(ply.faces)) == (n, m)
+    raw = ply.metadata["_ply_raw"]["vertex"]["data"]
+    c = np.column_stack([raw["red"], raw["green"], raw["blue"]]).astype(int)
+    assert np.asarray(raw["thickness"]).min() > 0
+    assert c.std(0).max() > 0 and (c.mean(0) > 10).all()  # real pigment colours, not a constant
+    # y up: the leaf's length (y in leafsim) is along −z of the file
+    assert np.ptp(ply.vertices[:, 2]) > 5 * np.ptp(ply.vertices[:, 1])
+
+
+def test_export_is_deterministic_and_bad_requests_write_nothing(leaf, tmp_path):
+    model, params, view, states = leaf
+    a, b = tmp_path / "a.glb", tmp_path / "b.glb"
+    export_mesh(model, states, a, params=params, view=view, veins=True)
+    export_mesh(model, states, b, params=params, view=view, veins=True)
+    assert a.read_bytes() == b.read_bytes()
+    with pytest.raises(LeafsimError, match="one static shape"):
+        export_mesh(model, states, tmp_path / "x.obj", params=params)
+    with pytest.raises(LeafsimError, match="does not exist"):
+        export_mesh(model, states, tmp_path / "missing" / "x.glb", params=params)
+    with pytest.raises(LeafsimError, match="unknown mesh format"):
+        export_mesh(model, states, tmp_path / "x.stl", params=params)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.glb", "b.glb"]
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "leafsim", *args], capture_output=True, text=True, timeout=300)
+
+
+def test_cli_export_animation_and_bad_input(tmp_path):
+    out = tmp_path / "chestnut.glb"
+    r = _cli("export", "--species", "chestnut", "--frames", "40", "--every", "20", "--format", "glb", "--out", str(out),
+             "--set", "mesh.spacing=0.08", "--veins", "--json")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    assert rep["targets"] == 2 and rep["frames"] == 40 and set(rep["meshes"]) == {"blade", "veins"}
+    assert_clean(out)
+    for args, msg in [(["--every", "5", "--out", str(tmp_path / "x.obj")], "--every needs"),
+                      (["--out", str(tmp_path / "nope" / "x.glb")], "does not exist"),
+                      (["--texture", "photo", "--out", str(tmp_path / "x.glb")], "has no photo")]:
+        r = _cli("export", "--species", "chestnut", *args)
+        assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    r = _cli("export", "--species", "nosuch", "--out", str(tmp_path / "x.glb"))
+    assert r.returncode == 2 and "unknown species" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["chestnut.glb"]

@@ -1,0 +1,179 @@
+"""The simulation worker (GL-free): background stepping, snapshots, live parameters, pacing,
+dry-to-end; and that the numba kernels release the GIL so the worker thread lets the UI run."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from leafsim.interactive.session import Session
+from leafsim.interactive.worker import DRY_END_FRACTION
+
+
+def until(cond, timeout=60.0):
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        if cond():
+            return True
+        time.sleep(0.005)
+    return cond()
+
+
+@pytest.fixture()
+def s():
+    s = Session("oak", overrides={"mesh.spacing": 0.05})
+    s.playback.start_worker()
+    yield s
+    s.close()
+
+
+def test_kernels_release_the_gil():
+    from numba.core.registry import CPUDispatcher
+
+    from leafsim.sim import pigments as colour
+    from leafsim.sim.kernels import osmosis, pbd, shrink
+
+    found = []
+    for mod in (osmosis, pbd, shrink, colour):
+        for name, obj in vars(mod).items():
+            # the cached (top-level) kernels; inlined helpers run inside them
+            if isinstance(obj, CPUDispatcher) and type(obj._cache).__name__ != "NullCache":
+                found.append((mod.__name__, name, bool(obj.targetoptions.get("nogil"))))
+    assert len(found) > 15
+    assert all(ok for *_, ok in found), [f for f in found if not f[2]]
+
+
+def test_plays_in_background_and_snapshots_stay_consistent(s):
+    assert s.frame == 0
+    s.playback.play(True)
+    assert until(lambda: s.playback.take_snapshot() and s.frame >= 3)
+    snap_state = s.state
+    q = snap_state.particle_q.copy()
+    w = snap_state.particle_water.copy()
+    frame = snap_state.frame
+    assert until(lambda: s.playback.take_snapshot() and s.frame >= frame + 5)
+    # the snapshot the UI held was never touched by the worker
+    assert snap_state.frame == frame
+    np.testing.assert_array_equal(snap_state.particle_q, q)
+    np.testing.assert_array_equal(snap_state.particle_water, w)
+    assert s.state is not snap_state and s.water_fraction() < 1.0
+    # every snapshot's history record arrived, in order
+    fr = list(s.playback.history["frame"])
+    assert fr == sorted(fr) and fr[0] == 0 and fr[-1] == s.frame
+    s.playback.play(False)
+    time.sleep(0.1)
+    s.playback.take_snapshot()
+    f = s.frame
+    time.sleep(0.2)
+    s.playback.take_snapshot()
+    assert s.frame == f and not s.playback.playing
+
+
+def test_live_params_reach_the_worker_while_it_plays(s):
+    s.playback.play(True)
+    until(lambda: s.playback.take_snapshot() and s.frame >= 2)
+    for k in range(20):  # a burst of slider changes while it steps
+        s.set_params({"osmosis.evaporation_top": 0.5 + 0.1 * k, "colour.age_rate": 0.01 * (k + 1)})
+    assert until(lambda: s.simulator.params["osmosis.evaporation_top"] == pytest.approx(2.4))
+    assert s.simulator.params["colour.age_rate"] == pytest.approx(0.2)
+    f = s.frame
+    assert until(lambda: s.playback.take_snapshot() and s.frame > f + 2)  # still stepping
+    assert s.playback.sim_error is None
+
+
+def test_single_steps_while_paused(s):
+    s.playback.request_steps(3)
+    assert until(lambda: s.playback.take_snapshot() and s.frame == 3)
+    time.sleep(0.2)
+    s.playback.take_snapshot()
+    assert s.frame == 3
+
+
+def test_speed_limits_simulated_time(s):
+    dt = s.sim_params["dynamics.dt"]
+    s.playback.set_speed(10 * dt)  # 10 frames per wall second
+    s.playback.play(True)
+    t0 = time.time()
+    time.sleep(1.0)
+    s.playback.take_snapshot()
+    frames = s.frame
+    elapsed = time.time() - t0
+    assert 1 <= frames <= 10 * elapsed * 1.5 + 2, frames
+    s.playback.set_speed(None)  # as fast as possible: not limited to 10/s (oak at this size steps in ~1 ms)
+    f = s.frame
+    time.sleep(1.0)
+    s.playback.take_snapshot()
+    assert s.frame - f > 15
+
+
+def test_dry_to_end(s):
+    s.set_params({"osmosis.evaporation_top": 50.0, "osmosis.evaporation_bottom": 50.0})
+    s.playback.dry_to_end()
+    assert s.playback.drying
+    assert until(lambda: (s.playback.take_snapshot() or True) and not s.playback.drying, 120)
+    s.playback.take_snapshot()
+    assert s.water_fraction() <= DRY_END_FRACTION + 1e-9
+    assert s.playback.dry_progress() == pytest.approx(1.0) and not s.playback.playing
+    assert s.playback.worker.dry_done
+
+
+def test_divergence_stops_and_reports(s):
+    s.playback.play(True)
+    until(lambda: s.playback.take_snapshot() and s.frame >= 1)
+    with s.playback.worker._step_lock:  # poison the worker's own state between two steps
+        s.playback.worker.run.state.particle_q[0, 0] = np.nan
+    assert until(lambda: (s.playback.take_snapshot() or True) and s.playback.sim_error is not None)
+    assert "diverged" in s.playback.sim_error
+    f = s.frame
+    time.sleep(0.2)
+    s.playback.take_snapshot()
+    assert s.frame == f
+    s.reset()
+    assert s.frame == 0 and s.playback.sim_error is None
+
+
+def test_reset_and_rebuild_while_playing(s):
+    s.playback.play(True)
+    until(lambda: s.playback.take_snapshot() and s.frame >= 3)
+    s.reset()
+    assert s.frame == 0 and s.playback.playing  # playing carries over to the fresh leaf
+    old = s.playback.worker
+    s.set_params({"mesh.spacing": 0.06})
+    s.apply_rebuild()
+    assert s.wait(120)
+    assert s.playback.worker is not old and s.playback.playing
+    assert until(lambda: not old.running, 10)  # the old worker thread ended
+    assert until(lambda: s.playback.take_snapshot() and s.frame >= 2)
+
+
+def test_reset_without_waiting_while_playing(s):
+    s.playback.play(True)
+    assert until(lambda: s.playback.take_snapshot() and s.frame >= 5)
+    s.reset(wait=False)  # the GUI's Reset: returns at once, the worker makes the fresh leaf
+    assert until(lambda: (s.playback.take_snapshot() or True) and s.playback.history["frame"] and s.playback.history["frame"][0] == 0
+                 and s.frame < 5 and s.playback.worker.epoch >= 1)
+    fr = list(s.playback.history["frame"])
+    assert fr == sorted(fr)  # the old run's records were dropped with the reset
+
+
+def test_simulator_is_made_on_the_build_thread(monkeypatch):
+    import threading
+
+    from leafsim.sim import simulator as simmod
+
+    made = []
+    orig = simmod.Simulator.__init__
+
+    def init(self, *a, **k):
+        made.append(threading.current_thread().name)
+        orig(self, *a, **k)
+
+    monkeypatch.setattr(simmod.Simulator, "__init__", init)
+    s = Session("oak", overrides={"mesh.spacing": 0.06}, build=False)
+    s.playback.start_worker()
+    s.rebuild_async()
+    assert s.wait(120) and s.ready
+    s.close()
+    assert made == ["leafsim-build"]  # installing it on the UI thread constructs none

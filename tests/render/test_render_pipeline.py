@@ -1,0 +1,36 @@
+"""Offscreen renders of a real species before and after drying (EGL, pixel assertions)."""
+
+import numpy as np
+
+from leafsim.render.offscreen import OffscreenRenderer, default_camera
+from leafsim.render.options import RenderOptions
+from leafsim.interactive.session import Session
+
+
+def test_drying_changes_the_rendered_leaf():
+    s = Session("maple", overrides={"mesh.spacing": 0.04, "osmosis.evaporation_top": 0.21, "osmosis.evaporation_bottom": 0.14,
+                                    "colour.age_rate": 3.0}, build=True)
+    r = OffscreenRenderer(320, 240, samples=0)
+    try:
+        mesh = s.render_mesh()
+        cam = default_camera(mesh.positions)
+        before = r.render_array(mesh, camera=cam).astype(float)
+        bg = before[2, 2]
+        leaf0 = np.abs(before - bg).sum(-1) > 30
+        assert 0.05 < leaf0.mean() < 0.8  # the leaf is there and framed
+        cy, cx = np.argwhere(leaf0).mean(0)
+        assert abs(cx - 160) < 60 and abs(cy - 120) < 60
+        g0 = before[leaf0].mean(0)
+        assert g0[1] > g0[0] and g0[1] > g0[2]  # young leaf is green
+        s.step(400)
+        after = r.render_array(s.render_update(), camera=cam).astype(float)
+        leaf1 = np.abs(after - bg).sum(-1) > 30
+        g1 = after[leaf1].mean(0)
+        assert g1[0] - g1[1] > g0[0] - g0[1] + 20  # redder/browner after drying and ageing
+        assert (leaf0 != leaf1).mean() > 0.002  # the silhouette moved (shrink/curl)
+        views = [r.render_array(None, camera=cam, options=RenderOptions(view=v)) for v in ("particles", "springs", "water")]
+        for a in range(3):
+            for b in range(a + 1, 3):
+                assert np.abs(views[a].astype(int) - views[b]).mean() > 1.0
+    finally:
+        r.release()

@@ -1,0 +1,225 @@
+"""Scenes: strict scene files, batch runs (local pool, Dask), reproducible bytes, reruns,
+failure isolation, level of detail and placement."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from helpers.paths import REPO as ROOT
+from leafsim.base.errors import LeafsimError
+from leafsim.scene.run import load_scene, run_scene
+from leafsim.scene.job import run_leaf
+
+TINY = {"mesh.spacing": 0.08}
+
+
+def _scene(tmp_path: Path, name="tiny", overview=False, **over) -> Path:
+    """A tiny scene: two oaks on a coarse mesh shown on a finer one (LOD, one checked, frames
+    every 20, an animated glb) and one chestnut; floor layout."""
+    data = {
+        "name": name, "seed": 4, "layout": {"kind": "floor", "size": [0.12, 0.12]}, "overview": overview,
+        "groups": [
+            {"name": "oak", "species": "oak", "count": 2, "seed": 7, "params": dict(TINY),
+             "stop": {"frames": 40}, "lod": {"simulate": 0.08, "show": 0.06, "check": 1},
+             "output": {"every": 20, "mesh": "glb", "veins": True, "stats": True}},
+            {"name": "chestnut", "species": "chestnut", "count": 1, "seed": 3, "params": dict(TINY),
+             "stop": {"water_left": 0.97}},
+        ],
+    }
+    data.update(over)
+    p = tmp_path / f"{name}.json"
+    p.write_text(json.dumps(data))
+    return p
+
+
+def _files(out: Path) -> dict:
+    """Every output file's bytes except the run report (the one file with timings)."""
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file() and p.name != "run.json"}
+
+
+@pytest.fixture(scope="module")
+def one_worker(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("scene1")
+    scene = load_scene(_scene(tmp))
+    rep = run_scene(scene, tmp / "out", workers=1, progress=False)
+    return scene, tmp / "out", rep
+
+
+def test_scene_runs_and_writes_every_output(one_worker):
+    scene, out, rep = one_worker
+    assert rep["ran"] == 3 and rep["failed"] == [] and rep["skipped"] == 0
+    leaf = out / "leaves" / "oak-000"
+    frames = sorted(p.name for p in (leaf / "frames").iterdir())
+    assert frames == ["state_000000.npz", "state_000020.npz", "state_000040.npz"]
+    assert {"state.npz", "view.npz", "stats.jsonl", "leaf.glb", "lod.json", "done.json"} <= {p.name for p in leaf.iterdir()}
+    assert not (out / "leaves" / "oak-001" / "lod.json").exists()  # check: 1 → only the first leaf
+    assert len((leaf / "stats.jsonl").read_text().splitlines()) == 40
+    lod = json.loads((leaf / "lod.json").read_text())
+    assert lod["particles_fine"] > lod["particles_coarse"] and 0 <= lod["position_rms"] < 0.2
+    assert all(np.isfinite(v) for v in lod.values())
+    done = json.loads((leaf / "done.json").read_text())
+    assert done["frames"] == 40 and done["particles_shown"] == lod["particles_fine"]
+    ch = json.loads((out / "leaves" / "chestnut-000" / "done.json").read_text())
+    assert ch["water_left"] <= 0.97 and not (out / "leaves" / "chestnut-000" / "frames").exists()
+    placed = json.loads((out / "placement.json").read_text())
+    assert [x["name"] for x in placed["leaves"]] == ["oak-000", "oak-001", "chestnut-000"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary["leaves"]) == {"oak-000", "oak-001", "chestnut-000"} and set(summary["lod"]) == {"oak-000"}
+
+
+def test_two_workers_give_the_same_bytes_and_rerun_skips(one_worker, tmp_path):
+    scene, out1, _ = one_worker
+    out2 = tmp_path / "out"
+    run_scene(scene, out2, workers=2, progress=False)
+    a, b = _files(out1), _files(out2)
+    assert a.keys() == b.keys() and all(a[k] == b[k] for k in a), [k for k in a if a[k] != b.get(k)]
+    stamp = {p: p.stat().st_mtime_ns for p in out2.rglob("*") if p.is_file() and p.name != "run.json"}
+    again = run_scene(scene, out2, workers=2, progress=False)
+    assert again["ran"] == 0 and again["skipped"] == 3
+    assert all(p.stat().st_mtime_ns == t for p, t in stamp.items() if p.parent.parent.name == "leaves")
+
+
+def test_changed_group_reruns_only_its_leaves(one_worker, tmp_path):
+    scene, out1, _ = one_worker
+    import shutil
+
+    out = tmp_path / "out"
+    shutil.copytree(out1, out)
+    changed = _scene(tmp_path, groups=[json.loads(scene.path.read_text())["groups"][0],
+                                       {"name": "chestnut", "species": "chestnut", "count": 1, "seed": 3,
+                                        "params": dict(TINY), "stop": {"frames": 5}}])
+    rep = run_scene(load_scene(changed), out, workers=1, progress=False)
+    assert rep["ran"] == 1 and rep["skipped"] == 2
+    assert json.loads((out / "leaves" / "chestnut-000" / "done.json").read_text())["frames"] == 5
+
+
+def test_dask_local_cluster_gives_the_same_bytes(one_worker, tmp_path):
+    from distributed import LocalCluster
+
+    scene, out1, _ = one_worker
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        rep = run_scene(scene, tmp_path / "out", scheduler=cluster.scheduler_address, progress=False)
+    assert rep["ran"] == 3 and rep["scheduler"] == cluster.scheduler_address
+    a, b = _files(out1), _files(tmp_path / "out")
+    assert a.keys() == b.keys() and all(a[k] == b[k] for k in a)
+
+
+def test_failed_leaf_is_reported_by_name_and_the_others_finish(tmp_path):
+    path = _scene(tmp_path, groups=[
+        {"name": "ok", "species": "chestnut", "count": 2, "seed": 0, "params": dict(TINY), "stop": {"frames": 10}},
+        {"name": "stuck", "species": "chestnut", "count": 1, "seed": 0, "params": dict(TINY),
+         "stop": {"water_left": 0.001, "max_frames": 15}}])
+    r = subprocess.run([sys.executable, "-m", "leafsim", "scene", str(path), "--out", str(tmp_path / "out"),
+                        "--workers", "2", "--json"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 1
+    rep = json.loads(r.stdout)
+    assert [f["name"] for f in rep["failed"]] == ["stuck-000"] and "not reached within max_frames = 15" in rep["failed"][0]["error"]
+    assert "stuck-000" in r.stderr.strip().splitlines()[-1] and "Traceback" not in r.stderr
+    leaves = tmp_path / "out" / "leaves"
+    assert sorted(p.name for p in leaves.iterdir()) == ["ok-000", "ok-001"]  # nothing of the failed leaf
+    assert not list((tmp_path / "out").rglob("*.tmp"))
+
+
+def test_a_leaf_that_blows_up_fails_alone_and_leaves_no_files(tmp_path, monkeypatch):
+    """NaN in the state (forced: the physics is stable) → a per-leaf failure, its folder removed."""
+    from leafsim.sim.simulator import Simulator
+
+    scene = load_scene(_scene(tmp_path))
+    job = scene.jobs[2]
+    step = Simulator.step
+
+    def exploding(self, state):
+        ms = step(self, state)
+        if state.frame == 30:
+            state.particle_q[0, 0] = np.nan
+        return ms
+
+    monkeypatch.setattr(Simulator, "step", exploding)
+    job = type(job)(**{**job.__dict__, "stop": {"kind": "frames", "value": 200, "max_frames": 200}})
+    res = run_leaf(job, tmp_path / "out")
+    assert res["ok"] is False and res["name"] == "chestnut-000"
+    # a kernel trips ("blew up at frame 31"), the watchdog's NaN check (every few frames) or the
+    # scene's own (every FINITE_CHECK_EVERY frames)
+    err = res["error"]
+    assert "blew up" in err or "NaN/Inf" in err
+    assert int(re.search(r"frame (\d+)", err).group(1)) <= 64
+    assert not (tmp_path / "out" / "leaves" / "chestnut-000").exists()
+
+
+BAD = [
+    ({"colour": 1}, "key 'colour': unknown key"),
+    ({"groups": [{"name": "a", "species": "birch", "count": 1, "stop": {"frames": 1}}]}, "group 'a', key 'species': unknown species 'birch'"),
+    ({"groups": [{"name": "a", "species": "oak", "count": -3, "stop": {"frames": 1}}]}, "group 'a', key 'count': expected an integer ≥ 1, got -3"),
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "lod": {"simulate": 0.05, "show": 0.07}}]}, "key 'lod.show'"),
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1, "season": 1}}]}, "key 'stop': expected exactly one"),
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "params": {"mesh.spacingg": 1}}]}, "unknown parameter 'mesh.spacingg'"),
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "effects": ["wind"]}]}, "key 'effects'"),
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "output": {"mesh": "obj", "every": 5}}]}, "key 'output.mesh'"),
+    ({"layout": {"kind": "floor", "size": [0.1]}}, "key 'layout.size'"),
+]
+
+
+@pytest.mark.parametrize("over,msg", BAD)
+def test_bad_scene_files_give_one_line_errors(tmp_path, over, msg):
+    path = _scene(tmp_path, **over)
+    with pytest.raises(LeafsimError) as e:
+        load_scene(path)
+    text = str(e.value)
+    assert text.startswith(str(path)) and msg in text and "\n" not in text
+
+
+def test_cli_bad_input_exit_2_and_no_files(tmp_path):
+    cases = []
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"groups": [ ')
+    cases.append(([str(bad), "--out", str(tmp_path / "bad")], "malformed JSON"))
+    neg = _scene(tmp_path, name="neg", groups=[{"name": "a", "species": "oak", "count": -1, "stop": {"frames": 1}}])
+    cases.append(([str(neg), "--out", str(tmp_path / "neg")], "key 'count'"))
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    cases.append(([str(_scene(tmp_path)), "--out", str(blocker / "out")], "cannot create the output folder"))
+    cases.append(([str(_scene(tmp_path)), "--out", str(blocker)], "exists and is not a folder"))
+    cases.append(([str(_scene(tmp_path)), "--workers", "0", "--out", str(tmp_path / "w0")], "--workers 0"))
+    for args, msg in cases:
+        r = subprocess.run([sys.executable, "-m", "leafsim", "scene", *args], capture_output=True, text=True, timeout=120,
+                           cwd=tmp_path)
+        assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, (args, r.stderr)
+    assert not (tmp_path / "w0").exists() and not (tmp_path / "neg").exists() and not (tmp_path / "out").exists()
+
+
+def test_shipped_scenes_load_and_say_what_they_promise():
+    canopy = load_scene(ROOT / "configs" / "scenes" / "autumn_canopy.json")
+    assert len(canopy.jobs) >= 200 and all(j.effects == ("colour",) and j.stop["kind"] == "season" for j in canopy.jobs)
+    assert len({j.stop["value"] for j in canopy.jobs}) > 100  # each leaf its own season
+    floor = load_scene(ROOT / "configs" / "scenes" / "forest_floor.json")
+    assert floor.layout["kind"] == "floor" and all(j.lod and j.stop["kind"] == "water_left" and j.output["every"] == 0
+                                                    for j in floor.jobs)
+    close = load_scene(ROOT / "configs" / "scenes" / "close_up.json")
+    assert all(j.lod is None and j.output["every"] > 0 and j.output["mesh"] == "glb" and not j.overrides.get("mesh.spacing")
+               for j in close.jobs)
+
+
+def test_overview_image_shows_every_leaf(tmp_path):
+    from leafsim.scene.placement import load_views
+
+    scene = load_scene(_scene(tmp_path, overview={"width": 320, "height": 240, "pitch": 90},
+                              groups=[{"name": "c", "species": "chestnut", "count": 3, "seed": 0, "params": dict(TINY),
+                                       "stop": {"frames": 2}}],
+                              layout={"kind": "row", "gap": 0.05}))
+    run_scene(scene, tmp_path / "out", workers=1, progress=False)
+    import cv2
+
+    img = cv2.imread(str(tmp_path / "out" / "overview.png"))
+    assert img.shape == (240, 320, 3)
+    sat = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)[:, :, 1]
+    n, _, st, _ = cv2.connectedComponentsWithStats((sat > 80).astype(np.uint8))
+    blobs = sorted(st[1:, cv2.CC_STAT_AREA])
+    assert len(blobs) == 3 and blobs[0] > 500, blobs  # three green leaves, side by side, none lost
+    assert len(load_views(tmp_path / "out", scene.jobs)) == 3

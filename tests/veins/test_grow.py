@@ -1,0 +1,99 @@
+import json
+
+import numpy as np
+import pytest
+
+from leafsim.pipeline import leaf_shape, species_veins
+from leafsim.config.species import load_library
+from leafsim.veins.stats import count_crossings, outside_length
+from leafsim.veins.lobes import detect_lobe_tips
+from leafsim.veins.graph import LATERAL, MAIN, SUB, VeinGraph, Vein
+
+LIB = load_library()
+SHAPES = {}
+
+
+def shape_of(key):
+    if key not in SHAPES:
+        SHAPES[key] = leaf_shape(LIB[key])
+    return SHAPES[key]
+
+
+@pytest.mark.parametrize("key", sorted(LIB))
+def test_ten_seeds_clean(key):
+    """Every species, seeds 0-9: no crossings, nothing outside, main veins end at their targets."""
+    sp, sh = LIB[key], shape_of(key)
+    step = sp.params["veins.main.step"] * sp.length_m * (1 + sp.params["veins.main.scale_jitter"])
+    for seed in range(10):
+        g = species_veins(sp, sh, sp.params, seed)
+        s = g.stats
+        assert s["crossings"] == 0, (key, seed)
+        assert s["outside_length"] == 0, (key, seed)
+        for v in g.of_order(MAIN):
+            assert np.linalg.norm(v.points[-1] - v.target) <= step
+            assert np.linalg.norm(v.points[-1] - v.points[-2]) <= step + 1e-12
+        assert s["counts"]["lateral"] >= 4
+        # widths taper: every vein is thinner at its end than at its start, and orders thin out
+        for v in g.veins:
+            assert v.widths[-1] <= v.widths[0] + 1e-15 and (v.widths > 0).all()
+
+
+@pytest.mark.parametrize("key", ["maple", "oak", "hornbeam"])
+def test_same_seed_same_json_other_seed_other_leaf(key):
+    sp, sh = LIB[key], shape_of(key)
+    a = json.dumps(species_veins(sp, sh, sp.params, 5).stats, sort_keys=True)
+    b = json.dumps(species_veins(sp, sh, sp.params, 5).stats, sort_keys=True)
+    assert a == b
+    g1 = species_veins(sp, sh, sp.params, 5)
+    g2 = species_veins(sp, sh, sp.params, 6)
+    P1, _, _ = g1.segments()
+    P2, _, _ = g2.segments()
+    assert P1.shape != P2.shape or not np.allclose(P1, P2)
+
+
+@pytest.mark.parametrize("key,lobes", [("maple", 5), ("grapevine", 5), ("oak", 5)])
+def test_lobed_leaves_get_a_main_vein_into_every_lobe(key, lobes):
+    sp, sh = LIB[key], shape_of(key)
+    g = species_veins(sp, sh, sp.params, 0)
+    mains = g.of_order(MAIN)
+    assert len(mains) >= lobes
+    tips = detect_lobe_tips(sh.contour, sh.length, sp.params["outline.lobe_depth"], radial=sp.main_origin == "base")
+    ends = np.array([v.points[-1] for v in mains])
+    served = [np.min(np.linalg.norm(ends - t, axis=1)) < 0.12 * sh.length for t in tips]
+    assert np.mean(served) >= 0.8, (len(tips), sum(served))
+
+
+def test_simple_leaves_have_one_main_vein_and_sublaterals_are_curved():
+    sp, sh = LIB["pokeweed"], shape_of("pokeweed")
+    g = species_veins(sp, sh, sp.params, 1)
+    assert len(g.of_order(MAIN)) == 1 and len(g.of_order(SUB)) > 5
+    bent = 0
+    for v in g.of_order(SUB):
+        chord = v.points[-1] - v.points[0]
+        n = np.array([-chord[1], chord[0]]) / np.linalg.norm(chord)
+        bent += np.abs((v.points - v.points[0]) @ n).max() > 1e-4
+    assert bent >= 0.5 * len(g.of_order(SUB))
+
+
+def test_sublateral_and_net_switches():
+    sp, sh = LIB["maple"], shape_of("maple")
+    p = sp.params.with_overrides({"veins.sub.enabled": False, "veins.net.enabled": True})
+    g = species_veins(sp, sh, p, 0)
+    assert g.stats["counts"]["sublateral"] == 0 and g.stats["counts"]["net"] > 20
+    assert g.stats["crossings"] == 0 and g.stats["outside_length"] == 0
+
+
+def test_spacing_changes_lateral_count():
+    sp, sh = LIB["chestnut"], shape_of("chestnut")
+    n1 = species_veins(sp, sh, sp.params.with_overrides({"veins.lateral.spacing": 1}), 0).stats["counts"]["lateral"]
+    n3 = species_veins(sp, sh, sp.params.with_overrides({"veins.lateral.spacing": 3}), 0).stats["counts"]["lateral"]
+    assert n1 > 2 * n3
+
+
+def test_crossing_and_outside_metrics_detect_defects():
+    sq = np.array([[-1, 0], [1, 0], [1, 2], [-1, 2]], float)
+    g = VeinGraph([Vein(MAIN, np.array([[0, 0.1], [0, 1.9]]), np.ones(2)),
+                   Vein(LATERAL, np.array([[-0.5, 1], [0.5, 1]]), np.ones(2)),
+                   Vein(LATERAL, np.array([[0.5, 0.5], [1.5, 0.5]]), np.ones(2))])
+    assert count_crossings(g) == 1
+    assert np.isclose(outside_length(g, sq), 0.5)
