@@ -20,7 +20,6 @@ from leafsim.base.signals import Interrupted, main_thread, raise_interrupted
 from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
 from leafsim.config.presets import QUALITY
 
-
 #: command → "module:function" in leafsim.commands
 COMMANDS = {
     "gui": "gui:cmd_gui", "species": "library:cmd_species", "params": "library:cmd_params",

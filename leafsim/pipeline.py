@@ -15,8 +15,15 @@ from typing import NamedTuple
 import numpy as np
 
 from leafsim.base.geometry import (
-    OUTLINE_END_TOLERANCE, LeafShape, distance_to_polygon, holes_problem, outline_problem, points_in_polygon,
-    polygon_area, resample_closed, targets_problem,
+    OUTLINE_END_TOLERANCE,
+    LeafShape,
+    distance_to_polygon,
+    holes_problem,
+    outline_problem,
+    points_in_polygon,
+    polygon_area,
+    resample_closed,
+    targets_problem,
 )
 from leafsim.blade.budget import check_mesh_budget
 from leafsim.blade.build import build_blade
@@ -112,11 +119,6 @@ def species_veins(sp: Species, shape: LeafShape, params: ParamSet, seed: int) ->
         if problem:
             raise sp.error("targets", problem)
     return grow_veins(shape, params, seed, targets=targets, main_origin=sp.main_origin, lateral_profile=sp.lateral_profile)
-
-
-def resolve_params(sp: Species, overrides: dict | None = None) -> ParamSet:
-    """Species parameters with user overrides applied (validated)."""
-    return sp.params.with_overrides(overrides or {}, where="--set")
 
 
 class BuiltLeaf(NamedTuple):

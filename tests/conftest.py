@@ -14,13 +14,12 @@ import subprocess
 import time
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 # leafsim first: it points numba's cache at a folder keyed to the kernel sources, which only
 # works before anything imports numba (the reference kernels of tests/helpers/pbd_reference.py call
 # leafsim's, so their cached code must not outlive a change there either)
 import leafsim  # noqa: F401
-
-from hypothesis import HealthCheck, settings
 
 # property-based tests (tests/test_properties.py): a quick, reproducible profile by default;
 # HYPOTHESIS_PROFILE=nightly runs 20x the examples with fresh randomness (a longer, nightly run)
@@ -88,7 +87,7 @@ def xdisplay():
 @pytest.fixture(scope="session")
 def tiny():
     """The bench's tiny leaf (a coarse maple-like blade), built once per test session."""
-    from leafsim.measure.bench import build_bench_model
+    from leafsim.measure.models import build_bench_model
 
     return build_bench_model("tiny")
 

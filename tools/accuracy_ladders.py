@@ -21,8 +21,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
-from leafsim.measure.accuracy import METRIC_NAMES, METRICS, floor_study, ladder_study
 from leafsim.config.params import PARAMS, parse_set_args
+from leafsim.measure.accuracy import METRIC_NAMES, METRICS, floor_study, ladder_study
 
 SHOWN = ("position", "height", "margin_lift", "area_3d", "area_top")
 

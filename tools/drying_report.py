@@ -65,10 +65,10 @@ def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides:
 
 def _pictures(sp, p, model, st, path: Path) -> None:
     """Top-down, side and front views side by side (the GUI's look: photo detail where there is one)."""
+    from leafsim.appearance.view import LeafView
     from leafsim.base.fileio import write_png_atomic
     from leafsim.render.offscreen import OffscreenRenderer, default_camera
     from leafsim.render.options import RenderOptions
-    from leafsim.appearance.view import LeafView
 
     photo = load_photo_rgba(sp.image) if sp.image is not None else None
     view = LeafView(model, photo, photo_tint=False)

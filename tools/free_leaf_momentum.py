@@ -10,7 +10,6 @@ import argparse
 
 import numpy as np
 
-
 from leafsim.config.species import get_species
 from leafsim.pipeline import build_leaf
 from leafsim.sim.run import Run

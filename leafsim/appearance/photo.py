@@ -1,8 +1,10 @@
-"""photo."""
+"""The species photo as a texture: RGB with the traced blade as alpha (holes transparent, a
+petiole lying on the blade inpainted), downscaled to the image limit."""
 
 from __future__ import annotations
 
 import numpy as np
+
 from leafsim.config.params import ParamSet
 from leafsim.config.species import Species
 from leafsim.pipeline import species_trace
@@ -18,9 +20,9 @@ def load_photo_rgba(path, max_pixels: int | None = None, traced=None) -> np.ndar
     when it cannot be read."""
     import cv2
 
-    from leafsim.outline.segment import segment_leaf
-    from leafsim.outline.image import load_image, working_image
     from leafsim.config.params import PARAMS
+    from leafsim.outline.image import load_image, working_image
+    from leafsim.outline.segment import segment_leaf
 
     if max_pixels is None:
         max_pixels = PARAMS["limits.image_pixels"].default

@@ -1,12 +1,17 @@
-"""reflectance."""
+"""Pigments → colour: a Beer–Lambert reflectance model per particle (absorption of each pigment
+per RGB band over pigment-free tissue, plus the cuticle's surface reflection), the photo's own
+colour fitted as the young state, and the sRGB curve.  The pigment kinetics are
+:mod:`leafsim.sim.pigments`."""
 
 from __future__ import annotations
 
 from typing import Any, Mapping
+
 import numpy as np
 from numba import njit
-from leafsim.sim.pigments import PigmentState, FASTMATH_FLAGS, ONE32, ZERO32, exp_neg_any
+
 from leafsim.base.cache import configure_numba_cache
+from leafsim.sim.pigments import FASTMATH_FLAGS, ONE32, ZERO32, PigmentState, exp_neg_any
 
 configure_numba_cache()  # before the first @njit(cache=True): the cache folder keyed to the kernel sources
 

@@ -127,7 +127,9 @@ class LeafView:
 
     def mesh(self, state: State, params):
         """A :class:`leafsim.appearance.mesh.RenderMesh` of the model in ``state`` (populate once)."""
-        from leafsim.appearance.mesh import SPRING_LINK as R_LINK, SPRING_SURFACE_T, SPRING_SURFACE_V, SPRING_VEIN as R_VEIN, RenderMesh
+        from leafsim.appearance.mesh import SPRING_LINK as R_LINK
+        from leafsim.appearance.mesh import SPRING_SURFACE_T, SPRING_SURFACE_V, RenderMesh
+        from leafsim.appearance.mesh import SPRING_VEIN as R_VEIN
 
         m, T, V, remap = self.model, self.T, self.V, self.remap
         kind_map = np.zeros(4, np.int8)

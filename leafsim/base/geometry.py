@@ -140,15 +140,6 @@ def outline_edges(contour: np.ndarray, holes=()) -> tuple[np.ndarray, np.ndarray
     return np.vstack(rings), np.vstack([np.roll(r, -1, axis=0) for r in rings])
 
 
-def segments_intersect(p1, p2, q1, q2) -> bool:
-    """Proper intersection test of segments p1p2 and q1q2 (touching at end points excluded)."""
-    d1 = _cross(q2 - q1, p1 - q1)
-    d2 = _cross(q2 - q1, p2 - q1)
-    d3 = _cross(p2 - p1, q1 - p1)
-    d4 = _cross(p2 - p1, q2 - p1)
-    return (d1 * d2 < 0) and (d3 * d4 < 0)
-
-
 def _cross(a, b):
     return a[0] * b[1] - a[1] * b[0]
 

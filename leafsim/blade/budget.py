@@ -1,14 +1,16 @@
-"""budget."""
+"""Refusing a blade that is too large before anything is built: the particle count estimated
+from the outline, against ``limits.max_particles`` and the machine's memory."""
 
 from __future__ import annotations
 
 import math
 import os
+
 import numpy as np
+
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import LeafShape, polygon_area
 from leafsim.config.params import ParamSet
-
 
 #: peak memory of a built and running model: a fixed part plus this much per particle
 #: (measured with ``leafsim run``: 0.31 GB at 33 k particles, 0.58 GB at 122 k; rounded up)

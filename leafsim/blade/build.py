@@ -22,18 +22,20 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import LeafShape, distance_to_outline
-from leafsim.config.params import ParamSet
+from leafsim.blade.budget import check_mesh_budget
+from leafsim.blade.elements import Hinges, Springs, make_hinges, make_springs, t_edges
 from leafsim.blade.kernels import greedy_colour
+from leafsim.blade.masses import Masses, lump_masses
+from leafsim.blade.mesh import signed_areas, triangulate, vein_chains
+from leafsim.blade.sample import patch_field, sample_particles
+from leafsim.config.params import ParamSet
 from leafsim.sim.model import (
-    KIND_VORONOI, LAYER_T, LAYER_V,
+    KIND_VORONOI,
+    LAYER_T,
+    LAYER_V,
     Model,
 )
 from leafsim.veins.graph import VeinGraph
-from leafsim.blade.budget import check_mesh_budget
-from leafsim.blade.sample import patch_field, sample_particles
-from leafsim.blade.mesh import signed_areas, triangulate, vein_chains
-from leafsim.blade.elements import Hinges, Springs, make_hinges, make_springs, t_edges
-from leafsim.blade.masses import Masses, lump_masses
 
 
 def colour_sort(idx: np.ndarray, n: int):

@@ -1,11 +1,17 @@
-"""elements."""
+"""Stage 3c–d: the T edges and springs (membrane and vein rods), the dual layer V and its links,
+and the bending hinges on interior edges."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
+
 from leafsim.sim.model import (
-    SPRING_LINK, SPRING_SURFACE, SPRING_V, SPRING_VEIN,
+    SPRING_LINK,
+    SPRING_SURFACE,
+    SPRING_V,
+    SPRING_VEIN,
 )
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
 from leafsim.base.cache import configure_numba_cache
 
 configure_numba_cache()  # before the first @njit(cache=True): the cache folder keyed to the kernel sources

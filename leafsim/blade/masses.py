@@ -1,14 +1,17 @@
-"""masses."""
+"""Stage 3e: masses per area — dry mass and water lumped to the particles by the area each stands
+for (veins by cross-section × length), with Jeong's graph-distance profile."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
-from leafsim.config.params import ParamSet
-from leafsim.blade.sample import Points
+
 from leafsim.blade.elements import Springs
+from leafsim.blade.sample import Points
+from leafsim.config.params import ParamSet
 
 
 @dataclass

@@ -1,14 +1,16 @@
-"""mesh."""
+"""Stage 3b: the Delaunay triangulation of layer T (outside triangles and boundary slivers
+dropped, Morton order, missing vein edges flipped in) and the vein chains on it."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import Delaunay
+
 from leafsim.base.geometry import points_in_region
+from leafsim.blade.sample import Points
 from leafsim.sim.model import (
     KIND_CONTOUR,
 )
-from leafsim.blade.sample import Points
 
 
 def triangulate(P: Points, contour, r: float, holes=()):

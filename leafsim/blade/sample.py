@@ -1,17 +1,22 @@
-"""sample."""
+"""Stage 3a: layer-T particles — contour, veins (up to ``mesh.veins_included``) and Poisson-disk
+surface particles — and the seeded hydraulic patch field."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial import cKDTree
+
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import points_in_region, polygon_area, resample_closed, resample_polyline
-from leafsim.config.params import ParamSet
 from leafsim.blade.kernels import poisson_accept
+from leafsim.config.params import ParamSet
 from leafsim.sim.model import (
-    KIND_CONTOUR, KIND_SURFACE, KIND_VEIN,
+    KIND_CONTOUR,
+    KIND_SURFACE,
+    KIND_VEIN,
 )
 from leafsim.veins.graph import VeinGraph
 

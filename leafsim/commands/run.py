@@ -24,7 +24,6 @@ from leafsim.sim.shape import save_npz, shape_metrics
 from leafsim.sim.stats import StatsStream
 
 
-
 def check_run_args(args) -> Path | None:
     """Validate ``leafsim run``'s options before any work; returns the --out folder (or None)."""
     if args.frames < 0:

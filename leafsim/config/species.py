@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from leafsim.base.resources import default_config, display_path
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import read_json
 from leafsim.base.geometry import outline_problem, targets_problem
+from leafsim.base.resources import default_config, display_path
 from leafsim.config.params import ParamSet
 from leafsim.config.params import show as _show
 

@@ -26,8 +26,8 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes
-from leafsim.sim.model import Model, State
 from leafsim.sim.frame import _unit, blade_frame
+from leafsim.sim.model import Model, State
 
 FORMATS = ("glb", "gltf", "obj", "ply")
 LAYERS = ("shell", "mid")

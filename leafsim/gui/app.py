@@ -44,6 +44,7 @@ from leafsim.interactive.session import Session
 from leafsim.render.camera import OrbitCamera
 from leafsim.render.options import RenderOptions
 from leafsim.render.renderer import Renderer
+
 #: above this many triangles the view is drawn into a texture kept while nothing changes (a
 #: large mesh costs more to draw than the texture costs to show; a small one is drawn straight
 #: into the window every frame)

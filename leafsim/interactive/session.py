@@ -32,7 +32,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.config.params import PARAMS, ParamSet
 from leafsim.config.presets_io import read_param_set, write_param_set
 from leafsim.config.species import DEFAULT_SPECIES, get_species, load_library
-from leafsim.interactive.builder import BuildResult, Builder, build, live_params
+from leafsim.interactive.builder import Builder, BuildResult, build, live_params
 from leafsim.interactive.history import history_record
 from leafsim.interactive.playback import Playback
 from leafsim.sim.run import Run
@@ -314,9 +314,6 @@ class Session:
         """Renderer arrays of a snapshot (runs on the worker thread)."""
         return view.update(state, self.sim_params), self._render_key()
 
-    def render_colours(self):
-        """(colours, tint) of layer T — see :meth:`leafsim.appearance.view.LeafView.colours`."""
-        return self._view().colours(self.state, self.sim_params)
 
     def use_texture(self) -> bool:
         return bool(self.params["render.texture"]) and self.photo_rgba is not None

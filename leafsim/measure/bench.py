@@ -27,319 +27,19 @@ Example
 from __future__ import annotations
 
 import os
-import resource
 import time
 
 import numpy as np
 
 from leafsim.appearance.reflectance import pigments_to_rgb
 from leafsim.config.params import ParamSet
+from leafsim.measure.memory import memory, memory_subprocess
+from leafsim.measure.models import EFFECTS, PASSES, bench_params, build_bench_model, folded_state
+from leafsim.measure.parallel import parallel_vs_serial
+from leafsim.measure.springs import spring_race
+from leafsim.measure.timing import interleaved, load_average, nothing, summary
 from leafsim.sim.model import Model
 from leafsim.sim.pigments import init_pigments, step_pigments
-
-#: name -> mesh.spacing on the built-in maple-like test outline (0.12 m long)
-SIZES = {"maple": 0.0158, "100k": 0.00385, "tiny": 0.05}
-#: passes of the spring race
-PASSES = 10
-#: the solver settings every bench job uses: 20 substeps per frame at any size (the count the
-#: bench's history was measured with; the default at the fine maple mesh is 40, and
-#: dynamics.substep_scaling would give a 100 k mesh ≈ 1000), mesh.spacing set to the model's
-BENCH_SETTINGS = {"dynamics.substeps": 20, "dynamics.substep_scaling": False}
-
-
-def bench_params(model: Model) -> ParamSet:
-    """The bench's parameters for ``model``: :data:`BENCH_SETTINGS` at the model's own spacing."""
-    return ParamSet({**BENCH_SETTINGS, "mesh.spacing": round(model.spacing / model.length, 6)})
-EFFECTS = {e: True for e in ("gravity", "pbd", "bending", "ground", "self_collision", "shrink")}
-
-
-def _maple_like():
-    """A palmate five-lobed outline with midrib, laterals and sublaterals (no image needed)."""
-    from leafsim.base.geometry import LeafShape, ray_polygon_hit, resample_polyline
-    from leafsim.veins.graph import Vein, VeinGraph
-
-    L = 0.12
-    t = np.linspace(-np.pi / 2, 1.5 * np.pi, 400, endpoint=False)
-    ang = t - np.pi / 2
-    rad = (1.0 - 0.35 * (0.5 - 0.5 * np.cos(5 * ang)) ** 0.7) * (0.6 + 0.4 * np.cos(ang / 2) ** 2)
-    c = np.column_stack([rad * np.cos(t), rad * np.sin(t)])
-    c -= c[0]
-    c *= L / c[:, 1].max()
-    shape = LeafShape(contour=c, base=np.zeros(2), apex=np.array([0.0, L]), lobes=np.empty((0, 2)), length=L)
-    veins = [Vein(0, resample_polyline(np.array([[0, 0], [0, 0.97 * L]]), 0.0024), np.zeros(0))]
-    veins[0].widths = np.linspace(0.0015, 0.0004, len(veins[0].points))
-    for k in range(6):
-        y = L * (0.1 + 0.7 * k / 5)
-        side = 1 if k % 2 == 0 else -1
-        d = np.array([side * np.cos(np.radians(35)), np.sin(np.radians(35))])
-        hit = ray_polygon_hit(np.array([0.0, y]), d, c)
-        if hit:
-            p = resample_polyline(np.array([[0.0, y], [0.0, y] + 0.85 * hit * d]), 0.0024)
-            veins.append(Vein(1, p, np.full(len(p), 0.0005), parent=0))
-    return shape, VeinGraph(veins=veins)
-
-
-def build_bench_model(size: str | float, seed: int = 1) -> Model:
-    from leafsim.blade.build import build_blade
-
-    spacing = SIZES[size] if isinstance(size, str) else float(size)
-    shape, veins = _maple_like()
-    return build_blade(shape, veins, ParamSet({"mesh.spacing": spacing}), seed)
-
-
-def folded_state(model: Model, seed: int = 1):
-    """A state with the right half of the blade folded over the left, 0.3 r above it, and a
-    random bilayer curl: a leaf in self-contact (the contact-heavy case)."""
-    st = model.state()
-    q = st.particle_q
-    right = q[:, 0] > 0
-    q[right, 0] *= -1
-    q[right, 2] = -q[right, 2] + 3 * model.thickness + 0.3 * model.spacing
-    st.hinge_rest[:] = np.random.default_rng(seed).uniform(-0.2, 0.2, model.hinge_count)
-    return st
-
-
-# ----------------------------------------------------------------------------- timing
-def interleaved(jobs: dict, rounds: int, warm: int = 1) -> dict:
-    """Time ``jobs`` (name → (reset, run); ``reset`` untimed) round-robin: one run of each per
-    round.  Returns name → list of ms."""
-    for _ in range(warm):
-        for reset, run in jobs.values():
-            reset()
-            run()
-    out = {k: [] for k in jobs}
-    for _ in range(rounds):
-        for k, (reset, run) in jobs.items():
-            reset()
-            t0 = time.perf_counter()
-            run()
-            out[k].append((time.perf_counter() - t0) * 1e3)
-    return out
-
-
-def _stats(ms) -> dict:
-    return {"median_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)), "rounds": len(ms)}
-
-
-def _load() -> float:
-    return float(os.getloadavg()[0])
-
-
-def _nothing():
-    return None
-
-
-# ----------------------------------------------------------------------------- spring race
-class SpringProblem:
-    """The race's job on one model: perturbed positions (2 % of the spacing) of the rest leaf,
-    the fresh leaf's inverse masses and the default compliances, springs in production order."""
-
-    def __init__(self, model: Model, params: ParamSet | None = None):
-        from leafsim.sim.effects.dynamics import Dynamics
-        from leafsim.sim.kernels import pbd as kp
-
-        params = params or bench_params(model)
-        self.model = model
-        d = Dynamics(model)
-        d.configure(params, EFFECTS)
-        st = model.state()
-        d.gather(st)
-        self.ij = d.sij
-        self.rec = d.srec.copy()
-        self.rest = self.rec[:, 0].copy()
-        self.cs = model.spring_colour_start
-        rng = np.random.default_rng(0)
-        self.q0 = st.particle_q + rng.normal(0, 0.02 * model.spacing, st.particle_q.shape)
-        self.residual0 = float(kp.residual(self.q0, self.ij, self.rest))
-
-    def residual(self, q) -> float:
-        from leafsim.sim.kernels import pbd as kp
-
-        return float(kp.residual(np.ascontiguousarray(q, np.float64), self.ij, self.rest))
-
-
-class _Kernel:
-    """A numba contender: positions/lambdas of ``dtype`` reset from the problem; ``fn(q, lam)``."""
-
-    def __init__(self, prob: SpringProblem, fn, dtype=np.float64):
-        self.q0 = prob.q0.astype(dtype)
-        self.q = self.q0.copy()
-        self.lam = np.zeros(len(prob.ij), dtype)
-        self.fn = fn
-
-    def reset(self):
-        self.q[:] = self.q0
-        self.lam[:] = 0.0
-
-    def run(self, npass=PASSES):
-        self.fn(self.q, self.lam)
-
-    def positions(self):
-        return self.q.astype(np.float64)
-
-
-class _NumpyJacobi:
-    """Vectorised numpy: Jacobi passes with bincount gathers, relaxation 1.5 / degree."""
-
-    def __init__(self, prob: SpringProblem):
-        self.prob = prob
-        n = len(prob.q0)
-        self.i, self.j = prob.ij[:, 0].astype(np.int64), prob.ij[:, 1].astype(np.int64)
-        self.deg = np.maximum(np.bincount(np.r_[self.i, self.j], minlength=n), 1).astype(float)
-        self.q = prob.q0.copy()
-
-    def reset(self):
-        self.q[:] = self.prob.q0
-
-    def run(self, npass=PASSES):
-        r, i, j, q, n = self.prob.rec, self.i, self.j, self.q, len(self.q)
-        for _ in range(npass):
-            d = q[i] - q[j]
-            ln = np.sqrt((d * d).sum(1))
-            f = ((r[:, 0] - ln) * r[:, 2] / np.maximum(ln, 1e-12))[:, None] * d
-            for k in range(3):
-                q[:, k] += 1.5 * (np.bincount(i, f[:, k] * r[:, 3], n) - np.bincount(j, f[:, k] * r[:, 4], n)) / self.deg
-
-    def positions(self):
-        return self.q
-
-
-def spring_contenders(prob: SpringProblem, peers: bool = True, numpy: bool = True, parallel: bool = True) -> dict:
-    """name → contender (reset(), run(), positions()).  The first is ours (production)."""
-    from leafsim.measure import contenders as kc
-    from leafsim.sim.kernels import pbd as kp
-
-    ij, rec, cs = prob.ij, prob.rec, prob.cs
-    ij32, rec32 = ij.astype(np.int32), rec.astype(np.float32)
-    perm, bs = kc.block_order(ij, prob.model.particle_rest)
-    bij, brec = np.ascontiguousarray(ij[perm]), np.ascontiguousarray(rec[perm])
-    out = {
-        "ours (f64, serial)": _Kernel(prob, lambda q, lam: kp.springs_passes(q, ij, rec, lam, PASSES, 0.0)),
-        "ceiling (f32, serial)": _Kernel(prob, lambda q, lam: kp.springs_passes(q, ij32, rec32, lam, PASSES, 0.0),
-                                         np.float32),
-    }
-    if parallel:
-        out["coloured parallel (before)"] = _Kernel(prob, lambda q, lam: kc.coloured_passes(q, ij, rec, lam, cs, 2, PASSES))
-        out["2-block parallel"] = _Kernel(prob, lambda q, lam: kc.block_passes(q, bij, brec, lam, bs, PASSES))
-    if numpy:
-        out["numpy Jacobi"] = _NumpyJacobi(prob)
-    if peers:
-        from leafsim.measure.peers import available
-
-        for name, Peer in available().items():
-            out[name] = _PeerAdapter(Peer(prob.q0, ij, rec, cs))
-    return out
-
-
-class _PeerAdapter:
-    def __init__(self, peer):
-        self.peer = peer
-        self.reset = peer.reset
-        self.positions = peer.positions
-
-    def run(self, npass=PASSES):
-        self.peer.run(npass)
-
-
-def spring_race(model: Model, rounds: int = 30, peers: bool = True, numpy: bool = True, parallel: bool = True) -> list[dict]:
-    """Race every contender on ``model``'s springs; rows with median/p90 ms, ratio to ours,
-    ns per spring, the residual after the passes and the largest distance of its positions
-    from ours (in mesh spacings)."""
-    prob = SpringProblem(model)
-    cons = spring_contenders(prob, peers, numpy, parallel)
-    load = _load()
-    times = interleaved({k: (c.reset, c.run) for k, c in cons.items()}, rounds)
-    ours = next(iter(cons))
-    for c in cons.values():
-        c.reset()
-        c.run()
-    q_ours = cons[ours].positions()
-    rows = []
-    for k, c in cons.items():
-        q = c.positions()
-        rows.append({"contender": k, **_stats(times[k]), "residual0": prob.residual0, "residual": prob.residual(q),
-                     "agree": float(np.abs(q - q_ours).max() / model.spacing),
-                     "ns_per_spring": float(np.median(times[k])) * 1e6 / PASSES / model.spring_count})
-    base = rows[0]["median_ms"]
-    for r in rows:
-        r["ratio"] = r["median_ms"] / base
-        r["load"] = load
-    return rows
-
-
-# ----------------------------------------------------------------------------- parallel vs serial
-class _Busy:
-    """``n`` processes spinning on the CPU while the block runs: the bench's own, reproducible
-    "machine under load" (the project's machines are shared; a parallel path must not lose
-    when another job holds a core)."""
-
-    def __init__(self, n: int):
-        self.n, self.procs = n, []
-
-    def __enter__(self):
-        import subprocess
-        import sys
-
-        try:
-            for _ in range(self.n):
-                self.procs.append(subprocess.Popen([sys.executable, "-c", "while True: pass"]))
-            time.sleep(0.3)
-        except BaseException:  # a failed start or Ctrl-C: no burner outlives the bench
-            self.__exit__()
-            raise
-        return self
-
-    def __exit__(self, *exc):
-        for p in self.procs:
-            p.kill()
-        for p in self.procs:
-            p.wait()
-        self.procs = []
-        return False
-
-
-def parallel_vs_serial(model: Model, rounds: int = 30, busy: int | None = None) -> list[dict]:
-    """Every parallel kernel against its serial twin, interleaved, on a quiet machine and with
-    ``busy`` CPU-bound processes running (default: one per core): 10 spring passes (the
-    coloured fork/join per colour and the 2-block domain split against the serial sweep) and
-    the shrink step (``prange`` over springs against the serial loop).  Rows: job, load,
-    median / p90 ms, and p90 ÷ the serial twin's p90 (load: the 1-minute load average at the
-    end of the block, which lags the burners)."""
-    from leafsim.sim.effects.shrink import Shrink
-    from leafsim.sim.kernels import shrink as ks
-
-    prob = SpringProblem(model)
-    cons = spring_contenders(prob, peers=False, numpy=False, parallel=True)
-    cons.pop("ceiling (f32, serial)")
-    st = model.state()
-    st.particle_water[:] *= np.linspace(0.6, 1.0, model.particle_count)
-    sh = Shrink(model)
-    sh.configure(bench_params(model))
-    m = model
-
-    def shrink(fn):
-        return lambda: fn(m.spring_ij, m.spring_rest0, sh.sigma, sh.alpha, sh.l_min, m.particle_cytosol,
-                          st.particle_water, m.particle_mass0, st.spring_rest)
-
-    jobs = {f"springs ×10: {k}": (c.reset, c.run) for k, c in cons.items()}
-    jobs["shrink: serial"] = (_nothing, shrink(ks.shrink_springs))
-    jobs["shrink: parallel (prange)"] = (_nothing, shrink(ks.shrink_springs_par))
-    twin = {k: ("springs ×10: ours (f64, serial)" if k.startswith("springs") else "shrink: serial") for k in jobs}
-    busy = (os.cpu_count() or 2) if busy is None else busy
-    rows = []
-    for n_busy in (0, busy):
-        if n_busy:
-            with _Busy(n_busy):
-                ms = interleaved(jobs, rounds)
-                load = _load()
-        else:
-            ms = interleaved(jobs, rounds)
-            load = _load()
-        st_ = {k: _stats(v) for k, v in ms.items()}
-        for k, v in st_.items():
-            rows.append({"job": k, "busy": n_busy, "load": load, **v,
-                         "p90_vs_serial": v["p90_ms"] / st_[twin[k]]["p90_ms"]})
-    return rows
 
 
 # ----------------------------------------------------------------------------- frame
@@ -396,8 +96,8 @@ def _pass_jobs(model, params):
 
 
 def _stage_jobs(model, params):
-    from leafsim.sim.effects.shrink import Shrink
     from leafsim.sim.effects.osmosis import Osmosis
+    from leafsim.sim.effects.shrink import Shrink
 
     st = model.state()
     st.particle_water[:] *= np.linspace(0.6, 1.0, model.particle_count)
@@ -405,8 +105,8 @@ def _stage_jobs(model, params):
     osm.configure(params)
     sh = Shrink(model)
     sh.configure(params)
-    return {"osmosis": (_nothing, lambda: osm.apply(st)), "shrink": (_nothing, lambda: sh.apply(st)),
-            "colour step": (_nothing, _colour_step_fn(model, params))}
+    return {"osmosis": (nothing, lambda: osm.apply(st)), "shrink": (nothing, lambda: sh.apply(st)),
+            "colour step": (nothing, _colour_step_fn(model, params))}
 
 
 def frame_bench(model: Model, rounds: int = 20, params: ParamSet | None = None) -> dict:
@@ -420,12 +120,12 @@ def frame_bench(model: Model, rounds: int = 20, params: ParamSet | None = None) 
                            ("frame folded, no self-collision", noself, lambda: folded_state(model))):
         reset, run, d = _frame_job(model, params, eff, sfn)
         if sfn is model.state:
-            reset = _nothing  # the flat leaf keeps lying on the ground: no reset needed
+            reset = nothing  # the flat leaf keeps lying on the ground: no reset needed
         jobs[name], dyn[name] = (reset, run), d
     jobs.update(_pass_jobs(model, params))
     jobs.update(_stage_jobs(model, params))
-    load = _load()
-    ms = {k: _stats(v) for k, v in interleaved(jobs, rounds).items()}
+    load = load_average()
+    ms = {k: summary(v) for k, v in interleaved(jobs, rounds).items()}
     med = {k: v["median_ms"] for k, v in ms.items()}
     ns = {k: med[job] * 1e6 / PASSES / c for k, job, c in
           (("spring", "springs ×10", model.spring_count), ("hinge", "hinges ×10", model.hinge_count),
@@ -478,73 +178,6 @@ def _colour_step_fn(model: Model, params: ParamSet):
         pigments_to_rgb(pig, params)
 
     return step
-
-
-# ----------------------------------------------------------------------------- memory
-def memory(model: Model, params: ParamSet | None = None) -> dict:
-    """Bytes per particle of the model, one state and the stages' arrays (dynamics, osmosis
-    with its factors, shrink), and this process's peak RSS so far."""
-    from leafsim.sim.simulator import Simulator
-
-    sim = Simulator(model, params or bench_params(model), watchdog=False)
-    st = sim.state()
-    sim.step(st)
-    n = model.particle_count
-    parts = {"model": _nbytes(model), "state": _nbytes(st), "dynamics": _nbytes(sim._dynamics),
-             "osmosis": _nbytes(sim._osmosis), "shrink": _nbytes(sim._shrink)}
-    return {"bytes_per_particle": {k: v / n for k, v in parts.items()},
-            "bytes_per_particle_total": sum(parts.values()) / n,
-            "peak_rss_mb": peak_rss_mb()}
-
-
-def peak_rss_mb() -> float:
-    """This process's peak resident memory [MB]: the kernel's high-water mark of its address
-    space (VmHWM), which starts afresh at exec.  (``ru_maxrss`` does not on Linux: a process
-    started by a 1 GB bench inherits the 1 GB as its 'peak'.)  ``ru_maxrss`` where /proc is
-    missing."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return float(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
-def _nbytes(obj, seen=None) -> int:
-    """Bytes of the numpy arrays and scipy sparse matrices an object holds (one level of
-    tuples/lists, no double counting)."""
-    import scipy.sparse as sp
-
-    seen = set() if seen is None else seen
-    vals = obj if isinstance(obj, (tuple, list)) else (vars(obj).values() if hasattr(obj, "__dict__") else
-                                                       [getattr(obj, f) for f in getattr(obj, "__dataclass_fields__", {})])
-    total = 0
-    for v in vals:
-        if id(v) in seen:
-            continue
-        seen.add(id(v))
-        if isinstance(v, np.ndarray):
-            total += v.nbytes
-        elif sp.issparse(v):
-            total += sum(getattr(v, a).nbytes for a in ("data", "indices", "indptr") if hasattr(v, a))
-        elif isinstance(v, (tuple, list)):
-            total += _nbytes(v, seen)
-    return total
-
-
-def memory_subprocess(size: str) -> dict:
-    """:func:`memory` of a fresh process that builds only ``size`` (a clean peak RSS)."""
-    import json
-    import subprocess
-    import sys
-
-    code = ("import json, resource; from leafsim.measure.bench import build_bench_model, memory; "
-            "from leafsim.measure.bench import peak_rss_mb; r0 = peak_rss_mb(); "
-            f"m = build_bench_model({size!r}); r = memory(m); r['rss_after_imports_mb'] = r0; print(json.dumps(r))")
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    return json.loads(res.stdout.strip().splitlines()[-1])
 
 
 # ----------------------------------------------------------------------------- driver

@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from leafsim.sim.kernels.scalar import spring_pass
 from leafsim.base.cache import configure_numba_cache
+from leafsim.sim.kernels.scalar import spring_pass
 
 configure_numba_cache()  # before the first @njit(cache=True): the cache folder keyed to the kernel sources
 

@@ -1,8 +1,10 @@
-"""drawn."""
+"""Outlines drawn in a species config (leaf-normalised points): Chaikin smoothing and margin
+teeth, for species without a licensed photo."""
 
 from __future__ import annotations
 
 import numpy as np
+
 from leafsim.config.species import Species
 
 
@@ -34,7 +36,7 @@ def add_teeth(pts: np.ndarray, count: int, depth: float, skip_base: float = 0.15
     Teeth are saw-shaped (pointing toward the apex); the margin within ``skip_base`` of the
     base and the tip (within 0.06 of the apex) stay entire.
     """
-    from leafsim.base.geometry import resample_closed, polygon_area
+    from leafsim.base.geometry import polygon_area, resample_closed
 
     if count <= 0 or depth <= 0:
         return pts

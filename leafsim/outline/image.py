@@ -1,14 +1,16 @@
-"""image."""
+"""Reading a leaf photo: any image file (alpha kept) with a clear error naming the file, a
+working copy downscaled to the pixel limit, and the mask morphology helpers."""
 
 from __future__ import annotations
 
 import math
 import os
 from pathlib import Path
+
 import cv2
 import numpy as np
-from leafsim.base.errors import LeafsimError
 
+from leafsim.base.errors import LeafsimError
 
 _DEBUG = False
 

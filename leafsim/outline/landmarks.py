@@ -1,9 +1,11 @@
-"""landmarks."""
+"""Landmarks of a traced leaf: the petiole and its junction with the blade (the base), the apex,
+lobe tips and sinuses, from the outline's shape and its mirror symmetry."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
+
 from leafsim.base.errors import LeafsimError
 from leafsim.outline.image import _DEBUG, _disk, _fill_holes, _largest_component
 

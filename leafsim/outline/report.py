@@ -1,12 +1,15 @@
-"""report."""
+"""What ``leafsim outline`` reports of a trace (JSON) and draws (the outline, base, apex and lobe
+tips over the photo)."""
 
 from __future__ import annotations
 
 import math
 import os
 from pathlib import Path
+
 import cv2
 import numpy as np
+
 from leafsim.base.fileio import write_png_atomic
 from leafsim.base.geometry import polygon_area
 from leafsim.outline.trace import TracedOutline

@@ -1,14 +1,17 @@
-"""segment."""
+"""Segmenting one leaf from its background: alpha when it is informative, else colour against
+the background estimated from the border (cast shadows count as background), holes filled
+or kept as closed sinuses, one leaf-sized region picked (two are refused)."""
 
 from __future__ import annotations
 
 import math
+
 import cv2
 import numpy as np
+
 from leafsim.base.errors import LeafsimError
 from leafsim.outline.holes import kept_holes
 from leafsim.outline.image import _disk, _fill_holes
-
 
 #: A component smaller than this fraction of the image is not a leaf.
 MIN_LEAF_FRACTION = 0.005

@@ -26,11 +26,11 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import LeafShape, polygon_area, resample_closed
-from leafsim.outline.holes import hole_polygons, kept_holes, petiole_band, sinus_junction, without_band
 from leafsim.config.params import ParamSet
+from leafsim.outline.holes import hole_polygons, kept_holes, petiole_band, sinus_junction, without_band
 from leafsim.outline.image import _disk, _fill_holes, _largest_component, load_image, working_image
-from leafsim.outline.segment import HOLE_MIN_FRACTION, segment_with_holes
 from leafsim.outline.landmarks import _base_from_shape, _find_petiole, _lobe_tips
+from leafsim.outline.segment import HOLE_MIN_FRACTION, segment_with_holes
 
 __all__ = [
     "TracedOutline",

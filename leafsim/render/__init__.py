@@ -1,8 +1,8 @@
 """Renderer (moderngl). ``RenderMesh``, ``OrbitCamera`` and ``RenderOptions`` import no OpenGL;
 ``Renderer`` and ``OffscreenRenderer`` load moderngl on first use."""
 
-from leafsim.render.camera import OrbitCamera
 from leafsim.appearance.mesh import RenderMesh
+from leafsim.render.camera import OrbitCamera
 from leafsim.render.options import RenderOptions
 
 __all__ = ["OrbitCamera", "RenderMesh", "RenderOptions", "Renderer", "OffscreenRenderer"]

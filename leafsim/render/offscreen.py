@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from leafsim.base.resources import shader_dir as default_shader_dir
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import write_png_atomic as _write_png
+from leafsim.base.resources import shader_dir as default_shader_dir
 from leafsim.render.camera import OrbitCamera
 
 

@@ -12,11 +12,11 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from leafsim.base.resources import shader_dir as default_shader_dir
+from leafsim.appearance.mesh import validate_mesh
 from leafsim.base.errors import LeafsimError
+from leafsim.base.resources import shader_dir as default_shader_dir
 from leafsim.render.camera import look_at, orthographic
 from leafsim.render.geom import VeinRibbons, bounds, orient_up, unique_edges, vertex_normals
-from leafsim.appearance.mesh import validate_mesh
 from leafsim.render.options import BASIC_VIEWS, RenderOptions
 
 DEFAULT_COLOUR = np.array([0.10, 0.32, 0.05], dtype=np.float32)  # linear summer green

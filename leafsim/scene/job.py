@@ -35,7 +35,6 @@ from leafsim.sim.model import Model, State
 from leafsim.sim.run import Run, Stop
 
 
-
 @dataclass(frozen=True)
 class LeafJob:
     """Everything one leaf needs (picklable, hashable into :attr:`key`).

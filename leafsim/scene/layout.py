@@ -1,4 +1,4 @@
-"""layout."""
+"""Where a scene writes each leaf: ``OUT/leaves/NAME/``."""
 
 from __future__ import annotations
 

@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.base.fileio import atomic_write_bytes, read_json
+from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, is_done, run_leaf
 from leafsim.scene.layout import leaf_dir
 

@@ -6,13 +6,13 @@
 >>> state, stats = run_headless(model, params, frames=2000)        # doctest: +SKIP
 """
 
-from leafsim.sim.model import Model, State
 from leafsim.config.presets import PRESETS, THESIS_PRESET
-from leafsim.sim.run import run_headless
-from leafsim.sim.stats import frame_stats
-from leafsim.sim.shape import leaf_frame, save_npz, shape_metrics
 from leafsim.sim.effects import EFFECTS
+from leafsim.sim.model import Model, State
+from leafsim.sim.run import run_headless
+from leafsim.sim.shape import leaf_frame, save_npz, shape_metrics
 from leafsim.sim.simulator import Simulator
+from leafsim.sim.stats import frame_stats
 
 __all__ = ["Model", "State", "Simulator", "EFFECTS", "run_headless", "save_npz", "shape_metrics", "frame_stats",
            "leaf_frame", "THESIS_PRESET", "PRESETS"]

@@ -22,8 +22,8 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes
-from leafsim.sim.pigments import PigmentState
 from leafsim.sim.model import Model, State
+from leafsim.sim.pigments import PigmentState
 
 FORMAT = "leafsim-checkpoint/1"
 _PIGMENT_ARRAYS = ("chlorophyll", "carotenoid", "anthocyanin", "browning", "necrosis", "vein", "leaf")

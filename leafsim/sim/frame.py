@@ -1,10 +1,11 @@
-"""frame."""
+"""The blade's mid-surface frame of a state: layer-T positions, triangles, vertex normals and the
+local thickness from the V layer (exports and the level of detail use it)."""
 
 from __future__ import annotations
 
 import numpy as np
-from leafsim.sim.model import Model, State
 
+from leafsim.sim.model import Model, State
 
 #: the shell's top surface never comes closer to the bottom than this fraction of the thickness
 MIN_THICKNESS = 0.05

@@ -18,7 +18,6 @@ LAYER_T, LAYER_V = 0, 1
 KIND_SURFACE, KIND_CONTOUR, KIND_VEIN, KIND_VORONOI = 0, 1, 2, 3
 # spring types
 SPRING_SURFACE, SPRING_VEIN, SPRING_V, SPRING_LINK = 0, 1, 2, 3
-SPRING_TYPE_NAMES = ("surface", "vein", "voronoi", "link")
 
 
 @dataclass(frozen=True)

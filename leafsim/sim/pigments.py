@@ -148,8 +148,8 @@ from typing import Any, Mapping
 import numpy as np
 from numba import njit
 
-from leafsim.config.params import ParamSet
 from leafsim.base.cache import configure_numba_cache
+from leafsim.config.params import ParamSet
 
 configure_numba_cache()  # before the first @njit(cache=True): the cache folder keyed to the kernel sources
 

@@ -146,12 +146,6 @@ class Run:
             if until is not None and until(self.state):
                 return
 
-    def advance(self, n: int) -> "Run":
-        """Step ``n`` frames (or until NaN/Inf: :class:`Diverged`)."""
-        for _ in self.frames(Stop(frames=self.state.frame + max(int(n), 0))):
-            pass
-        return self
-
 
 def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stats_path=None, on_frame=None,
                  seed: int = 0, state: State | None = None, simulator: Simulator | None = None, stats_stream=None):

@@ -1,10 +1,10 @@
-"""graph."""
+"""The vein graph: one :class:`Vein` polyline per vein with its widths, order and parent."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import numpy as np
 
+import numpy as np
 
 MAIN, LATERAL, SUB, NET = 0, 1, 2, 3
 

@@ -1,4 +1,5 @@
-"""lobes."""
+"""Lobe tips of an outline (Kim's automatic main-vein targets): convex-hull vertices that are
+contour extrema beyond a depth threshold."""
 
 from __future__ import annotations
 

@@ -1,8 +1,9 @@
-"""stats."""
+"""Statistics of a vein graph: counts and lengths per order, crossings, length outside the blade."""
 
 from __future__ import annotations
 
 import numpy as np
+
 from leafsim.base.geometry import (  # noqa: E402
     LeafShape,
     crossing_pairs,

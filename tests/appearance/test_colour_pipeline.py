@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from leafsim.interactive.session import Session
 from leafsim.appearance.reflectance import pigments_to_rgb
+from leafsim.interactive.session import Session
 from leafsim.sim.model import KIND_CONTOUR, KIND_VEIN, LAYER_T
 
 COLOUR_ONLY = {"effects.shrink": False, "effects.gravity": False, "effects.pbd": False, "effects.bending": False,

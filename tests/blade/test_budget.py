@@ -9,14 +9,14 @@ import json
 import numpy as np
 import pytest
 
-from leafsim.blade import budget
-from leafsim.blade.build import build_blade
-from leafsim.blade.budget import check_mesh_budget, estimate_particles
-from leafsim.cli import main
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import points_in_polygon
-from leafsim.pipeline import leaf_shape, species_veins
+from leafsim.blade import budget
+from leafsim.blade.budget import check_mesh_budget, estimate_particles
+from leafsim.blade.build import build_blade
+from leafsim.cli import main
 from leafsim.config.species import load_library
+from leafsim.pipeline import leaf_shape, species_veins
 
 LIB = load_library()
 

@@ -1,13 +1,12 @@
 import numpy as np
 import pytest
 
-from leafsim.blade.build import build_blade
+from helpers.synthetic import ellipse_shape, lobed_shape, synthetic_veins
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import points_in_polygon
+from leafsim.blade.build import build_blade
 from leafsim.config.params import ParamSet
 from leafsim.sim.model import LAYER_T, LAYER_V, SPRING_LINK, SPRING_V
-
-from helpers.synthetic import ellipse_shape, lobed_shape, synthetic_veins
 
 P = ParamSet({"mesh.spacing": 0.04})
 

@@ -70,6 +70,7 @@ def _assert_same(run, reference):
     assert stats == ref_stats
 
 
+@pytest.mark.slow
 def test_sigkill_then_resume_is_bit_identical(tmp_path, reference, capsys):
     code, so, se, out, stats = _start_and_signal(tmp_path, signal.SIGKILL, fresh_compile=True)
     assert code == -signal.SIGKILL

@@ -23,12 +23,12 @@ import numpy as np
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from leafsim.cli import main
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import crossing_pairs, distance_to_polygon, points_in_polygon
-from leafsim.pipeline import leaf_shape
+from leafsim.cli import main
 from leafsim.config.params import PARAMS, ParamSet, parse_set_args
 from leafsim.config.species import load_library
+from leafsim.pipeline import leaf_shape
 
 NAMES = sorted(PARAMS)
 TMP = Path(tempfile.mkdtemp(prefix="leafsim-hyp-"))

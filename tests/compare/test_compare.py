@@ -6,10 +6,9 @@ import json
 
 import cv2
 
+from helpers.leafimg import photo
 from leafsim.compare.run import run_compare
 from leafsim.config.species import get_species
-
-from helpers.leafimg import photo
 
 #: a coarse, fast-drying leaf: the whole drying run takes ≈ 900 frames
 FAST = {"mesh.spacing": 0.06, "osmosis.evaporation_top": 0.07, "osmosis.evaporation_bottom": 0.0525}

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from helpers.paths import REPO as ROOT
-from leafsim.cli import main
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import crossing_pairs, outline_problem
+from leafsim.cli import main
 from leafsim.config.params import JOINTS, PARAMS, ParamSet
 
 LIB = json.loads((ROOT / "configs" / "leaves.json").read_text(encoding="utf-8"))

@@ -5,9 +5,9 @@ import pytest
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import points_in_polygon, polygon_area
-from leafsim.pipeline import leaf_shape
 from leafsim.base.resources import data_dir
 from leafsim.config.species import get_species, load_library
+from leafsim.pipeline import leaf_shape
 
 LIB = load_library()
 

@@ -11,16 +11,15 @@ import numpy as np
 import pytest
 import trimesh
 
+from helpers.gltf import assert_clean
+from leafsim.appearance.photo import load_photo_rgba
+from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
+from leafsim.config.species import get_species
 from leafsim.export.mesh import boundary_edges, export_mesh
 from leafsim.pipeline import build_leaf
-from leafsim.appearance.photo import load_photo_rgba
 from leafsim.sim.model import LAYER_T
 from leafsim.sim.simulator import Simulator
-from leafsim.config.species import get_species
-from leafsim.appearance.view import LeafView
-
-from helpers.gltf import assert_clean
 
 
 @pytest.fixture(scope="module")
@@ -139,6 +138,7 @@ def _cli(*args):
     return subprocess.run([sys.executable, "-m", "leafsim", *args], capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_cli_export_animation_and_bad_input(tmp_path):
     out = tmp_path / "chestnut.glb"
     r = _cli("export", "--species", "chestnut", "--frames", "40", "--every", "20", "--format", "glb", "--out", str(out),

@@ -19,9 +19,9 @@ import pytest
 pytest.importorskip("imgui_bundle")
 pytest.importorskip("moderngl")
 
+from helpers.paths import REPO as ROOT  # noqa: E402
 from leafsim.base.errors import LeafsimError  # noqa: E402
 from leafsim.config.params import GROUPS, PARAMS  # noqa: E402
-from helpers.paths import REPO as ROOT  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("xdisplay")
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from leafsim.gui.photo import UV_CORNERS, panel_quad, project, screen_rotation, texcoord_affine, uv_to_model
-from leafsim.render.camera import OrbitCamera
 from leafsim.interactive.session import Session
+from leafsim.render.camera import OrbitCamera
 
 
 def _default_view(model):

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 from numba import njit, prange
+
 from leafsim.base.cache import configure_numba_cache
 
 configure_numba_cache()  # before the first @njit(cache=True): the cache folder keyed to the kernel sources
@@ -410,7 +411,7 @@ def uninvert(q, invm, vidx, hmin, vonly, ground):
     return moved
 
 
-from leafsim.sim.kernels.pbd import canonical_pairs as _canonical  # noqa: E402
+from leafsim.sim.kernels.contacts import canonical_pairs as _canonical
 
 
 @njit(cache=True, nogil=True, fastmath=True)

@@ -2,11 +2,14 @@
 
 import json
 
-from leafsim.measure.accuracy import METRICS, pareto_front
+import pytest
+
 from leafsim.cli import main
 from leafsim.config.params import PARAMS
+from leafsim.measure.accuracy import METRICS, pareto_front
 
 
+@pytest.mark.slow
 def test_accuracy_quick_report(tmp_path, capsys):
     out = tmp_path / "acc"
     assert main(["accuracy", "--quick", "--species", "oak", "--out", str(out), "--json", "--floor", "1"]) == 0
@@ -55,9 +58,9 @@ def test_accuracy_bad_out(tmp_path, capsys):
 def test_study_measures_every_other_quality_level():
     """The full study's "quality" sweep: one row per quality level other than the defaults and
     the reference, with exactly the level's changes from the defaults."""
-    from leafsim.measure.accuracy import default_sweeps
     from leafsim.config.params import ParamSet
     from leafsim.config.presets import QUALITY, quality_of
+    from leafsim.measure.accuracy import default_sweeps
 
     base = ParamSet()
     rows = [s for s in default_sweeps(base, groups=["quality"]) if s.group == "quality"]
@@ -72,10 +75,10 @@ def test_unperturbed_start_repeats_the_run_exactly():
     with a real perturbation is the leaf's sensitivity, not noise in the solver)."""
     import numpy as np
 
+    from leafsim.config.species import get_species
     from leafsim.measure.accuracy import Setting, run_setting
     from leafsim.pipeline import leaf_shape
     from leafsim.sim.metrics import Probe
-    from leafsim.config.species import get_species
 
     sp = get_species("oak")
     base = sp.params.with_overrides({"mesh.spacing": 0.08})

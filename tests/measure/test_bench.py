@@ -16,6 +16,7 @@ def race(tiny):
     return {r["contender"]: r for r in bench.spring_race(tiny, rounds=1)}
 
 
+@pytest.mark.slow
 def test_every_contender_projects(race):
     for name, r in race.items():
         assert r["residual"] < 0.5 * r["residual0"], name  # a kernel that does nothing cannot win
@@ -90,10 +91,9 @@ def test_parallel_vs_serial_rows_under_load(tiny):
 def test_json_output_stays_pure_when_contenders_print(monkeypatch, capfd):
     """`leafsim bench --json`: banners the peers print while they load (from Python or straight
     to file descriptor 1) go to stderr, so stdout parses as JSON."""
+    import ctypes
     import json
     import os
-
-    import ctypes
 
     def noisy(*a, **k):
         print("Warp 1.19.0 initialized:")

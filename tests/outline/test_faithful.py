@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 
 from helpers.leafimg import overlapping_lobes_photo
+from leafsim.appearance.photo import species_photo_rgba
+from leafsim.base.geometry import distance_to_polygon, points_in_polygon, polygon_area, segment_hits
 from leafsim.blade.build import build_blade
 from leafsim.compare.metrics import frame_for, margin_length, reference, silhouette_iou
-from leafsim.base.geometry import distance_to_polygon, points_in_polygon, polygon_area, segment_hits
-from leafsim.pipeline import build_leaf
-from leafsim.appearance.photo import species_photo_rgba
-from leafsim.outline.trace import to_leaf_shape, trace_outline
 from leafsim.config.params import ParamSet
-from leafsim.sim.model import LAYER_T
 from leafsim.config.species import get_species
+from leafsim.outline.trace import to_leaf_shape, trace_outline
+from leafsim.pipeline import build_leaf
+from leafsim.sim.model import LAYER_T
 from leafsim.veins.grow import grow_veins
 
 SIZE = 800
@@ -50,9 +50,9 @@ def test_base_found_behind_overlapping_basal_lobes(tmp_path, petiole_over, flip)
 
 
 def test_closed_gap_stays_a_hole_in_outline_mesh_veins_and_render(tmp_path):
+    from leafsim.appearance.view import LeafView
     from leafsim.render.topdown import TopDown
     from leafsim.sim.simulator import Simulator
-    from leafsim.appearance.view import LeafView
 
     t, img, base, apex, hole = _traced(tmp_path, False, True)
     shape = to_leaf_shape(t, 0.12)
@@ -98,9 +98,9 @@ def test_margin_teeth_kept_on_serrate_photos(species):
     """The young model's rendered margin is at least 95 % as long as the photo's at the same
     resolution (hornbeam is doubly serrate, the grapevine dentate, the aspen crenate-serrate);
     evenly spaced contour particles gave 0.69–0.87."""
+    from leafsim.appearance.view import LeafView
     from leafsim.render.topdown import TopDown
     from leafsim.sim.simulator import Simulator
-    from leafsim.appearance.view import LeafView
 
     sp = get_species(species)
     params = sp.params

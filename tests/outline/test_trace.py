@@ -13,10 +13,10 @@ from helpers.paths import REPO as ROOT
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import polygon_area
 from leafsim.config.params import PARAMS
-from leafsim.outline.trace import to_leaf_shape, trace_outline
+from leafsim.outline.image import load_image
 from leafsim.outline.report import draw_outline, outline_report
 from leafsim.outline.segment import segment_leaf
-from leafsim.outline.image import load_image
+from leafsim.outline.trace import to_leaf_shape, trace_outline
 
 IMG = ROOT / "images"
 
@@ -254,7 +254,8 @@ def test_no_leaf(kind, tmp_path):
 
 # ------------------------------------------------------------------ photos that used to trace wrong (issue 9.4)
 
-from helpers.leafimg import GREEN, PAPER, draw_leaf, iou as mask_iou, mask_of, petiole_line, photo  # noqa: E402
+from helpers.leafimg import GREEN, PAPER, draw_leaf, mask_of, petiole_line, photo  # noqa: E402
+from helpers.leafimg import iou as mask_iou
 
 
 def _trace_img(tmp_path, img, name="leaf.png", **params):

@@ -2,9 +2,9 @@
 
 import numpy as np
 
+from leafsim.interactive.session import Session
 from leafsim.render.offscreen import OffscreenRenderer, default_camera
 from leafsim.render.options import RenderOptions
-from leafsim.interactive.session import Session
 
 
 def test_drying_changes_the_rendered_leaf():

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from leafsim.config.species import get_species
 from leafsim.scene.lod import LevelOfDetail, lod_error
 from leafsim.scene.placement import HeightField, _floor, _samples
 from leafsim.sim.model import LAYER_T
-from leafsim.config.species import get_species
 
 
 @pytest.fixture(scope="module")

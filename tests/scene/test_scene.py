@@ -14,8 +14,8 @@ import pytest
 
 from helpers.paths import REPO as ROOT
 from leafsim.base.errors import LeafsimError
-from leafsim.scene.run import load_scene, run_scene
 from leafsim.scene.job import run_leaf
+from leafsim.scene.run import load_scene, run_scene
 
 TINY = {"mesh.spacing": 0.08}
 
@@ -100,6 +100,7 @@ def test_changed_group_reruns_only_its_leaves(one_worker, tmp_path):
     assert json.loads((out / "leaves" / "chestnut-000" / "done.json").read_text())["frames"] == 5
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_the_same_bytes(one_worker, tmp_path):
     from distributed import LocalCluster
 

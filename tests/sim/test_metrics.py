@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from leafsim.config.species import get_species
 from leafsim.pipeline import build_leaf
 from leafsim.sim.metrics import Probe, field_errors
-from leafsim.config.species import get_species
 
 
 @pytest.fixture(scope="module")

@@ -3,20 +3,21 @@ the watchdog, and a convergence check under mesh refinement."""
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from leafsim.blade.build import build_blade
+from helpers.synthetic import ellipse_shape, synthetic_veins
 from leafsim.base.errors import LeafsimError
-from leafsim.pipeline import build_leaf
+from leafsim.blade.build import build_blade
 from leafsim.config.params import ParamSet
+from leafsim.config.species import get_species
+from leafsim.pipeline import build_leaf
 from leafsim.sim.metrics import Probe
 from leafsim.sim.simulator import Simulator
 from leafsim.sim.watchdog import Watchdog, momenta
-from leafsim.config.species import get_species
-
-from helpers.synthetic import ellipse_shape, synthetic_veins
 
 
+@pytest.mark.slow
 def test_mass_and_water_do_not_depend_on_the_mesh():
     """Fresh mass and water of one maple agree within 1 % across spacings 0.04 … 0.014, and
     match leaf mass per area × area (+ the veins' rods)."""
@@ -146,6 +147,7 @@ def test_random_physics_stays_bounded_and_momentum_free(sig_top, sig_bot, l_min,
         assert np.linalg.norm(mom["momentum"]) / M <= 0.05 * mom["max_internal_speed"] + 1e-9
 
 
+@pytest.mark.slow
 def test_refinement_converges():
     """Dried on the ground, the default physics on a small leaf: each √2 refinement of the mesh
     changes the margin lift and the top-down area less than the previous one did (substeps
@@ -240,6 +242,7 @@ def test_dried_curled_leaf_on_the_ground_comes_to_rest_where_it_lies(mass_scalin
     assert travel < 1e-3 and speed < 1e-4, (travel, speed)
 
 
+@pytest.mark.slow
 def test_float32_dynamics_runs_on_float32_copies():
     """``dynamics.precision = float32`` runs the frame on float32 copies: the state stays
     float64 holding float32 values, nothing blows up, and with one large substep per frame

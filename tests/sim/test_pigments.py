@@ -7,10 +7,10 @@ import colorsys
 import numpy as np
 import pytest
 
-from leafsim.config.params import PARAMS, ParamSet
-from leafsim.sim.pigments import PALETTES, PigmentState, age_at, init_pigments, step_pigments
-from leafsim.measure.bench import bench_colour
 from leafsim.appearance.reflectance import linear_to_srgb, pigments_to_rgb, tint_for_texture
+from leafsim.config.params import PARAMS, ParamSet
+from leafsim.measure.bench import bench_colour
+from leafsim.sim.pigments import PALETTES, PigmentState, age_at, init_pigments, step_pigments
 
 
 def _params(name: str | None = None, **extra) -> ParamSet:

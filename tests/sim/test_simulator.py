@@ -3,15 +3,14 @@ import json
 import numpy as np
 import pytest
 
-from leafsim.blade.build import build_blade
+from helpers.synthetic import ellipse_shape, synthetic_veins
 from leafsim.base.errors import LeafsimError
+from leafsim.blade.build import build_blade
 from leafsim.config.params import ParamSet
 from leafsim.sim.model import LAYER_T, LAYER_V
 from leafsim.sim.run import run_headless
 from leafsim.sim.shape import save_npz, shape_metrics
 from leafsim.sim.simulator import Simulator
-
-from helpers.synthetic import ellipse_shape, synthetic_veins
 
 COARSE = {"mesh.spacing": 0.05}
 

@@ -5,14 +5,13 @@ and no layer inversion (each V particle stays on the top side of its triangle)."
 import numpy as np
 import pytest
 
+from helpers.synthetic import ellipse_shape, lobed_shape, synthetic_veins
 from leafsim.blade.build import build_blade
 from leafsim.config.params import ParamSet
-from leafsim.sim.model import LAYER_T
 from leafsim.config.presets import THESIS_PRESET
+from leafsim.sim.model import LAYER_T
 from leafsim.sim.run import run_headless
 from leafsim.sim.shape import leaf_frame, shape_metrics
-
-from helpers.synthetic import ellipse_shape, lobed_shape, synthetic_veins
 
 CHEAP = {"mesh.spacing": 0.06}
 
@@ -54,7 +53,7 @@ def _model(kind, params):
     return build_blade(s, synthetic_veins(s), params, seed=4, extra_points=extra)
 
 
-@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c == "fine_50k" else c for c in CASES])
 def test_hard_case_stable(case):
     over, frames, kind = CASES[case]
     p = ParamSet(over)

@@ -4,15 +4,14 @@ bends about axes along its veins when ``shrink.curl_anisotropy`` asks for it."""
 import numpy as np
 import pytest
 
+from helpers.synthetic import ellipse_shape, synthetic_veins
+from leafsim.base.geometry import resample_polyline
 from leafsim.blade.build import build_blade
 from leafsim.config.params import ParamSet
 from leafsim.sim.effects.shrink import Shrink
 from leafsim.sim.simulator import Simulator
 from leafsim.sim.veinframe import hinge_alignment, vein_field, vein_frame_curl
 from leafsim.veins.graph import MAIN, Vein, VeinGraph
-
-from helpers.synthetic import ellipse_shape, synthetic_veins
-from leafsim.base.geometry import resample_polyline
 
 SPACING = 0.06
 

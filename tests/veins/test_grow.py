@@ -3,11 +3,11 @@ import json
 import numpy as np
 import pytest
 
-from leafsim.pipeline import leaf_shape, species_veins
 from leafsim.config.species import load_library
-from leafsim.veins.stats import count_crossings, outside_length
+from leafsim.pipeline import leaf_shape, species_veins
+from leafsim.veins.graph import LATERAL, MAIN, SUB, Vein, VeinGraph
 from leafsim.veins.lobes import detect_lobe_tips
-from leafsim.veins.graph import LATERAL, MAIN, SUB, VeinGraph, Vein
+from leafsim.veins.stats import count_crossings, outside_length
 
 LIB = load_library()
 SHAPES = {}

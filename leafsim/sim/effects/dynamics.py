@@ -11,7 +11,9 @@ import numpy as np
 from leafsim.sim.kernels import blocked as kb
 from leafsim.sim.kernels import pbd as kp
 from leafsim.sim.model import (
-    LAYER_T, Model, State,
+    LAYER_T,
+    Model,
+    State,
 )
 
 #: self-contact candidates are searched (spatial hash) at (1 + this) × the contact radius and
@@ -88,9 +90,9 @@ class Dynamics:
         self.table = np.zeros(1 << max(2 * len(T) - 1, 1).bit_length(), np.int64)
         self.out = np.zeros(3, np.int64)
         self.nxt = np.zeros(len(T), np.int64)
-        # the contact lists (kp.update_contacts): searched pairs and the near ones, with the T
+        # the contact lists (kernels.contacts.update_contacts): searched pairs and the near ones, with the T
         # positions (and rest positions) at the search and at the filtering, in T order (ascending,
-        # as kp.find_contacts needs); the lists double when a search fills them (the folded bench
+        # as kernels.contacts.find_contacts needs); the lists double when a search fills them (the folded bench
         # leaf needs 2.3 pairs per T particle)
         self.pairs = np.zeros((4 * len(T) + 64, 2), np.int32)
         self.near = np.zeros_like(self.pairs)

@@ -7,11 +7,14 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
+
 from leafsim.sim.kernels import osmosis as ko
 from leafsim.sim.model import (
-    LAYER_T, LAYER_V, Model, State,
+    LAYER_T,
+    LAYER_V,
+    Model,
+    State,
 )
-
 
 #: below this many unknowns the factor-once direct osmosis solve is used (measured: direct 1.2 ms vs
 #: PCG 3.2 ms vs pyamg 14 ms at 5.4 k; 20 ms vs 106 ms vs 576 ms at 83 k; factor 0.03 s / 0.55 s)

@@ -4,13 +4,18 @@ curvature), thickness volumes and the Voronoi layer follow the tissue strain as 
 from __future__ import annotations
 
 import numpy as np
-from leafsim.sim.kernels import shrink as ks
-from leafsim.sim.veinframe import hinge_alignment
-from leafsim.sim.model import (
-    LAYER_T, SPRING_LINK, SPRING_SURFACE, SPRING_VEIN, Model, State,
-)
-from leafsim.sim.kernels import PARALLEL_MIN_PARTICLES
 
+from leafsim.sim.kernels import PARALLEL_MIN_PARTICLES
+from leafsim.sim.kernels import shrink as ks
+from leafsim.sim.model import (
+    LAYER_T,
+    SPRING_LINK,
+    SPRING_SURFACE,
+    SPRING_VEIN,
+    Model,
+    State,
+)
+from leafsim.sim.veinframe import hinge_alignment
 
 #: bilayer curvature gain κ = gain · Δε / h (prototype measured 1.3; Timoshenko equal layers 1.5)
 BILAYER_GAIN = 1.3

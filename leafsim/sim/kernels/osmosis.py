@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from leafsim.sim.kernels import FASTMATH
 
@@ -26,15 +26,6 @@ def loss_rhs(M, c, w0, rate, dt, rhs, loss):
         w = M[i] * c[i]
         loss[i] = _loss(w, rate[i], dt, w0[i])
         rhs[i] = w - loss[i]
-
-
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH)
-def csr_matvec(indptr, indices, data, x, y):
-    for i in prange(indptr.shape[0] - 1):
-        s = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
-            s += data[k] * x[indices[k]]
-        y[i] = s
 
 
 @njit(cache=True, nogil=True, fastmath=False)
