@@ -58,3 +58,14 @@ def test_sibling_stages_do_not_import_each_other(copy):
     f = copy / "scene" / "run.py"
     f.write_text(f.read_text() + "\nfrom leafsim.compare import metrics  # noqa: F401,E402\n")
     assert any("imports leafsim.compare.metrics (stage compare)" in x for x in layers.upward(copy))
+
+
+def test_the_architecture_page_shows_the_contract():
+    """docs/architecture.md's table lists the stages row by row as the contract orders them."""
+    from helpers.paths import REPO
+
+    text = (REPO / "docs" / "architecture.md").read_text(encoding="utf-8")
+    rows = [line.split("|")[1:3] for line in text.splitlines() if line.startswith("| ") and "`" in line.split("|")[2]]
+    found = [(int(r.strip()), s.strip().strip("`").rstrip("/").removesuffix(".py")) for r, s in rows if r.strip().isdigit()]
+    expected = [(i + 1, stage) for i, row in enumerate(layers.LAYERS) for stage in row if stage != "__main__"]
+    assert found == expected
