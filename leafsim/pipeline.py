@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import (
     OUTLINE_END_TOLERANCE,
     LeafShape,
@@ -30,7 +31,7 @@ from leafsim.blade.build import build_blade
 from leafsim.config.params import ParamSet
 from leafsim.config.species import Species
 from leafsim.outline.drawn import drawn_contour
-from leafsim.outline.trace import to_leaf_shape, trace_outline
+from leafsim.outline.trace import refuse_non_leaf, to_leaf_shape, trace_outline
 from leafsim.sim.model import Model
 from leafsim.veins.graph import VeinGraph
 from leafsim.veins.grow import grow_veins
@@ -55,6 +56,10 @@ def leaf_shape(sp: Species, params: ParamSet | None = None) -> LeafShape:
         key = "outline.teeth" if sp.teeth else "outline"
     else:
         traced = species_trace(sp, params)
+        try:
+            refuse_non_leaf(traced)
+        except LeafsimError as e:
+            raise sp.error("image", str(e)) from None
         _check_given_ends(sp, traced)
         shape = to_leaf_shape(traced, sp.length_m)
         key = "image"

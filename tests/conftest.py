@@ -50,7 +50,7 @@ def xdisplay():
         n = _free_display()
         proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        deadline = time.time() + 10
+        deadline = time.time() + 120  # Xvfb's socket appears in milliseconds; a bound against a hang
         while time.time() < deadline and proc.poll() is None:
             if os.path.exists(f"/tmp/.X11-unix/X{n}"):
                 break

@@ -1,12 +1,22 @@
-"""Atomic file output: a temporary file in the target folder, fsync, then os.replace.
+"""Safe file input and output.
 
-An interrupted export never leaves a half-written file; a missing or unwritable folder
-raises LeafsimError naming the path.
+Output: a temporary file in the target folder, fsync, then os.replace — an interrupted export
+never leaves a half-written file — and only ever onto a regular file: a device, a named pipe,
+a socket or a folder at the target path is refused, never replaced (a symbolic link is written
+through to its regular target).  :func:`check_output` tells before any expensive work whether
+an output can be written (the folder exists and takes a file, the target is a regular file or
+nothing, the disk has room).
+
+Input: :func:`regular_input` accepts only a regular file of bounded size (a named pipe would
+block the reader for ever, ``/dev/zero`` never ends), and :func:`read_json` refuses duplicate
+keys (the last one would silently win).  Every failure is one LeafsimError line naming the path.
 """
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -22,22 +32,120 @@ def _public_mode() -> int:
     return 0o666 & ~mask
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes, what: str = "file") -> Path:
-    """Write ``data`` to ``path`` atomically; returns the path."""
+#: the largest JSON file (species config, scene, parameter set) read [bytes]
+MAX_JSON_BYTES = 32 * 2**20
+#: the largest image file read [bytes]
+MAX_IMAGE_BYTES = 512 * 2**20
+#: an output is refused when its disk has less free space than this plus what it needs [bytes]
+MIN_FREE_BYTES = 2**20
+
+_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+          (stat.S_ISFIFO, "a named pipe"), (stat.S_ISSOCK, "a socket"))
+
+
+def _kind(mode: int) -> str:
+    for test, name in _KINDS:
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def _os_reason(e: OSError) -> str:
+    if e.errno == errno.ELOOP:
+        return "a loop of symbolic links"
+    if e.errno == errno.ENOSPC:
+        return "no space left on the device"
+    return e.strerror or str(e)
+
+
+def output_target(path: str | os.PathLike, what: str = "file") -> Path:
+    """The file ``path`` will be written as: symbolic links followed to their target; LeafsimError
+    when that exists and is not a regular file (it is never replaced), or the link is broken
+    into a missing folder or loops."""
     path = Path(path)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        st = None
+    except OSError as e:
+        raise LeafsimError(f"{path}: cannot write {what} ({_os_reason(e)})") from None
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        raise LeafsimError(f"{path}: cannot write {what} (it is {_kind(st.st_mode)}; only a regular file is ever replaced)")
+    if path.is_symlink():
+        try:
+            return path.resolve(strict=False)
+        except (OSError, RuntimeError) as e:
+            raise LeafsimError(f"{path}: cannot write {what} ({_os_reason(e) if isinstance(e, OSError) else 'a loop of symbolic links'})") from None
+    return path
+
+
+def check_output(path: str | os.PathLike, what: str = "file", need_bytes: int = 0, folder: bool = False) -> Path:
+    """Check an output before any work: its folder exists, is a folder and takes a new file (a
+    probe file is made and removed: ``/proc`` and read-only mounts fail here, not after the
+    build); the target is a regular file or nothing (``folder=True``: a folder or nothing);
+    the disk has ``need_bytes`` + 1 MiB free.  Returns the path to write (links followed)."""
+    path = Path(path)
+    if folder:
+        if path.exists() and not path.is_dir():
+            raise LeafsimError(f"{path}: cannot write {what} (exists and is not a folder)")
+        target, parent = path, (path if path.is_dir() else path.parent)
+    else:
+        target = output_target(path, what)
+        parent = target.parent
+    parent = parent if str(parent) else Path(".")
+    if not parent.is_dir():
+        raise LeafsimError(f"{path}: cannot write {what} (folder {parent} does not exist)")
+    try:
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as e:
+        raise LeafsimError(f"{path}: cannot write {what} (cannot create a file in {parent}: {_os_reason(e)})") from None
+    try:
+        vfs = os.statvfs(parent)
+        free = vfs.f_bavail * vfs.f_frsize
+    except (OSError, AttributeError):
+        free = None
+    if free is not None and free < need_bytes + MIN_FREE_BYTES:
+        raise LeafsimError(f"{path}: cannot write {what} (only {free / 2**20:.1f} MiB free on its disk, "
+                           f"{(need_bytes + MIN_FREE_BYTES) / 2**20:.1f} MiB needed)")
+    return target
+
+
+def regular_input(path: str | os.PathLike, what: str = "file", max_bytes: int = MAX_JSON_BYTES) -> Path:
+    """``path`` if it is a readable regular file of at most ``max_bytes``; else LeafsimError
+    naming what it is (missing, a folder, a device, a named pipe, a link loop, too large)."""
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise LeafsimError(f"{path}: {what} not found") from None
+    except OSError as e:
+        raise LeafsimError(f"{path}: cannot read {what} ({_os_reason(e)})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise LeafsimError(f"{path}: cannot read {what} (it is {_kind(st.st_mode)}, expected a regular file)")
+    if st.st_size > max_bytes:
+        raise LeafsimError(f"{path}: {what} is {st.st_size / 2**20:.0f} MiB, more than the {max_bytes / 2**20:.0f} MiB "
+                           f"leafsim reads")
+    return path
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, what: str = "file") -> Path:
+    """Write ``data`` to ``path`` atomically (onto a regular file or nothing); returns the path."""
+    path = output_target(path, what)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise LeafsimError(f"{path}: cannot write {what} (folder {folder} does not exist)")
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
     except OSError as e:
-        raise LeafsimError(f"{path}: cannot write {what} ({e.strerror or e})") from None
+        raise LeafsimError(f"{path}: cannot write {what} ({_os_reason(e)})") from None
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, _public_mode())
+        output_target(path, what)  # the target may have changed kind while we wrote
         os.replace(tmp, path)
     except BaseException as e:
         try:
@@ -45,7 +153,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, what: str = "file")
         except OSError:
             pass
         if isinstance(e, OSError):
-            raise LeafsimError(f"{path}: cannot write {what} ({e.strerror or e})") from None
+            raise LeafsimError(f"{path}: cannot write {what} ({_os_reason(e)})") from None
         raise
     return path
 
@@ -97,21 +205,31 @@ def npz_bytes(arrays: dict) -> bytes:
     return buf.getvalue()
 
 
-def read_json(path: str | os.PathLike, what: str = "file"):
+def _no_duplicates(pairs):
+    out = {}
+    for k, v in pairs:
+        if k in out:
+            raise _Duplicate(k)
+        out[k] = v
+    return out
+
+
+class _Duplicate(ValueError):
+    pass
+
+
+def read_json(path: str | os.PathLike, what: str = "file", max_bytes: int = MAX_JSON_BYTES):
     """Parse the JSON file ``path``; LeafsimError (one line naming the file and, for bad JSON,
-    the line and column) when it is missing, a folder, unreadable, not UTF-8 text (a UTF-8
-    byte-order mark is allowed; UTF-16 is named), malformed or nested too deeply."""
+    the line and column) when it is missing, not a regular file, larger than ``max_bytes``,
+    unreadable, not UTF-8 text (a UTF-8 byte-order mark is allowed; UTF-16 is named),
+    malformed, nested too deeply or names a key twice in one object."""
     import json
 
-    path = Path(path)
-    if path.is_dir():
-        raise LeafsimError(f"{path}: {what} is a folder, expected a JSON file")
+    path = regular_input(path, what, max_bytes)
     try:
         raw = path.read_bytes()
-    except FileNotFoundError:
-        raise LeafsimError(f"{path}: {what} not found") from None
     except OSError as e:
-        raise LeafsimError(f"{path}: cannot read {what} ({e.strerror or e})") from None
+        raise LeafsimError(f"{path}: cannot read {what} ({_os_reason(e)})") from None
     if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise LeafsimError(f"{path}: {what} is UTF-16 text, expected UTF-8 (save it as UTF-8)")
     try:
@@ -120,7 +238,10 @@ def read_json(path: str | os.PathLike, what: str = "file"):
         raise LeafsimError(f"{path}: {what} is not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); "
                            "expected a UTF-8 JSON file") from None
     try:
-        return json.loads(text)
+        return json.loads(text, object_pairs_hook=_no_duplicates)
+    except _Duplicate as e:
+        raise LeafsimError(f"{path}: duplicate key '{e.args[0]}' (a JSON object names each key once; the "
+                           "second would silently replace the first)") from None
     except json.JSONDecodeError as e:
         raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
     except RecursionError:

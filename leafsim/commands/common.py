@@ -4,11 +4,20 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import check_output
 from leafsim.config.params import PARAMS, ParamSet, parse_set_args
 from leafsim.config.presets import quality_overrides
 from leafsim.config.species import DEFAULT_SPECIES, Species, get_species
+
+
+def warn(text: str) -> None:
+    """One warning line on stderr (stdout stays the command's result, JSON or text)."""
+    import sys
+
+    print(f"leafsim: warning: {' '.join(text.split())}", file=sys.stderr)
 
 
 def emit(args, obj: dict, text: str) -> None:
@@ -40,6 +49,17 @@ def effects_overrides(spec: str | None) -> dict:
 def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
     """The species of ``--species`` (default maple) and its parameters with ``--quality``,
     ``--set`` and (``effects``) ``--effects`` applied."""
-    sp = get_species(args.species or DEFAULT_SPECIES, args.config)
+    sp = get_species(DEFAULT_SPECIES if args.species is None else args.species, args.config)
     extra = effects_overrides(getattr(args, "effects", None)) if effects else {}
     return sp, sp.params.with_overrides({**overrides(args), **extra}, where="--set")
+
+
+def png_output(option: str, path: str | None):
+    """Check a PNG output before any work (one line naming the option): a ``.png`` name (the
+    file holds PNG data, so another suffix would mislabel it), and a writable place that is a
+    regular file or nothing."""
+    if path is None:
+        return None
+    if Path(path).suffix.lower() != ".png":
+        raise LeafsimError(f"{option} {path}: expected a .png file name (leafsim writes PNG pictures)")
+    return check_output(path, f"{option} picture")

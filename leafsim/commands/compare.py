@@ -6,7 +6,7 @@ from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import write_png_atomic
-from leafsim.commands.common import emit, species_params
+from leafsim.commands.common import emit, png_output, species_params
 from leafsim.compare.metrics import montage
 from leafsim.compare.run import run_compare
 
@@ -28,8 +28,7 @@ def cmd_compare(args):
     stage = stage_arg(args.stage)
     if args.photo is not None and not Path(args.photo).is_file():
         raise LeafsimError(f"--photo {args.photo}: file not found")
-    if args.out and not Path(args.out).resolve().parent.is_dir():
-        raise LeafsimError(f"--out {args.out}: folder {Path(args.out).parent} does not exist")
+    png_output("--out", args.out)
     sp, params = species_params(args, effects=True)
     rep = run_compare(sp, params, seed=args.seed, photo=args.photo, stage=stage)
     rows = rep.pop("_rows")

@@ -8,6 +8,7 @@ from pathlib import Path
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import check_output
 from leafsim.commands.common import emit, species_params
 from leafsim.export.mesh import export_mesh, format_of
 from leafsim.pipeline import build_leaf
@@ -15,6 +16,7 @@ from leafsim.sim.run import Run, Stop
 
 
 def _check(args) -> str:
+    check_output(args.out, "mesh")  # a folder, a device or an unwritable place: now, not after the drying
     fmt = format_of(args.out, args.format)
     if args.frames < 0 or args.every < 0:
         raise LeafsimError(f"--frames {args.frames} / --every {args.every}: expected non-negative frame counts")

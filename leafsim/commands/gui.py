@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from leafsim.base.errors import LeafsimError
-from leafsim.commands.common import overrides
+from leafsim.commands.common import overrides, png_output
 
 
 def cmd_gui(args):
     if args.screenshot and args.frames is None:
         raise LeafsimError("--screenshot needs --frames N")
+    png_output("--screenshot", args.screenshot)
     from leafsim.gui.app import run_app  # imgui and OpenGL load only when the window opens
 
     return run_app(species=args.species, config=args.config, seed=args.seed, overrides=overrides(args),

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import check_output
 from leafsim.commands.common import emit
 from leafsim.measure.accuracy import GROUPS, markdown, study, write_report
 from leafsim.measure.bench import main as bench_main
@@ -16,6 +17,8 @@ def cmd_accuracy(args):
         raise LeafsimError(f"--out {out}: exists and is not a folder")
     if out is not None and not out.parent.exists():
         raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
+    if out is not None:
+        check_output(out, "--out folder", folder=True)
     if args.floor < 0:
         raise LeafsimError(f"--floor {args.floor}: expected a count ≥ 0")
     groups = None if args.groups is None else [g.strip() for g in args.groups.split(",") if g.strip()]

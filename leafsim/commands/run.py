@@ -12,7 +12,7 @@ import numpy as np
 
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import remove_stale_temps
+from leafsim.base.fileio import check_output, remove_stale_temps
 from leafsim.base.signals import DeferredSignals, Interrupted
 from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
 from leafsim.commands.common import emit, species_params
@@ -42,10 +42,13 @@ def check_run_args(args) -> Path | None:
             raise LeafsimError(f"--out {out}: exists and is not a folder")
         if not out.parent.exists():
             raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
+        check_output(out, "--out folder", folder=True)
         if args.resume and not (out / CHECKPOINT).is_file():
             raise LeafsimError(f"--resume: no checkpoint at {out / CHECKPOINT} (run first with --out {out})")
-    if args.stats and not Path(args.stats).parent.exists():
-        raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
+    if args.stats:
+        if not Path(args.stats).parent.exists():
+            raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
+        check_output(args.stats, "--stats file")
     if args.checkpoint_every is None:
         args.checkpoint_every = CHECKPOINT_EVERY if out is not None else 0
     return out
@@ -117,6 +120,9 @@ def cmd_run(args):
     run = Run(model, params, seed=args.seed)
     if args.resume:
         run.state = load_checkpoint(ck, model, meta)
+        if args.frames < run.state.frame:
+            raise LeafsimError(f"--frames {args.frames}: the checkpoint in {out} is at frame {run.state.frame} already "
+                               f"(resume with --frames ≥ {run.state.frame})")
     start = run.state.frame
     _prepare_out(out, ck, args.stats)
     outputs = _Outputs(args, sp, params, run, ck, meta, out, start)

@@ -7,7 +7,7 @@ import time
 
 from leafsim.appearance.draw2d import draw_veins
 from leafsim.base.fileio import write_png_atomic
-from leafsim.commands.common import emit, species_params
+from leafsim.commands.common import emit, png_output, species_params, warn
 from leafsim.config.params import ParamSet, parse_set_args
 from leafsim.outline.image import load_image
 from leafsim.outline.report import draw_outline, outline_report
@@ -16,9 +16,12 @@ from leafsim.pipeline import build_leaf, leaf_shape, species_veins
 
 
 def cmd_outline(args):
+    png_output("--out", args.out)
     params = ParamSet(parse_set_args(args.sets))
     traced = trace_outline(args.image, params)
     rep = outline_report(traced)
+    for problem in rep["leafness"]["problems"]:  # reported, never silent (build and compare refuse them)
+        warn(f"{args.image}: {problem['text']}")
     if args.out:
         draw_outline(traced, load_image(args.image), args.out)
     emit(args, rep, f"{args.image}: {rep['points']} points, area {rep['area_px']:.0f} px, base {rep['base']}, apex {rep['apex']}, "
@@ -26,6 +29,7 @@ def cmd_outline(args):
 
 
 def cmd_veins(args):
+    png_output("--out", args.out)
     sp, params = species_params(args)
     t0 = time.perf_counter()
     shape = leaf_shape(sp, params)

@@ -22,7 +22,7 @@ from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.base.resources import display_path
 from leafsim.compare import metrics as C
-from leafsim.outline.trace import to_leaf_shape
+from leafsim.outline.trace import refuse_non_leaf, to_leaf_shape
 from leafsim.pipeline import build_leaf, trace_photo
 from leafsim.render.topdown import TopDown
 from leafsim.sim.model import LAYER_T
@@ -90,6 +90,7 @@ class _Leaf:
 
 def _reference(path, params, frame, length_m, base_px=None, apex_px=None):
     traced = trace_photo(path, params, base_px, apex_px)
+    refuse_non_leaf(traced)  # a cut leaf, the background or a rectangle would give a meaningless IoU
     return C.reference(traced, to_leaf_shape(traced, length_m), frame)
 
 

@@ -76,7 +76,7 @@ class Param:
         except (TypeError, ValueError, OverflowError):
             raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}") from None
         if not math.isfinite(num):
-            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected a finite {expect}")
+            raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected a finite value, {expect}")
         if self.kind == "int":
             if num != int(num):
                 raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")

@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import atomic_write_bytes
+from leafsim.base.fileio import atomic_write_bytes, read_json
 from leafsim.config.params import PARAMS, ParamSet, flatten, unknown_key_message
 from leafsim.config.species import get_species
 
@@ -27,16 +27,7 @@ def write_param_set(path, species: str, seed: int, params: ParamSet) -> Path:
 
 
 def _read_json(path: Path):
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise LeafsimError(f"{path}: parameter file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise LeafsimError(f"{path}: cannot read parameter file ({getattr(e, 'strerror', None) or e})") from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise LeafsimError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    doc = read_json(path, "parameter file")
     if not isinstance(doc, dict):
         raise LeafsimError(f"{path}: expected a JSON object of parameter values")
     return doc

@@ -110,7 +110,15 @@ def _err(path: Path, species: str | None, key: str | None, msg: str) -> LeafsimE
     return LeafsimError(f"{where}: {msg}")
 
 
+#: the most points a drawn outline or a target list may hold (the outline is resampled to
+#: ``outline.points`` anyway; a million-point outline took minutes to validate)
+MAX_POINTS = 20_000
+
+
 def _points(path, sp, key, value, min_len=1) -> np.ndarray:
+    if isinstance(value, list) and len(value) > MAX_POINTS:
+        raise _err(path, sp, key, f"{len(value):,} points, expected at most {MAX_POINTS:,} (it is resampled to "
+                                  "outline.points anyway)")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
@@ -270,9 +278,16 @@ def _teeth(path: Path, key: str, teeth: Any) -> dict:
 
 
 def get_species(name: str, path: str | Path | None = None) -> Species:
+    """The species ``name`` of the library at ``path`` (default: the built-in one); an unknown
+    or empty name is an error that lists the known keys and suggests the closest one."""
+    import difflib
+
     lib = load_library(path)
     if name not in lib:
-        raise LeafsimError(f"unknown species '{name}' (known: {', '.join(sorted(lib))})")
+        close = difflib.get_close_matches(name, list(lib), n=1, cutoff=0.6) if name else []
+        hint = f"did you mean '{close[0]}'? " if close else ""
+        what = "no species given" if not name else f"unknown species '{name}'"
+        raise LeafsimError(f"{what} ({hint}known: {', '.join(sorted(lib))})")
     return lib[name]
 
 

@@ -61,7 +61,7 @@ class Session:
     def __init__(self, species: str | None = None, config=None, seed: int = 0,
                  overrides: dict | None = None, build: bool = True):
         self.config = config
-        self.species_key = species or DEFAULT_SPECIES
+        self.species_key = DEFAULT_SPECIES if species is None else species
         self.species = get_species(self.species_key, config)
         self.overrides = dict(overrides or {})
         self.params: ParamSet = self.species.params.with_overrides(self.overrides, where="--set")

@@ -3,16 +3,21 @@ working copy downscaled to the pixel limit, and the mask morphology helpers."""
 
 from __future__ import annotations
 
+import errno
 import math
 import os
+import stat
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
+from leafsim.base.fileio import MAX_IMAGE_BYTES
 
 _DEBUG = False
+#: a working copy smaller than this on its long side is too coarse to trace [px]
+MIN_WORKING_SIDE = 300
 
 
 def load_image(path: str | os.PathLike) -> np.ndarray:
@@ -23,10 +28,20 @@ def load_image(path: str | os.PathLike) -> np.ndarray:
     """
     p = Path(path)
     where = str(path)
-    if not p.exists():
-        raise LeafsimError(f"{where}: cannot read image (file not found)")
-    if p.is_dir():
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise LeafsimError(f"{where}: cannot read image (file not found)") from None
+    except OSError as exc:
+        reason = "a loop of symbolic links" if exc.errno == errno.ELOOP else (exc.strerror or str(exc))
+        raise LeafsimError(f"{where}: cannot read image ({reason})") from None
+    if stat.S_ISDIR(st.st_mode):
         raise LeafsimError(f"{where}: cannot read image (is a folder, expected an image file)")
+    if not stat.S_ISREG(st.st_mode):  # a named pipe would block the reader, a device never end
+        raise LeafsimError(f"{where}: cannot read image (not a regular file: a device, named pipe or socket)")
+    if st.st_size > MAX_IMAGE_BYTES:
+        raise LeafsimError(f"{where}: cannot read image ({st.st_size / 2**20:.0f} MiB, more than the "
+                           f"{MAX_IMAGE_BYTES / 2**20:.0f} MiB leafsim reads)")
     try:
         data = np.fromfile(str(p), dtype=np.uint8)
     except OSError as exc:
@@ -86,6 +101,10 @@ def working_image(img: np.ndarray, max_pixels: int) -> tuple[np.ndarray, float]:
     if h * w <= max_pixels:
         return img, 1.0
     f = math.sqrt(max_pixels / float(h * w))
+    if max(w, h) * f < MIN_WORKING_SIDE:
+        raise LeafsimError(f"limits.image_pixels = {max_pixels:,} would trace this {w}×{h} photo on a {int(w * f)}×{int(h * f)} "
+                           f"copy, too coarse to find the leaf's outline (≥ {MIN_WORKING_SIDE} px on the long side needed); "
+                           "raise limits.image_pixels")
     size = (max(8, int(w * f)), max(8, int(h * f)))
     small = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
     return small, size[0] / float(w)

@@ -12,6 +12,7 @@ import numpy as np
 
 from leafsim.base.fileio import write_png_atomic
 from leafsim.base.geometry import polygon_area
+from leafsim.outline.checks import problems
 from leafsim.outline.trace import TracedOutline
 
 
@@ -35,6 +36,9 @@ def outline_report(traced: TracedOutline) -> dict:
         "petiole_on_blade": traced.petiole_mask is not None,
         "work_scale": round(float(traced.work_scale), 6),
         "border_fraction": round(float(traced.border_fraction), 5),
+        "cut_by_border": list(traced.leafness.get("cut_by", [])),
+        "leafness": {**{k: (round(v, 5) if isinstance(v, float) else v) for k, v in traced.leafness.items()},
+                     "problems": [{"level": lv, "text": tx} for lv, tx in problems(traced.leafness)]},
         "seconds": round(float(traced.seconds), 4),
     }
 

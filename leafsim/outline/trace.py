@@ -27,21 +27,13 @@ import numpy as np
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import LeafShape, polygon_area, resample_closed
 from leafsim.config.params import ParamSet
+from leafsim.outline.checks import leafness, problems
 from leafsim.outline.holes import hole_polygons, kept_holes, petiole_band, sinus_junction, without_band
 from leafsim.outline.image import _disk, _fill_holes, _largest_component, load_image, working_image
 from leafsim.outline.landmarks import _base_from_shape, _find_petiole, _lobe_tips
 from leafsim.outline.segment import HOLE_MIN_FRACTION, segment_with_holes
 
-__all__ = [
-    "TracedOutline",
-    "load_image",
-    "segment_leaf",
-    "working_image",
-    "trace_outline",
-    "to_leaf_shape",
-    "outline_report",
-    "draw_outline",
-]
+__all__ = ["TracedOutline", "trace_outline", "to_leaf_shape"]
 
 
 @dataclass
@@ -68,6 +60,8 @@ class TracedOutline:
         has the working size, every coordinate is in full-photo pixels.
     border_fraction : share of the image border the traced leaf covers (> 0: the leaf runs
         off the photo and the frame's straight edge is part of the outline).
+    border_sides : {"top", "bottom", "left", "right"} → share of that side the leaf covers.
+    leafness : the measures of :func:`leafsim.outline.checks.leafness` (is it a whole leaf?).
     holes_px : list of (k, 2) float64 — closed holes of the blade (sinuses closed by
         overlapping lobes), clockwise as seen; ``hole_mask`` the same at the working size.
     petiole_mask : (h, w) uint8 0/255 or None — pixels of a petiole lying on the blade (its
@@ -88,6 +82,8 @@ class TracedOutline:
     seconds: float = 0.0
     work_scale: float = 1.0
     border_fraction: float = 0.0
+    border_sides: dict = field(default_factory=dict)
+    leafness: dict = field(default_factory=dict)
     holes_px: list = field(default_factory=list)
     hole_mask: np.ndarray | None = None
     petiole_mask: np.ndarray | None = None
@@ -153,7 +149,8 @@ def _iou(poly: np.ndarray, mask: np.ndarray) -> float:
 
 def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = None,
                   base_px=None, apex_px=None) -> TracedOutline:
-    """Trace the outline of the one leaf in the photo at ``path``.
+    """Trace the outline of the one leaf in the photo at ``path`` (with the leafness measures
+    of :mod:`leafsim.outline.checks`; :func:`refuse_non_leaf` turns them into an error).
 
     ``params`` (a ParamSet or a mapping of overrides) supplies ``outline.simplify``
     (Douglas–Peucker tolerance × image diagonal), ``outline.points`` (resample count),
@@ -174,6 +171,7 @@ def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = No
     del full
     to_work = lambda q: None if q is None else (np.asarray(q, float).reshape(2) + 0.5) * f - 0.5  # noqa: E731
     t = _trace(img, p, where, to_work(base_px), to_work(apex_px))
+    t.leafness = leafness(t, img)
     if f != 1.0:
         back = lambda q: None if q is None else (np.asarray(q, float) + 0.5) / f - 0.5  # noqa: E731
         t.contour_px, t.lobes_px, t.petiole_px = back(t.contour_px), back(t.lobes_px), back(t.petiole_px)
@@ -286,8 +284,21 @@ def _trace(img: np.ndarray, p: ParamSet, where: str, base_px, apex_px) -> Traced
         lobes_px=np.asarray(tips, float).reshape(-1, 2), iou=_iou(contour, mask), image_size=(int(w), int(h)),
         path=where, petiole_px=b.petiole, base_method=method,
         border_fraction=float(np.mean(np.concatenate([mask[0], mask[-1], mask[1:-1, 0], mask[1:-1, -1]]) > 0)),
+        border_sides={side: float(np.mean(edge > 0)) for side, edge in
+                      (("top", mask[0]), ("bottom", mask[-1]), ("left", mask[:, 0]), ("right", mask[:, -1]))},
         holes_px=hole_polygons(b.holes, eps, perim / n), hole_mask=b.holes, petiole_mask=b.band,
     )
+
+
+def refuse_non_leaf(traced: TracedOutline) -> list[str]:
+    """LeafsimError (one line naming the photo) when the traced object is not a whole leaf (cut
+    by the image border, the background, a rectangle); returns the warnings of the checks that
+    only warn."""
+    found = problems(traced.leafness) if traced.leafness else []
+    for level, text in found:
+        if level == "refuse":
+            raise LeafsimError(f"{traced.path}: {text}")
+    return [text for level, text in found]
 
 
 # ----------------------------------------------------------------------------- world frame

@@ -170,7 +170,6 @@ class Renderer:
         """Create the GL buffers, arrays and textures for ``mesh`` (a :class:`RenderMesh`)."""
         validate_mesh(mesh)
         self.release_mesh()
-        ctx = self.ctx
         self.mesh = mesh
         pos = np.ascontiguousarray(mesh.positions, dtype=np.float32)
         n = self.n = pos.shape[0]

@@ -26,6 +26,12 @@ from leafsim.sim.model import Model, State
 from leafsim.sim.pigments import PigmentState
 
 FORMAT = "leafsim-checkpoint/1"
+#: a loaded particle farther than this many leaf lengths from the leaf, or faster than this
+#: [m/s], is not a state any run reaches
+MAX_REACH = 100.0
+MAX_SPEED = 1e3
+#: pigment contents and per-leaf factors are of order one; beyond this a file is damaged
+MAX_PIGMENT = 100.0
 _PIGMENT_ARRAYS = ("chlorophyll", "carotenoid", "anthocyanin", "browning", "necrosis", "vein", "leaf")
 
 
@@ -97,4 +103,66 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
                                age=float(meta["pigments"]["age"]), seed=int(meta["pigments"]["seed"]))
     except KeyError as e:
         raise LeafsimError(f"{path}: checkpoint is missing {e.args[0]}") from None
-    return State(**arrays, pigments=pig)
+    except Exception as e:  # a damaged member: zlib, numpy or a wrong type
+        raise LeafsimError(f"{path}: cannot read checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:80]})") from None
+    state = State(**arrays, pigments=pig)
+    check_state(state, model, f"{path}: checkpoint", frame=meta.get("frame"))
+    return state
+
+
+def _fail(where: str, msg: str) -> LeafsimError:
+    return LeafsimError(f"{where} {msg}")
+
+
+def check_state(state: State, model: Model, where: str, frame=None) -> None:
+    """A loaded state must fit ``model`` before any kernel sees it: every array of the shape
+    and dtype a fresh state of the model has, finite, and physical — particles within
+    :data:`MAX_REACH` leaf lengths and :data:`MAX_SPEED`, water ≥ 0 and at most the fresh
+    leaf's total, rest lengths in (0, 2 l⁰], rest volumes within 10 × the fresh ones, hinge
+    rest angles within ±π, time and frame non-negative (the frame the record names).  Raises one LeafsimError line naming the array."""
+    fresh = model.state()
+    for f in fields(State):
+        if f.name == "pigments":
+            continue
+        a, ref = getattr(state, f.name), getattr(fresh, f.name)
+        if not isinstance(a, np.ndarray) or a.shape != ref.shape or a.dtype != ref.dtype:
+            got = f"{a.dtype} {a.shape}" if isinstance(a, np.ndarray) else type(a).__name__
+            raise _fail(where, f"array {f.name} is {got}, expected {ref.dtype} {ref.shape} for this model")
+        if not np.isfinite(a).all():
+            raise _fail(where, f"array {f.name} holds NaN or infinite values")
+    far = np.linalg.norm(state.particle_q - model.particle_rest.mean(0), axis=1).max()
+    if far > MAX_REACH * model.length:
+        raise _fail(where, f"array particle_q holds a particle {far:.3g} m from the leaf (more than {MAX_REACH:g} leaf lengths)")
+    if np.abs(state.particle_qd).max() > MAX_SPEED:
+        raise _fail(where, f"array particle_qd holds a speed above {MAX_SPEED:g} m/s")
+    if (np.abs(state.vol_rest) > 10.0 * np.abs(model.vol_rest0) + 1e-30).any():
+        raise _fail(where, "array vol_rest holds rest volumes beyond 10 × the fresh leaf's")
+    w = state.particle_water
+    if (w < 0).any():
+        raise _fail(where, f"array particle_water holds negative water ({w.min():.3g} kg)")
+    if w.sum() > model.particle_water0.sum() * (1 + 1e-6):
+        raise _fail(where, f"array particle_water holds more water ({w.sum():.4g} kg) than the fresh leaf "
+                           f"({model.particle_water0.sum():.4g} kg)")
+    r = state.spring_rest / np.maximum(model.spring_rest0, 1e-300)
+    if (r <= 0).any() or (r > 2.0).any():
+        raise _fail(where, "array spring_rest holds rest lengths outside (0, 2] × their fresh lengths")
+    if (np.abs(state.hinge_rest) > np.pi).any() or (np.abs(state.hinge_plastic) > np.pi).any():
+        raise _fail(where, "array hinge_rest/hinge_plastic holds angles beyond ±π")
+    t, k = float(state.scalars[0]), float(state.scalars[1])
+    if t < 0 or t > 1e9 or k < 0 or k != round(k) or (frame is not None and int(k) != frame):
+        raise _fail(where, f"array scalars holds time {t:g} s, frame {k:g} (expected non-negative, frame {frame})")
+    pig = state.pigments
+    if pig is not None:
+        n = model.particle_count
+        for name in _PIGMENT_ARRAYS:
+            a = getattr(pig, name)
+            shape = (6,) if name == "leaf" else (n,)
+            dtype = np.float64 if name == "leaf" else np.float32
+            if not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dtype:
+                got = f"{a.dtype} {a.shape}" if isinstance(a, np.ndarray) else type(a).__name__
+                raise _fail(where, f"pigment array {name} is {got}, expected {np.dtype(dtype)} {shape}")
+            if not np.isfinite(a).all() or (name != "leaf" and (a < 0).any()) or (np.abs(a) > MAX_PIGMENT).any():
+                raise _fail(where, f"pigment array {name} holds NaN, infinite, negative or huge values "
+                                   f"(pigment contents are fractions of a summer content, at most {MAX_PIGMENT:g})")
+        if not np.isfinite(pig.age):
+            raise _fail(where, "pigment age is not a finite number")

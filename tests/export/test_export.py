@@ -12,6 +12,7 @@ import pytest
 import trimesh
 
 from helpers.gltf import assert_clean
+from helpers.paths import HANG_S
 from leafsim.appearance.photo import load_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
@@ -135,7 +136,7 @@ def test_export_is_deterministic_and_bad_requests_write_nothing(leaf, tmp_path):
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "leafsim", *args], capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-m", "leafsim", *args], capture_output=True, text=True, timeout=HANG_S)
 
 
 @pytest.mark.slow

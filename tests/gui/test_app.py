@@ -19,6 +19,7 @@ import pytest
 pytest.importorskip("imgui_bundle")
 pytest.importorskip("moderngl")
 
+from helpers.paths import HANG_S
 from helpers.paths import REPO as ROOT  # noqa: E402
 from leafsim.base.errors import LeafsimError  # noqa: E402
 from leafsim.config.params import GROUPS, PARAMS  # noqa: E402
@@ -379,7 +380,7 @@ def test_cli_gui_screenshot(tmp_path, xdisplay):
     out = tmp_path / "shot.png"
     env = {**os.environ, "DISPLAY": xdisplay}
     r = subprocess.run([sys.executable, "-m", "leafsim", "gui", "--species", "oak", "--frames", "30",
-                        "--screenshot", str(out)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=240)
+                        "--screenshot", str(out)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr[-2000:]
     import cv2
 
@@ -392,7 +393,7 @@ def test_cli_gui_screenshot_bad_folder(tmp_path, xdisplay):
     env = {**os.environ, "DISPLAY": xdisplay}
     r = subprocess.run([sys.executable, "-m", "leafsim", "gui", "--species", "oak", "--frames", "2",
                         "--screenshot", str(tmp_path / "no" / "x.png")], cwd=ROOT, env=env,
-                       capture_output=True, text=True, timeout=120)
+                       capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
 
 

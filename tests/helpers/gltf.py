@@ -8,6 +8,7 @@ import subprocess
 
 import pytest
 
+from helpers.paths import HANG_S
 from helpers.paths import REPO as ROOT
 
 SCRIPT = ROOT / "tests" / "helpers" / "validate_gltf.js"
@@ -19,7 +20,7 @@ def validate(path) -> dict:
     node = shutil.which("node")
     if node is None or not MODULE.exists():
         pytest.fail("the glTF-Validator is missing: run scripts/setup.sh (installs Node and .tools/node_modules/gltf-validator)")
-    r = subprocess.run([node, str(SCRIPT), str(path)], capture_output=True, text=True, timeout=120)
+    r = subprocess.run([node, str(SCRIPT), str(path)], capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     return json.loads(r.stdout)
 

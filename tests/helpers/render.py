@@ -9,7 +9,6 @@ def views_png(path, model, q, size=360):
     import cv2
 
     tri = model.tri_T
-    L = model.length
     lo = q[: tri.max() + 1].min(0)
     span = max(np.ptp(q[: tri.max() + 1], 0).max(), 1e-9)
     imgs = []

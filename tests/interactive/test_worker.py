@@ -12,7 +12,7 @@ from leafsim.interactive.session import Session
 from leafsim.interactive.worker import DRY_END_FRACTION
 
 
-def until(cond, timeout=60.0):
+def until(cond, timeout=600.0):
     t0 = time.time()
     while time.time() - t0 < timeout:
         if cond():

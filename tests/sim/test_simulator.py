@@ -3,6 +3,7 @@ import json
 import numpy as np
 import pytest
 
+from helpers.paths import HANG_S
 from helpers.synthetic import ellipse_shape, synthetic_veins
 from leafsim.base.errors import LeafsimError
 from leafsim.blade.build import build_blade
@@ -232,7 +233,7 @@ def test_cli_run_does_not_use_the_gui_session(tmp_path):
     code = ("import sys; from leafsim.cli import main; rc = main(['run', '--species', 'oak', '--frames', '3', "
             "'--set', 'mesh.spacing=0.08', '--json']); "
             "sys.stderr.write('SESSION' if 'leafsim.interactive.session' in sys.modules else 'OK'); sys.exit(rc)")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     assert r.stderr.endswith("OK"), r.stderr
     assert json.loads(r.stdout)["frames"] == 3

@@ -1,0 +1,159 @@
+"""The hostile-user cases: special files, damaged checkpoints, runaways, size guards, non-leaf
+photos and errors that name their real cause.  Every bad input gives exit status 2 and one
+line on stderr; nothing is replaced, nothing hangs."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from helpers import leafimg
+from leafsim.cli import main
+
+OAK = ["--species", "oak", "--set", "mesh.spacing=0.06"]
+
+
+def run_cli(*argv):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in argv])
+    return code, out.getvalue(), err.getvalue()
+
+
+def one_line(code, out, err, *needles):
+    assert code == 2 and out == "", (code, out, err)
+    assert err.startswith("leafsim: ") and err.count("\n") == 1 and "Traceback" not in err and "internal error" not in err, err
+    for n in needles:
+        assert n in err, (n, err)
+    return err
+
+
+@pytest.fixture
+def fifo(tmp_path):
+    p = tmp_path / "pipe.png"
+    os.mkfifo(p)
+    return p
+
+
+def test_outputs_onto_special_files_are_refused_untouched(tmp_path, fifo):
+    one_line(*run_cli("outline", "images/quercus_01.png", "--out", fifo), "named pipe")
+    one_line(*run_cli("outline", "images/quercus_01.png", "--out", tmp_path / "x.jpg"), "expected a .png file name")
+    one_line(*run_cli("export", *OAK, "--out", fifo), "named pipe")
+    one_line(*run_cli("export", *OAK, "--out", tmp_path), "it is a folder")
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--stats", fifo), "named pipe")
+    assert fifo.is_fifo() and tmp_path.is_dir()
+    if os.path.isdir("/proc"):  # found before the build, not after it
+        one_line(*run_cli("run", *OAK, "--frames", "2", "--stats", "/proc/leafsim.jsonl"), "cannot create a file in /proc")
+
+
+def test_inputs_that_are_not_bounded_files_are_refused(tmp_path, fifo):
+    one_line(*run_cli("outline", fifo), "not a regular file")  # a named pipe would hang the reader
+    if os.path.exists("/dev/zero"):
+        one_line(*run_cli("species", "--config", "/dev/zero"), "character device")
+    cfg = json.loads(Path("configs/leaves.json").read_text())
+    cfg["species"]["maple"]["outline"]["points"] = [[0.5 * np.cos(t), 0.5 + 0.5 * np.sin(t)]
+                                                   for t in np.linspace(0, 6.28, 25_000)]
+    big = tmp_path / "big.json"
+    big.write_text(json.dumps(cfg))
+    one_line(*run_cli("species", "--config", big), "25,000 points, expected at most 20,000")
+    dup = tmp_path / "dup.json"
+    dup.write_text(Path("configs/leaves.json").read_text().replace('"species": {', '"species": {"oak": {}, ', 1))
+    one_line(*run_cli("species", "--config", dup), "duplicate key 'oak'")
+
+
+def test_scene_size_guards_come_before_any_work(tmp_path):
+    def scene(layout=None, **group):
+        p = tmp_path / "s.json"
+        g = {"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, **group}
+        p.write_text(json.dumps({"layout": layout or {"kind": "row"}, "overview": False, "groups": [g]}))
+        return p
+
+    one_line(*run_cli("scene", scene(count=1_000_000), "--out", tmp_path / "o"), "≈ 2.4 GB", "at most 10,000")
+    one_line(*run_cli("scene", scene(count=1e9), "--out", tmp_path / "o"), "expected an integer in [1, 10000]")
+    one_line(*run_cli("scene", scene(layout={"kind": "floor", "size": [100, 100], "cell": 0.0001}), "--out", tmp_path / "o"),
+             "layout.cell", "1e+12 cells")
+    p = tmp_path / "d.json"
+    p.write_text('{"groups": [{"name": "a", "species": "oak", "count": 2, "count": 100000, "stop": {"frames": 1}}]}')
+    one_line(*run_cli("scene", p, "--out", tmp_path / "o"), "duplicate key 'count'")
+    assert not (tmp_path / "o" / "leaves").exists() or not any((tmp_path / "o" / "leaves").iterdir())
+
+
+def test_errors_name_their_real_cause(tmp_path):
+    one_line(*run_cli("build", "--species", ""), "no species given")
+    one_line(*run_cli("build", "--species", "mapel"), "did you mean 'maple'?")
+    one_line(*run_cli("outline", "images/quercus_01.png", "--set", "limits.image_pixels=10000"),
+             "limits.image_pixels = 10,000", "too coarse")
+    one_line(*run_cli("build", *OAK, "--set", "dynamics.dt=nan"), "expected a finite value")
+    out = tmp_path / "o"
+    assert run_cli("run", *OAK, "--frames", "8", "--out", out, "--checkpoint-every", "4")[0] == 0
+    one_line(*run_cli("run", *OAK, "--frames", "5", "--out", out, "--checkpoint-every", "4", "--resume"),
+             "at frame 8 already")
+
+
+@pytest.mark.parametrize("damage,needle", [
+    ("short", "particle_q is float64 (" ),
+    ("float32", "particle_q is float32"),
+    ("negative water", "negative water"),
+    ("nan", "NaN or infinite"),
+    ("too much water", "more water"),
+    ("truncated file", "cannot read checkpoint"),
+])
+def test_a_damaged_checkpoint_is_refused_before_any_kernel(tmp_path, damage, needle):
+    out = tmp_path / "o"
+    assert run_cli("run", *OAK, "--frames", "4", "--out", out, "--checkpoint-every", "2")[0] == 0
+    ck = out / "checkpoint.npz"
+    if damage == "truncated file":
+        ck.write_bytes(ck.read_bytes()[: len(ck.read_bytes()) // 2])
+    else:
+        d = dict(np.load(ck))
+        if damage == "short":
+            d["state_particle_q"] = d["state_particle_q"][:-5]
+        elif damage == "float32":
+            d["state_particle_q"] = d["state_particle_q"].astype(np.float32)
+        elif damage == "negative water":
+            d["state_particle_water"] = -d["state_particle_water"]
+        elif damage == "nan":
+            d["state_particle_qd"][3, 1] = np.nan
+        elif damage == "too much water":
+            d["state_particle_water"] = d["state_particle_water"] * 3
+        np.savez(ck, **d)
+    one_line(*run_cli("run", *OAK, "--frames", "8", "--out", out, "--checkpoint-every", "2", "--resume"), needle)
+
+
+def test_non_leaf_photos_are_reported_and_refused(tmp_path):
+    sq = np.full((500, 500, 3), 235, np.uint8)
+    sq[120:380, 120:380] = (30, 30, 200)
+    cv2.imwrite(str(tmp_path / "square.png"), sq)
+    cut, _ = leafimg.photo(500, centre=(0.5, 0.75))  # the blade runs off the bottom edge
+    cv2.imwrite(str(tmp_path / "cut.png"), cut)
+    code, out, err = run_cli("outline", tmp_path / "cut.png", "--json")
+    assert code == 0 and json.loads(out)["cut_by_border"] == ["bottom"]
+    assert "leafsim: warning:" in err and "cut by the image's bottom border" in err
+    code, out, err = run_cli("outline", tmp_path / "square.png", "--json")
+    assert code == 0 and "is a rectangle" in err
+    one_line(*run_cli("compare", "--species", "oak", "--set", "mesh.spacing=0.06", "--photo", tmp_path / "square.png"),
+             "is a rectangle")
+    oak = json.loads(Path("configs/leaves.json").read_text())["species"]["oak"]
+    oak["image"] = str(tmp_path / "cut.png")
+    for k in ("base_px", "apex_px", "senescent_photo"):
+        oak.pop(k, None)
+    cfg = {"species": {"oak": oak}}
+    p = tmp_path / "cfg.json"
+    p.write_text(json.dumps(cfg))
+    one_line(*run_cli("build", "--species", "oak", "--config", p), "key 'image'", "cut by the image's bottom border")
+
+
+@pytest.mark.slow
+def test_the_runaway_of_the_issue_is_stopped():
+    """Two in-range values made the leaf crumple with growing energy (7 m/s) and exit 0; the
+    watchdog now stops it (internal RMS speed ≫ what drying tissue does)."""
+    code, out, err = run_cli("run", "--species", "maple", "--quality", "draft", "--frames", "1500",
+                             "--set", "shrink.sigma_surface_bottom=3", "--set", "shrink.l_min=0.1", "--json")
+    one_line(code, out, err, "simulation unstable", "internal motion", "shrink.sigma_surface_bottom = 3")

@@ -1,0 +1,110 @@
+"""Scene workers never outlive their parent, and a Dask worker killed mid-scene costs no leaf
+and corrupts no output.  Both wait for progress (processes appearing, leaves finishing), never
+for a fixed time."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from leafsim.scene.run import load_scene, run_scene
+
+#: generous bounds for waiting on progress on a busy machine (never reached when things work)
+PATIENCE_S = 600.0
+
+
+def _scene(tmp_path: Path, count: int, frames: int) -> Path:
+    data = {"name": "slow", "seed": 1, "layout": {"kind": "row"}, "overview": False,
+            "groups": [{"name": "leaf", "species": "chestnut", "count": count, "seed": 0,
+                        "params": {"mesh.spacing": 0.06}, "stop": {"frames": frames}}]}
+    p = tmp_path / "slow.json"
+    p.write_text(json.dumps(data))
+    return p
+
+
+def _children(pid: int) -> set[int]:
+    """PIDs whose parent is ``pid`` (Linux /proc)."""
+    out = set()
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat[stat.rindex(")") + 2:].split()[1]) == pid:
+                out.add(int(d.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2] != "Z"
+
+
+def _wait(cond, what: str) -> None:
+    t0 = time.monotonic()
+    while not cond():
+        if time.monotonic() - t0 > PATIENCE_S:
+            pytest.fail(f"no progress: {what}")
+        time.sleep(0.1)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc and prctl are Linux's")
+def test_scene_workers_die_with_a_killed_parent(tmp_path):
+    scene = _scene(tmp_path, count=4, frames=1_000_000)  # far longer than the test
+    proc = subprocess.Popen([sys.executable, "-m", "leafsim", "scene", str(scene), "--out", str(tmp_path / "out"),
+                             "--workers", "2"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        # the workers exist and have started simulating (their leaf folders are not written
+        # before the end, so wait for two spawned children that use a CPU)
+        _wait(lambda: len(_children(proc.pid)) >= 2, "the scene's worker processes did not start")
+        kids = _children(proc.pid)
+        grandkids = set().union(*(_children(k) for k in kids))
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        _wait(lambda: not any(_alive(k) for k in kids | grandkids), "scene workers outlived their killed parent")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_a_dask_worker_killed_mid_scene_costs_no_leaf(tmp_path):
+    from distributed import Client, LocalCluster
+
+    scene = load_scene(_scene(tmp_path, count=4, frames=400))
+    out = tmp_path / "out"
+    result = {}
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster.scheduler_address) as client:
+        pids = client.run(os.getpid)
+        worker = threading.Thread(target=lambda: result.update(rep=run_scene(
+            scene, out, scheduler=cluster.scheduler_address, progress=False)))
+        worker.start()
+        # kill a worker while it is busy with a leaf
+        _wait(lambda: any(client.processing().values()), "no leaf started on the Dask workers")
+        busy = next(addr for addr, tasks in client.processing().items() if tasks)
+        os.kill(pids[busy], signal.SIGKILL)
+        worker.join(PATIENCE_S)
+    rep = result["rep"]
+    names = {f"leaf-{k:03d}" for k in range(4)}
+    done = {p.name for p in (out / "leaves").iterdir()}
+    failed = {f["name"] for f in rep["failed"]}
+    assert done | failed == names and not done & failed  # every leaf finished or was reported by name
+    for name in done:  # and nothing written is corrupt
+        leaf = out / "leaves" / name
+        assert json.loads((leaf / "done.json").read_text())["frames"] == 400
+        with np.load(leaf / "view.npz") as v:
+            assert np.isfinite(v["positions"]).all()
+    assert not list(out.rglob("*.tmp"))
