@@ -43,11 +43,52 @@ def _border_strip(a: np.ndarray, b: int) -> np.ndarray:
                            a[b:-b, :b].reshape(-1, 3), a[b:-b, -b:].reshape(-1, 3)])
 
 
+def _border_mask(h: int, w: int, b: int) -> np.ndarray:
+    m = np.zeros((h, w), bool)
+    m[:b] = m[-b:] = True
+    m[:, :b] = m[:, -b:] = True
+    return m
+
+
+#: inlier share of the border a smooth background field must explain to be used
+_FIELD_INLIERS = 1.0 - _MIXED_BORDER
+
+
+def _smooth_background(lab: np.ndarray, b: int) -> np.ndarray | None:
+    """A background whose brightness or tint drifts across the sheet (a phone photo lit from one
+    side, a vignette): a quadratic in (x, y) per Lab channel fitted to the border strip,
+    refitted on its inliers (a leaf touching the border is an outlier).  Returns the (h, w, 3)
+    field, or None when it does not explain the border."""
+    h, w = lab.shape[:2]
+    ys, xs = np.nonzero(_border_mask(h, w, b))
+    step = max(1, len(xs) // 40000)
+    ys, xs = ys[::step], xs[::step]
+    u, v = xs / max(w - 1, 1), ys / max(h - 1, 1)
+    A = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], 1)
+    y = lab[ys, xs].astype(np.float64)
+    inl = np.ones(len(u), bool)
+    for _ in range(6):
+        coef = np.linalg.lstsq(A[inl], y[inl], rcond=None)[0]
+        res = np.linalg.norm(A @ coef - y, axis=1)
+        new = res < _SAME_COLOUR
+        if new.sum() < 6 or (new == inl).all():
+            inl = new
+            break
+        inl = new
+    if inl.mean() < _FIELD_INLIERS:
+        return None
+    U, V = np.meshgrid(np.linspace(0.0, 1.0, w), np.linspace(0.0, 1.0, h))
+    basis = np.stack([np.ones_like(U), U, V, U * U, U * V, V * V], -1)
+    return (basis @ coef).astype(np.float32)
+
+
 def _background_lab(lab: np.ndarray, path: str) -> np.ndarray:
-    """Background colour (Lab) of a photo: the median of a border strip.
+    """Background colour (Lab) of a photo: the median of a border strip, shape (3,).
 
     When the leaf covers much of the border (it touches the frame), the strip's median can be
-    the leaf's colour; the background is then the colour the four corners agree on.
+    the leaf's colour; the background is then the colour all four corners agree on.  When they
+    do not agree because the sheet's lighting drifts, the background is a smooth field (h, w, 3)
+    fitted to the border; failing that, the colour two or three corners agree on.
     """
     h, w = lab.shape[:2]
     b = max(2, int(round(0.03 * min(h, w))))
@@ -59,21 +100,41 @@ def _background_lab(lab: np.ndarray, path: str) -> np.ndarray:
     med = np.array([np.median(c.reshape(-1, 3), axis=0) for c in corners])
     agree = np.linalg.norm(med[:, None] - med[None], axis=2) < _SAME_COLOUR
     k = int(np.argmax(agree.sum(1)))
+    if agree[k].sum() < 4:
+        field = _smooth_background(lab, b)
+        if field is not None:
+            return field
     if agree[k].sum() < 2:
         raise LeafsimError(f"{path}: cannot tell the background from the leaf (neither the image border nor its "
-                           "corners show one background colour; expected a leaf on a plain background)")
+                           "corners show one background colour or a smooth shading of one; expected a leaf on a "
+                           "plain background)")
     return np.median(np.concatenate([corners[i].reshape(-1, 3) for i in np.flatnonzero(agree[k])]), axis=0)
+
+
+#: a shadow lit by the sky is bluer than the lit sheet: a shift to blue (b* down) counts this much
+_SKY_BLUE = 0.35
+
+
+def _off_chroma(ab: np.ndarray, s: np.ndarray, g: np.ndarray) -> np.ndarray:
+    d = ab - s[..., None] * g
+    d[..., 1] = np.where(d[..., 1] < 0.0, _SKY_BLUE * d[..., 1], d[..., 1])
+    return np.linalg.norm(d, axis=-1)
 
 
 def _shadow(lab: np.ndarray, bg: np.ndarray) -> np.ndarray:
     """Pixels that look like the background in shadow: darker, with the background's hue and
-    no more of its saturation (chroma (a, b) on the segment from grey to the background's)."""
+    no more of its saturation (chroma (a, b) on the segment from grey to the background's, a
+    shift towards blue discounted by :data:`_SKY_BLUE`)."""
     ab = lab[..., 1:]
+    if bg.ndim > 1:  # a smooth background field: the same test pixel by pixel
+        g = bg[..., 1:]
+        gg = (g * g).sum(-1)
+        s = np.where(gg > 1e-6, np.clip((ab * g).sum(-1) / np.maximum(gg, 1e-6), 0.0, 1.15), 0.0)
+        return (lab[..., 0] < bg[..., 0] - 3.0) & (_off_chroma(ab, s, g) < 8.0)
     g = bg[1:]
     gg = float(g @ g)
     s = np.clip((ab @ g) / gg, 0.0, 1.15) if gg > 1e-6 else np.zeros(lab.shape[:2], np.float32)
-    off = np.linalg.norm(ab - s[..., None] * g, axis=2)
-    return (lab[..., 0] < bg[0] - 3.0) & (off < 8.0)
+    return (lab[..., 0] < bg[0] - 3.0) & (_off_chroma(ab, s, g) < 8.0)
 
 
 def _colour_foreground(bgr: np.ndarray, path: str = "image") -> tuple[np.ndarray, float, np.ndarray]:

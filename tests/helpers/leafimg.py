@@ -81,6 +81,21 @@ def cast_shadow(img: np.ndarray, poly: np.ndarray, bg=PAPER, darken=0.55, blur=0
     img[:] = np.clip(img.astype(np.float32) * (1 - a) + shade * a, 0, 255).astype(np.uint8)
 
 
+def lit_unevenly(img: np.ndarray, low: float, direction=(1.0, 0.0), blue_shadow: bool = False) -> None:
+    """Scale the image's brightness in place from ``low`` to 1 along ``direction`` (x, y),
+    like a phone photo of a sheet lit from one side; with ``blue_shadow`` the darker side is
+    also bluer (lit by the sky)."""
+    h, w = img.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    d = np.asarray(direction, np.float32) / np.linalg.norm(direction)
+    t = xx / max(w - 1, 1) * d[0] + yy / max(h - 1, 1) * d[1]
+    t = (t - t.min()) / max(float(t.max() - t.min()), 1e-6)
+    g = (low + (1.0 - low) * t)[..., None]
+    tint = np.array([1.0, 0.92, 0.85], np.float32) if blue_shadow else np.ones(3, np.float32)  # BGR
+    f = g * (tint + (1.0 - tint) * t[..., None])
+    img[:] = np.clip(img.astype(np.float32) * f, 0, 255).astype(np.uint8)
+
+
 def mask_of(poly: np.ndarray, shape) -> np.ndarray:
     m = np.zeros(shape[:2], np.uint8)
     cv2.fillPoly(m, [np.round(poly * 16).astype(np.int32)], 255, cv2.LINE_8, shift=4)

@@ -254,7 +254,7 @@ def test_no_leaf(kind, tmp_path):
 
 # ------------------------------------------------------------------ photos that used to trace wrong (issue 9.4)
 
-from helpers.leafimg import GREEN, PAPER, draw_leaf, mask_of, petiole_line, photo  # noqa: E402
+from helpers.leafimg import GREEN, PAPER, draw_leaf, lit_unevenly, mask_of, petiole_line, photo  # noqa: E402
 from helpers.leafimg import iou as mask_iou
 
 
@@ -324,6 +324,20 @@ def test_cast_shadow_is_background(tmp_path, bg):
     true_area = cv2.contourArea(poly.astype(np.float32))
     assert abs(t.area_px / true_area - 1) < 0.03  # the shadow used to add ≈ 22 %
     assert mask_iou(t.mask, mask_of(poly, img.shape)) > 0.97
+
+
+@pytest.mark.parametrize("low,direction,blue", [(0.3, (1, 0), False), (0.5, (0, 1), False), (0.5, (1, 1), True)])
+def test_unevenly_lit_sheet_is_background(tmp_path, low, direction, blue):
+    """A sheet lit from one side (brightness 30-50 % at its dark edge) with a soft cast shadow,
+    as in phone photos: the leaf is traced, not the darker half of the sheet (which used to
+    be taken for a leaf 6x too big, cut by three borders)."""
+    img, poly = photo(800, shadow=0.04, length=0.5, width=0.28)
+    lit_unevenly(img, low, direction, blue)
+    t = _trace_img(tmp_path, img)
+    true_area = cv2.contourArea(poly.astype(np.float32))
+    assert abs(t.area_px / true_area - 1) < 0.03
+    assert mask_iou(t.mask, mask_of(poly, img.shape)) > 0.97
+    assert not t.leafness["cut_by"]
 
 
 def test_dark_grey_leaf_is_not_taken_for_a_shadow(tmp_path):
