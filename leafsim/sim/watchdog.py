@@ -20,8 +20,8 @@ blow-up that produce no NaN are caught:
 * internal kinetic energy growing exponentially (doubling every ≤ :data:`DOUBLING_FRAMES`
   frames for :data:`GROWTH_WINDOWS` windows in a row) above a floor.
 
-The error names the parameters most likely responsible (those changed from their defaults
-among the ones that drive the dynamics).
+The error names the parameters most likely responsible (those changed from their defaults,
+or from the run's quality level's settings, among the ones that drive the dynamics).
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.config.params import PARAMS, ParamSet
+from leafsim.config.presets import QUALITY, quality_of
 
 #: largest RMS (mass-weighted) internal speed of a drying leaf [m/s]
 MAX_RMS_SPEED = 0.25
@@ -150,8 +151,12 @@ class Watchdog:
         return speed
 
     def _fail(self, state, what: str):
-        changed = [k for k in SUSPECTS if k in self.params and self.params[k] != PARAMS[k].default]
-        blame = (", ".join(f"{k} = {self.params[k]:g} (default {PARAMS[k].default:g})" for k in changed[:3])
-                 if changed else "none of the dynamics parameters differ from their defaults")
+        # a quality level's own settings (draft: 10 substeps, ...) are its baseline, not a cause
+        level = quality_of(self.params)
+        base = {k: (QUALITY[level].get(k, PARAMS[k].default) if level else PARAMS[k].default) for k in SUSPECTS}
+        changed = [k for k in SUSPECTS if k in self.params and self.params[k] != base[k]]
+        what_base = f"{level} quality" if level else "default"
+        blame = (", ".join(f"{k} = {self.params[k]:g} ({what_base} {base[k]:g})" for k in changed[:3])
+                 if changed else f"none of the dynamics parameters differ from the {what_base} settings")
         raise LeafsimError(f"simulation unstable at frame {state.frame} (t = {state.time:.3f} s): {what}; "
                            f"likely cause: {blame}")

@@ -153,7 +153,10 @@ def test_non_leaf_photos_are_reported_and_refused(tmp_path):
 @pytest.mark.slow
 def test_the_runaway_of_the_issue_is_stopped():
     """Two in-range values made the leaf crumple with growing energy (7 m/s) and exit 0; the
-    watchdog now stops it (internal RMS speed ≫ what drying tissue does)."""
+    watchdog now stops it (internal RMS speed ≫ what drying tissue does) and blames the two
+    values the user set, not the draft level's own settings."""
     code, out, err = run_cli("run", "--species", "maple", "--quality", "draft", "--frames", "1500",
                              "--set", "shrink.sigma_surface_bottom=3", "--set", "shrink.l_min=0.1", "--json")
-    one_line(code, out, err, "simulation unstable", "internal motion", "shrink.sigma_surface_bottom = 3")
+    one_line(code, out, err, "simulation unstable", "internal motion", "shrink.sigma_surface_bottom = 3 (draft quality 0.15)",
+             "shrink.l_min = 0.1")
+    assert "dynamics.substeps" not in err
