@@ -111,7 +111,9 @@ def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray
         k = len(i)
         s = np.arange(k - 1)
         l0, l1, r0, r1 = s, s + 1, s + k, s + k + 1
-        tris.append(base + np.concatenate([np.column_stack([l0, r0, r1]), np.column_stack([l0, r1, l1])]))
+        # side = n × t puts r to the right of the walk seen from n: (l0, r1, r0), (l0, l1, r1) turn
+        # counter-clockwise about n, so the faces agree with their normals (clients light by winding)
+        tris.append(base + np.concatenate([np.column_stack([l0, r1, r0]), np.column_stack([l0, l1, r1])]))
         if uv is not None:
             uvs.append(np.concatenate([uv[i], uv[i]]))
         if col is not None:
