@@ -54,13 +54,13 @@ def _border_mask(h: int, w: int, b: int) -> np.ndarray:
 _FIELD_INLIERS = 1.0 - _MIXED_BORDER
 
 
-def _smooth_background(lab: np.ndarray, b: int) -> np.ndarray | None:
+def _smooth_background(lab: np.ndarray) -> np.ndarray | None:
     """A background whose brightness or tint drifts across the sheet (a phone photo lit from one
     side, a vignette): a quadratic in (x, y) per Lab channel fitted to the border strip,
     refitted on its inliers (a leaf touching the border is an outlier).  Returns the (h, w, 3)
     field, or None when it does not explain the border."""
     h, w = lab.shape[:2]
-    ys, xs = np.nonzero(_border_mask(h, w, b))
+    ys, xs = np.nonzero(_border_mask(h, w, _border_width(h, w)))
     step = max(1, len(xs) // 40000)
     ys, xs = ys[::step], xs[::step]
     u, v = xs / max(w - 1, 1), ys / max(h - 1, 1)
@@ -83,15 +83,13 @@ def _smooth_background(lab: np.ndarray, b: int) -> np.ndarray | None:
 
 
 def _background_lab(lab: np.ndarray, path: str) -> np.ndarray:
-    """Background colour (Lab) of a photo: the median of a border strip, shape (3,).
+    """Background colour (Lab) of a photo: the median of a border strip.
 
     When the leaf covers much of the border (it touches the frame), the strip's median can be
-    the leaf's colour; the background is then the colour all four corners agree on.  When they
-    do not agree because the sheet's lighting drifts, the background is a smooth field (h, w, 3)
-    fitted to the border; failing that, the colour two or three corners agree on.
+    the leaf's colour; the background is then the colour the four corners agree on.
     """
     h, w = lab.shape[:2]
-    b = max(2, int(round(0.03 * min(h, w))))
+    b = _border_width(h, w)
     strip = _border_strip(lab, b)
     bg = np.median(strip, axis=0)
     if np.mean(np.linalg.norm(strip - bg, axis=1) > _SAME_COLOUR) <= _MIXED_BORDER:
@@ -100,15 +98,27 @@ def _background_lab(lab: np.ndarray, path: str) -> np.ndarray:
     med = np.array([np.median(c.reshape(-1, 3), axis=0) for c in corners])
     agree = np.linalg.norm(med[:, None] - med[None], axis=2) < _SAME_COLOUR
     k = int(np.argmax(agree.sum(1)))
-    if agree[k].sum() < 4:
-        field = _smooth_background(lab, b)
-        if field is not None:
-            return field
     if agree[k].sum() < 2:
         raise LeafsimError(f"{path}: cannot tell the background from the leaf (neither the image border nor its "
                            "corners show one background colour or a smooth shading of one; expected a leaf on a "
                            "plain background)")
     return np.median(np.concatenate([corners[i].reshape(-1, 3) for i in np.flatnonzero(agree[k])]), axis=0)
+
+
+def _border_width(h: int, w: int) -> int:
+    return max(2, int(round(0.03 * min(h, w))))
+
+
+def _inner_region(fg: np.ndarray) -> bool:
+    """Whether a leaf-sized foreground region lies away from the image border (as
+    :func:`_pick_leaf` prefers); when none does, the background estimate may be what failed."""
+    h, w = fg.shape
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
+    if n <= 1:
+        return False
+    border = np.concatenate([lab[0, :], lab[-1, :], lab[1:-1, 0], lab[1:-1, -1]])
+    border_frac = np.bincount(border, minlength=n)[1:].astype(float) / border.size
+    return bool(np.any((stats[1:, cv2.CC_STAT_AREA] >= MIN_LEAF_FRACTION * h * w) & (border_frac < 0.08)))
 
 
 #: a shadow lit by the sky is bluer than the lit sheet: a shift to blue (b* down) counts this much
@@ -137,13 +147,17 @@ def _shadow(lab: np.ndarray, bg: np.ndarray) -> np.ndarray:
     return (lab[..., 0] < bg[0] - 3.0) & (_off_chroma(ab, s, g) < 8.0)
 
 
-def _colour_foreground(bgr: np.ndarray, path: str = "image") -> tuple[np.ndarray, float, np.ndarray]:
+def _colour_foreground(bgr: np.ndarray, path: str = "image", shading: bool = False):
     """Foreground = pixels whose Lab colour is far from the background (Otsu), cast shadows
     (darker, less saturated background) excluded unless they would be most of it.
-    Returns (mask, 99.5th percentile of the colour distance, Lab image)."""
+    Returns (mask, 99.5th percentile of the colour distance, Lab image).  ``shading``: the
+    background is a smooth field fitted to the border (:func:`_smooth_background`); returns
+    None when no field explains the border."""
     h, w = bgr.shape[:2]
     lab = cv2.cvtColor(bgr.astype(np.float32) * (1.0 / 255.0), cv2.COLOR_BGR2Lab)
-    bg = _background_lab(lab, path)
+    bg = _smooth_background(lab) if shading else _background_lab(lab, path)
+    if bg is None:
+        return None
     dist = np.sqrt(((lab - bg) ** 2).sum(axis=2))
     hi = float(np.percentile(dist, 99.5))
     if hi < 8.0:  # nothing stands out from the background by more than a faint shade
@@ -189,6 +203,24 @@ def _restore_petiole(raw: np.ndarray, opened: np.ndarray, leaf: np.ndarray, lab:
     return out
 
 
+def _colour_segments(bgr: np.ndarray, path: str):
+    """:func:`_colour_foreground` against one background colour; when that leaves no
+    leaf-sized region away from the border (a sheet lit from one side: its darker half joins
+    the leaf and runs off the frame) or finds no background colour at all, against a smooth
+    shading of the background instead, if that gives a region away from the border."""
+    try:
+        first, err = _colour_foreground(bgr, path), None
+    except LeafsimError as e:
+        first, err = None, e
+    if first is None or not _inner_region(first[0]):
+        shaded = _colour_foreground(bgr, path, shading=True)
+        if shaded is not None and _inner_region(shaded[0]):
+            return shaded
+    if err is not None:
+        raise err
+    return first
+
+
 def segment_leaf(img: np.ndarray, path: str = "image") -> np.ndarray:
     """Binary mask (uint8 0/255) of the one leaf in ``img`` (BGR or BGRA uint8).
 
@@ -220,7 +252,7 @@ def segment_with_holes(img: np.ndarray, path: str = "image") -> tuple[np.ndarray
         fg = np.where(img[..., 3] >= 128, 255, 0).astype(np.uint8)
         k_open = max(3, int(round(0.003 * diag)))
     if fg is None:
-        fg, spread, lab = _colour_foreground(np.ascontiguousarray(img[..., :3]), path)
+        fg, spread, lab = _colour_segments(np.ascontiguousarray(img[..., :3]), path)
         if not fg.any():
             raise LeafsimError(f"{path}: no leaf found (the image is blank: nothing differs from the background colour)")
         k_open = max(3, int(round(0.005 * diag)))
