@@ -33,7 +33,8 @@ class _Parser(argparse.ArgumentParser):
     """argparse that raises LeafsimError (one line) instead of printing usage + exiting."""
 
     def error(self, message):  # noqa: D401
-        raise LeafsimError(f"{self.prog}: {message}")
+        where = self.prog.removeprefix("leafsim").strip()  # main() adds "leafsim: " once
+        raise LeafsimError(f"{where}: {message}" if where else message)
 
 
 #: seeds are non-negative integers below 2**63 (numpy's generators take them as-is)
@@ -61,6 +62,16 @@ def _common(p: argparse.ArgumentParser, seed=True):
                    help="mesh and solver settings from the accuracy study's front (see `leafsim params`); --set wins")
 
 
+def add_stop_options(p: argparse.ArgumentParser, frames_default=None, frames_help="simulate N frames") -> None:
+    """``--frames N`` and ``--until dry|water=F|season=S`` (one of them; with both, the run stops
+    at whichever comes first)."""
+    p.add_argument("--frames", type=int, default=frames_default, metavar="N", help=frames_help)
+    p.add_argument("--until", default=None, metavar="WHEN",
+                   help="stop when the leaf is dry (water left ≤ 2 %%, as the GUI's \"Dry to end\"), at water=F "
+                        "(a fraction of the fresh leaf's water) or at season=S (the colour clock); with --frames, "
+                        "whichever comes first")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="leafsim", description="Procedural leaves and how they age.")
     ap.add_argument("--version", action="version", version=f"leafsim {__version__}")
@@ -68,8 +79,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     g = sub.add_parser("gui", help="interactive application (default)")
     _common(g)
-    g.add_argument("--frames", type=int, default=None, help="run N frames then exit (scripted checks)")
-    g.add_argument("--screenshot", default=None, help="save the final window to this PNG (with --frames)")
+    g.add_argument("--frames", type=int, default=None, metavar="N",
+                   help="simulate to frame N as fast as possible, draw it and exit (scripted screenshots: the same "
+                        "picture on any machine)")
+    g.add_argument("--window-frames", type=int, default=None, metavar="N",
+                   help="exit after N window frames drawn with the leaf, playing (timing the window)")
+    g.add_argument("--screenshot", default=None, help="save the final window to this PNG (with --frames or --window-frames)")
     g.add_argument("--play", action="store_true", help="start with the simulation playing")
 
     s = sub.add_parser("species", help="list the species library")
@@ -97,7 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="simulate headless")
     _common(r)
-    r.add_argument("--frames", type=int, required=True)
+    add_stop_options(r, frames_help="simulate to frame N (with --resume: to absolute frame N)")
     r.add_argument("--effects", default=None, help="comma-separated effects to enable (others off), e.g. osmosis,shrink,pbd")
     r.add_argument("--stats", default=None, help="write per-frame statistics (JSON lines) here")
     r.add_argument("--out", default=None, help="folder for final positions (.npz) and PNG frames")
@@ -146,7 +161,7 @@ def _scene_export_parsers(sub) -> None:
 
     ex = sub.add_parser("export", help="simulate one leaf and write it as a mesh (glTF, OBJ, PLY)")
     _common(ex)
-    ex.add_argument("--frames", type=int, default=0, help="simulate N frames first (default 0: the fresh leaf)")
+    add_stop_options(ex, frames_help="simulate N frames first (default without --until: 0, the fresh leaf)")
     ex.add_argument("--every", type=int, default=0, help="glTF: a morph-target key frame every K frames (the drying animation)")
     ex.add_argument("--format", default=None, choices=["glb", "gltf", "obj", "ply"], help="default: from the --out suffix")
     ex.add_argument("--out", required=True, help="output file")

@@ -63,3 +63,70 @@ def png_output(option: str, path: str | None):
     if Path(path).suffix.lower() != ".png":
         raise LeafsimError(f"{option} {path}: expected a .png file name (leafsim writes PNG pictures)")
     return check_output(path, f"{option} picture")
+
+
+def stop_of(args, start: int = 0):
+    """The :class:`~leafsim.sim.run.Stop` of ``--frames`` / ``--until`` (one line on a bad value).
+    ``--until`` alone may run up to DRY_MAX_FRAMES frames, then fails naming the criterion."""
+    from leafsim.sim.run import DRY_END_FRACTION, DRY_MAX_FRAMES, Stop
+
+    frames, until = getattr(args, "frames", None), getattr(args, "until", None)
+    if frames is not None and frames < 0:
+        raise LeafsimError(f"--frames {frames}: expected a non-negative number of frames")
+    if until is None:
+        if frames is None:
+            raise LeafsimError("give --frames N or --until dry (how long to simulate)")
+        return Stop(frames=frames)
+    kind, _, value = until.strip().partition("=")
+    kind = kind.strip().lower()
+    if kind == "dry" and not value:
+        water, season = DRY_END_FRACTION, None
+    elif kind in ("water", "season") and value:
+        try:
+            v = float(value)
+        except ValueError:
+            v = float("nan")
+        if not (v == v and (0.0 <= v <= 1.0 if kind == "water" else 0.0 <= v <= 10.0)):
+            raise LeafsimError(f"--until {until}: expected {kind}=F with F in "
+                               f"{'[0, 1] (a fraction of the fresh water)' if kind == 'water' else '[0, 10] (the season clock)'}")
+        water, season = (v, None) if kind == "water" else (None, v)
+    else:
+        raise LeafsimError(f"--until {until!r}: expected dry, water=F or season=S")
+    return Stop(frames=frames, water_left=water, season=season,
+                max_frames=None if frames is not None else start + DRY_MAX_FRAMES)
+
+
+class Progress:
+    """A progress bar on stderr (tqdm) while a leaf runs toward its :class:`Stop`, shown only
+    on a terminal and never with ``--json``.  Until the first frame is done it says that the
+    kernels may be compiling (a first run on a fresh install takes about a minute there)."""
+
+    def __init__(self, args, run, stop, desc: str):
+        import sys
+
+        self.run, self.stop, self.start = run, stop, run.state.frame
+        self.bar = None
+        if sys.stderr.isatty() and not getattr(args, "json", False):
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=1000, desc=f"{desc}: first frame (compiles the kernels on a first run)",
+                            file=sys.stderr, bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}",
+                            leave=False)
+            self.desc = desc
+        self._first = True
+
+    def update(self) -> None:
+        if self.bar is None:
+            return
+        if self._first:
+            self.bar.set_description_str(self.desc, refresh=False)
+            self._first = False
+        done = int(round(1000 * self.stop.progress(self.run, self.start)))
+        if done > self.bar.n:
+            self.bar.update(done - self.bar.n)
+        s = self.run.state
+        self.bar.set_postfix_str(f"frame {s.frame}, water {100 * self.run.water_left:.0f} %", refresh=False)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()

@@ -9,7 +9,7 @@ from leafsim.appearance.photo import species_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output
-from leafsim.commands.common import emit, species_params
+from leafsim.commands.common import Progress, emit, species_params, stop_of
 from leafsim.export.mesh import export_mesh, format_of
 from leafsim.pipeline import build_leaf
 from leafsim.sim.run import Run, Stop
@@ -18,8 +18,11 @@ from leafsim.sim.run import Run, Stop
 def _check(args) -> str:
     check_output(args.out, "mesh")  # a folder, a device or an unwritable place: now, not after the drying
     fmt = format_of(args.out, args.format)
-    if args.frames < 0 or args.every < 0:
-        raise LeafsimError(f"--frames {args.frames} / --every {args.every}: expected non-negative frame counts")
+    if args.frames is None and args.until is None:
+        args.frames = 0  # the fresh leaf
+    stop_of(args)
+    if args.every < 0:
+        raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
     if args.every and fmt in ("obj", "ply"):
         raise LeafsimError(f"--every needs --format glb or gltf ({fmt} holds one static shape)")
     folder = Path(args.out).parent
@@ -28,13 +31,19 @@ def _check(args) -> str:
     return fmt
 
 
-def key_frames(run: Run, frames: int, every: int) -> list:
-    """Simulate to ``frames``; the states every ``every`` frames (with the first and the last),
-    or the last state alone when ``every`` is 0."""
+def key_frames(run: Run, stop: Stop | int, every: int, progress: Progress | None = None) -> list:
+    """Simulate until ``stop`` (a :class:`Stop` or a frame number); the states every ``every``
+    frames (with the first and the last), or the last state alone when ``every`` is 0."""
     keys = [run.state.copy()]
-    for _ in run.frames(Stop(frames=frames)):
-        if every and run.state.frame % every == 0:
-            keys.append(run.state.copy())
+    try:
+        for _ in run.frames(stop if isinstance(stop, Stop) else Stop(frames=stop)):
+            if every and run.state.frame % every == 0:
+                keys.append(run.state.copy())
+            if progress is not None:
+                progress.update()
+    finally:
+        if progress is not None:
+            progress.close()
     if not every:
         return [run.state]
     if keys[-1].frame != run.state.frame:
@@ -49,7 +58,8 @@ def cmd_export(args):
         raise LeafsimError(f"--texture photo: species '{sp.key}' has no photo (drawn outline)")
     model = build_leaf(sp, params, args.seed).model
     run = Run(model, params, seed=args.seed)
-    keys = key_frames(run, args.frames, args.every)
+    until = stop_of(args)
+    keys = key_frames(run, until, args.every, Progress(args, run, until, sp.key))
     photo = species_photo_rgba(sp, params) if sp.image is not None else None
     view = LeafView(model, photo, run.sim.state().pigments, photo_colour=sp.photo_colour)
     rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view,

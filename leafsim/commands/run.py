@@ -5,6 +5,7 @@ a checkpoint and exit with one line."""
 from __future__ import annotations
 
 import json
+import signal
 import time
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output, remove_stale_temps
 from leafsim.base.signals import DeferredSignals, Interrupted
 from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
-from leafsim.commands.common import emit, species_params
+from leafsim.commands.common import Progress, emit, species_params, stop_of
 from leafsim.pipeline import build_leaf
 from leafsim.render.sequence import FrameWriter
 from leafsim.sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
@@ -26,8 +27,7 @@ from leafsim.sim.stats import StatsStream
 
 def check_run_args(args) -> Path | None:
     """Validate ``leafsim run``'s options before any work; returns the --out folder (or None)."""
-    if args.frames < 0:
-        raise LeafsimError(f"--frames {args.frames}: expected a non-negative number of frames")
+    stop_of(args)  # --frames / --until: checked before any work
     if args.every < 0:
         raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
     if args.every and not args.out:
@@ -89,18 +89,20 @@ class _Outputs:
             self.stream.close()
 
 
-def _simulate(run: Run, target: int, outputs: _Outputs) -> tuple[list, int | None]:
-    """Step to frame ``target`` (or NaN, or a signal); returns (statistics, signal or None)."""
+def _simulate(run: Run, until: Stop, outputs: _Outputs, progress: Progress) -> tuple[list, int | None]:
+    """Step until ``until`` holds (or NaN, or a signal); returns (statistics, signal or None)."""
     stats = []
     try:
         with DeferredSignals() as stop:
-            for ms in run.frames(Stop(frames=target)):
+            for ms in run.frames(until):
                 st = run.stats(ms)
                 stats.append(st)
                 outputs.frame(st, stop.signum is not None)
+                progress.update()
                 if stop.signum is not None or st["nan"]:
                     break
     finally:
+        progress.close()
         outputs.close()
     return stats, stop.signum
 
@@ -120,19 +122,24 @@ def cmd_run(args):
     run = Run(model, params, seed=args.seed)
     if args.resume:
         run.state = load_checkpoint(ck, model, meta)
-        if args.frames < run.state.frame:
+        if args.frames is not None and args.until is None and args.frames < run.state.frame:
             raise LeafsimError(f"--frames {args.frames}: the checkpoint in {out} is at frame {run.state.frame} already "
                                f"(resume with --frames ≥ {run.state.frame})")
     start = run.state.frame
+    until = stop_of(args, start)
     _prepare_out(out, ck, args.stats)
     outputs = _Outputs(args, sp, params, run, ck, meta, out, start)
     t1 = time.perf_counter()
-    stats, signum = _simulate(run, args.frames, outputs)
+    stats, signum = _simulate(run, until, outputs, Progress(args, run, until, sp.key))
     sim_s = time.perf_counter() - t1
     if signum is not None:
         where = (f"checkpoint {ck}: continue with the same command and --resume" if ck is not None and args.checkpoint_every
                  else "no checkpoint (give --out DIR and --checkpoint-every K to be able to resume)")
-        raise Interrupted(signum, f"interrupted at frame {run.state.frame} of {args.frames}"
+        if args.json:  # the one JSON object still comes, saying where the run stopped
+            rep = run_report(sp, params, args, run, stats, start, build_s, sim_s, outputs.frames, check_nan=False)
+            emit(args, {**rep, "interrupted": signal.Signals(signum).name}, "")
+        goal = f" of {args.frames}" if args.until is None else f" (until {args.until})"
+        raise Interrupted(signum, f"interrupted at frame {run.state.frame}{goal}"
                                   + (f", statistics in {args.stats}" if args.stats else "") + f"; {where}")
     if ck is not None and args.checkpoint_every:
         save_checkpoint(ck, model, run.state, meta)  # the final state: --resume --frames M continues it
@@ -142,8 +149,9 @@ def cmd_run(args):
     emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
 
 
-def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames) -> dict:
-    """The ``leafsim run`` report (LeafsimError when the run produced NaN)."""
+def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames, check_nan: bool = True) -> dict:
+    """The ``leafsim run`` report (LeafsimError when the run produced NaN and ``check_nan``).
+    ``water_kg`` is the water left now, ``fresh_water_kg`` the fresh leaf's."""
     model, state = run.model, run.state
     ms = [sum(s["ms"].values()) for s in stats]
     water = float(state.particle_water.sum() / max(model.particle_water0.sum(), 1e-300))
@@ -152,11 +160,13 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames)
         "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
         "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
         "water_fraction": round(water, 6),
+        "until": args.until,
         "nan": bool(any(s.get("nan") for s in stats)),
         "png_frames": 0 if frames is None else frames.written,
         **{f"shape_{k}": v for k, v in shape_metrics(model, state).items()},
         **model.to_report(),
+        "water_kg": float(state.particle_water.sum()),
     }
-    if rep["nan"]:
+    if rep["nan"] and check_nan:
         raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {state.frame} (parameters: {params.changed()})")
     return rep

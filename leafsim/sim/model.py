@@ -230,5 +230,5 @@ class Model:
             "spacing_m": self.spacing,
             "area_m2": float(self.particle_area[lay == LAYER_T].sum()),
             "fresh_mass_kg": float(self.particle_mass0.sum()),
-            "water_kg": float(self.particle_water0.sum()),
+            "fresh_water_kg": float(self.particle_water0.sum()),
         }

@@ -25,6 +25,12 @@ from leafsim.sim.model import Model, State
 from leafsim.sim.simulator import Simulator
 from leafsim.sim.stats import StatsStream, frame_stats
 
+#: "dry": the water left has fallen to this fraction of the fresh leaf's (GUI "Dry to end",
+#: ``--until dry``)
+DRY_END_FRACTION = 0.02
+#: ... within this many frames (a leaf that never dries, e.g. evaporation switched off)
+DRY_MAX_FRAMES = 200000
+
 
 class Diverged(LeafsimError):
     """The simulation produced NaN/Inf (or a kernel raised an arithmetic error)."""
@@ -53,6 +59,18 @@ class Stop:
         if self.water_left is not None and run.water_left <= self.water_left:
             return True
         return self.season is not None and run.season >= self.season
+
+    def progress(self, run: "Run", start: int = 0) -> float:
+        """How far the run is toward the nearest criterion, 0 … 1 (frames from ``start``,
+        water lost toward ``water_left``, the season clock toward ``season``)."""
+        parts = []
+        if self.frames is not None:
+            parts.append((run.state.frame - start) / max(self.frames - start, 1))
+        if self.water_left is not None:
+            parts.append((1.0 - run.water_left) / max(1.0 - self.water_left, 1e-12))
+        if self.season is not None:
+            parts.append(run.season / max(self.season, 1e-12))
+        return float(min(max(max(parts, default=0.0), 0.0), 1.0))
 
     def describe(self) -> str:
         parts = [f"{k} = {v:g}" for k, v in (("frames", self.frames), ("water_left", self.water_left),

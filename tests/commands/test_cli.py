@@ -173,3 +173,31 @@ def test_run_negative_frames(capsys):
 @pytest.mark.parametrize("setting", ["mesh.spacing=-1", "dynamics.tolerance=0", "osmosis.diffusion=nan"])
 def test_run_bad_parameter_before_any_work(capsys, setting):
     _bad(capsys, ["run", "--frames", "3", "--set", setting], setting.split("=")[0])
+
+
+def test_until_stops_at_the_first_frame_past_the_criterion(tmp_path, capsys):
+    """``--until water=F`` stops at the first frame whose water left is ≤ F (the statistics
+    show the frame before it above F); ``--until dry`` with ``--frames`` stops at whichever
+    comes first; bad values are one line."""
+    stats = tmp_path / "s.jsonl"
+    assert main(["run", "--species", "oak", "--set", "mesh.spacing=0.08", "--until", "water=0.95", "--stats", str(stats),
+                 "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    w = [(d["water_T"] + d["water_V"]) / rep["fresh_water_kg"] for d in map(json.loads, stats.read_text().splitlines())]
+    assert rep["until"] == "water=0.95" and len(w) == rep["frames"] > 10
+    assert w[-1] <= 0.95 < w[-2] and rep["water_fraction"] == pytest.approx(w[-1], abs=1e-6)
+    assert rep["water_kg"] == pytest.approx(rep["water_fraction"] * rep["fresh_water_kg"], rel=1e-5)
+    assert main(["run", "--species", "oak", "--set", "mesh.spacing=0.08", "--until", "dry", "--frames", "5", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["frame"] == 5
+    for bad, needle in ((["--until", "wet"], "expected dry, water=F or season=S"), (["--until", "water=1.5"], "in [0, 1]"),
+                        ([], "give --frames N or --until dry")):
+        assert main(["run", "--species", "oak", *bad]) == 2
+        err = capsys.readouterr().err
+        assert needle in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv", [["bench", "--nosuch"], ["run", "--species", "oak", "--frames", "x"], ["nosuchcmd"]])
+def test_argument_errors_carry_one_prefix(capsys, argv):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("leafsim: ") and not err.startswith("leafsim: leafsim") and err.count("\n") == 1

@@ -36,7 +36,7 @@ def reference(tmp_path_factory):
     return np.load(d / "out" / "final.npz"), _stats(d / "s.jsonl")
 
 
-def _start_and_signal(tmp_path, sig, min_lines=20, fresh_compile=False):
+def _start_and_signal(tmp_path, sig, min_lines=20, fresh_compile=False, extra=()):
     """Start a long run, wait until it has streamed ``min_lines`` frames, send ``sig``.
     ``fresh_compile``: the run compiles every kernel itself (an empty numba cache) while this
     process uses cached ones — the first run on a new machine against a later resume, which
@@ -44,7 +44,7 @@ def _start_and_signal(tmp_path, sig, min_lines=20, fresh_compile=False):
     out, stats = tmp_path / "out", tmp_path / "s.jsonl"
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba")) if fresh_compile else None
     proc = subprocess.Popen([sys.executable, "-m", "leafsim", *BASE, "--frames", "1000000", "--out", str(out),
-                             "--stats", str(stats)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                             "--stats", str(stats), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     # wait for progress (frames streamed), not for a clock: a fresh numba compile on a busy
     # machine may take minutes; only a run that makes no progress at all for HANG_S fails
     t0 = time.monotonic()
@@ -90,15 +90,19 @@ def test_sigkill_then_resume_is_bit_identical(tmp_path, reference, capsys):
     assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]  # a kill mid-write is cleaned up
 
 
-@pytest.mark.parametrize("sig,code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
-def test_sigterm_and_sigint_stop_cleanly_and_resume(tmp_path, reference, capsys, sig, code):
-    rc, so, se, out, stats = _start_and_signal(tmp_path, sig)
-    assert rc == code and so == ""
+@pytest.mark.parametrize("sig,code,as_json", [(signal.SIGTERM, 143, False), (signal.SIGINT, 130, True)])
+def test_sigterm_and_sigint_stop_cleanly_and_resume(tmp_path, reference, capsys, sig, code, as_json):
+    rc, so, se, out, stats = _start_and_signal(tmp_path, sig, extra=["--json"] if as_json else [])
     assert se.count("\n") == 1 and "Traceback" not in se, se
     name = signal.Signals(sig).name
     assert se.startswith("leafsim: interrupted at frame ") and f"(by {name})" in se and "--resume" in se
     # the frame in progress was finished and checkpointed: nothing computed is lost
     frame = int(se.split("interrupted at frame ")[1].split()[0])
+    if as_json:  # --json still prints its one object, saying where the run stopped
+        rep = json.loads(so)
+        assert rc == code and rep["interrupted"] == name and rep["frame"] == frame == rep["frames"]
+    else:
+        assert rc == code and so == ""
     assert json.loads(str(np.load(out / "checkpoint.npz")["meta"]))["frame"] == frame
     assert stats.read_text().count("\n") == frame
     assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]

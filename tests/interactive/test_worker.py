@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from leafsim.interactive.session import Session
-from leafsim.interactive.worker import DRY_END_FRACTION
+from leafsim.sim.run import DRY_END_FRACTION
 
 
 def until(cond, timeout=600.0):

@@ -26,7 +26,7 @@ def test_mass_and_water_do_not_depend_on_the_mesh():
     for s in (0.04, 0.028, 0.02, 0.014):
         _, _, m = build_leaf(sp, sp.params.with_overrides({"mesh.spacing": s}), 0)
         r = m.to_report()
-        tot.append((r["fresh_mass_kg"], r["water_kg"], r["area_m2"]))
+        tot.append((r["fresh_mass_kg"], r["fresh_water_kg"], r["area_m2"]))
     mass, water, area = (np.array(x) for x in zip(*tot))
     assert np.ptp(mass) / mass.mean() < 0.01 and np.ptp(water) / water.mean() < 0.01
     fresh = sp.params["mass.lma"] / (1 - sp.params["mass.water_fraction"])
