@@ -22,7 +22,7 @@ def shot(name: str, species: str, setup, overrides=None) -> None:
     from imgui_bundle.immapp import testing
 
     from leafsim.base.fileio import write_png_atomic
-    from leafsim.gui.app import LeafApp, _configure_threads
+    from leafsim.gui.app import LeafApp, _configure_threads, without_test_time_limit
     from leafsim.interactive.session import Session
 
     _configure_threads()
@@ -33,7 +33,9 @@ def shot(name: str, species: str, setup, overrides=None) -> None:
         setup(ctx, app)
         ctx.yield_(4)
 
-    testing.run(test_function=body, runner_params=app.runner_params(), add_ons_params=app.addons())
+    rp = app.runner_params()
+    without_test_time_limit(rp)  # drying maple to frame 900 takes minutes on a small machine
+    testing.run(test_function=body, runner_params=rp, add_ons_params=app.addons())
     img = np.asarray(hello_imgui.final_app_window_screenshot())
     out = ROOT / "docs" / name
     write_png_atomic(out, np.ascontiguousarray(img[:, :, :3]), rgb=True)
@@ -44,7 +46,9 @@ def _dry(ctx, app, frames):
     """Simulate ``frames`` frames (synchronously: a picture, not a benchmark), then play a
     few frames in the window."""
     s = app.session
-    s.step(frames)
+    s.playback.play_until(frames)  # in the worker, the window drawing meanwhile
+    while s.frame < frames:
+        ctx.yield_()
     ctx.item_click("**/###play")
     ctx.yield_(20)
     ctx.item_click("**/###play")

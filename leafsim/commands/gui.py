@@ -7,10 +7,11 @@ from leafsim.commands.common import overrides, png_output
 
 
 def cmd_gui(args):
-    if args.screenshot and args.frames is None:
-        raise LeafsimError("--screenshot needs --frames N")
+    if args.screenshot and args.frames is None and args.window_frames is None:
+        raise LeafsimError("--screenshot needs --frames N (or --window-frames N)")
     png_output("--screenshot", args.screenshot)
     from leafsim.gui.app import run_app  # imgui and OpenGL load only when the window opens
 
     return run_app(species=args.species, config=args.config, seed=args.seed, overrides=overrides(args),
-                   frames=args.frames, screenshot=args.screenshot, play=args.play)
+                   frames=args.frames, screenshot=args.screenshot, play=args.play,
+                   window_frames=args.window_frames)

@@ -51,6 +51,22 @@ from leafsim.render.renderer import Renderer
 CACHE_TRIANGLES = 20000
 
 
+def without_test_time_limit(runner_params) -> None:
+    """Scripts and tests that drive the window with the ImGui test engine wait for progress
+    (a frame reached, a build done), not for a clock: switch off the engine's watchdog, which
+    otherwise kills a test after 60 s, a limit a first run's numba compile or a busy machine
+    passes.  Call before ``immapp.testing.run``."""
+    earlier = runner_params.callbacks.register_tests
+
+    def register():
+        if callable(earlier):
+            earlier()
+        io = imgui.test_engine.get_io(hello_imgui.get_imgui_test_engine())
+        io.config_watchdog_warning = io.config_watchdog_kill_test = sys.float_info.max
+
+    runner_params.callbacks.register_tests = register
+
+
 def _configure_threads() -> None:
     """llvmpipe's render threads compete with numba's on small machines: cap them, and make
     numba's OpenMP workers sleep instead of spinning between parallel regions (measured: spinning
@@ -65,15 +81,18 @@ class LeafApp:
     Parameters
     ----------
     session : Session (may still be building).
-    frames : run this many frames once the leaf is built, then exit (scripted runs).
+    frames : simulate to this frame as fast as possible, draw it, then exit (scripted runs:
+        the same picture on any machine).
+    window_frames : exit after this many window frames drawn with the leaf (playing; timing).
     play : start playing.
     window_size : (w, h) pixels.
     """
 
     def __init__(self, session, frames: int | None = None, play: bool = False, window_size=(1280, 800),
-                 title: str = "leafsim"):
+                 title: str = "leafsim", window_frames: int | None = None):
         self.session = session
         self.frames = frames
+        self.window_frames = window_frames
         self.window_size = tuple(int(v) for v in window_size)
         self.title = title
         self.view = "shaded"
@@ -128,7 +147,9 @@ class LeafApp:
         self.status_bar, self.overlay = StatusBar(self), ViewOverlay(self)
         session.playback.start_worker()
         session.playback.set_speed(None)
-        if play or frames is not None:
+        if frames is not None:
+            session.playback.play_until(frames)
+        elif play or window_frames is not None:
             session.playback.play(True)
 
     @property
@@ -262,7 +283,7 @@ class LeafApp:
         if s.build_error:
             self.fail(s.build_error, "build")
             s.build_error = None
-            if self.frames is not None:
+            if self.scripted:
                 self.exit_code = 2
                 self._exit()
         if s.playback.take_snapshot():
@@ -272,6 +293,10 @@ class LeafApp:
         pb = s.playback
         if pb.sim_error and self.status.get("sim") is None:
             self.status.error("sim", pb.sim_error, holds=lambda: pb.sim_error is not None)
+            if self.frames is not None:  # the frame asked for will never come
+                sys.stderr.write(f"leafsim: {pb.sim_error}\n")
+                self.exit_code = 2
+                self._exit()
             if self.take is not None:
                 self.stop_recording()
 
@@ -294,8 +319,14 @@ class LeafApp:
             self.leaf_frames += 1
             if self.t_first_leaf is None:
                 self.t_first_leaf = time.perf_counter()
-            if self.frames is not None and self.leaf_frames >= self.frames:
+            if ((self.frames is not None and s.frame >= self.frames)
+                    or (self.window_frames is not None and self.leaf_frames >= self.window_frames)):
                 self._exit()
+
+    @property
+    def scripted(self) -> bool:
+        """Run by a script (``--frames`` / ``--window-frames``): exits by itself."""
+        return self.frames is not None or self.window_frames is not None
 
     def _exit(self) -> None:
         hello_imgui.get_runner_params().app_shall_exit = True
@@ -516,15 +547,17 @@ class LeafApp:
 
 
 def run_app(species=None, config=None, seed: int = 0, overrides=None, frames=None, screenshot=None,
-            play: bool = False) -> int:
+            play: bool = False, window_frames=None) -> int:
     """Run the GUI; returns the exit code.
 
-    ``frames``: run that many frames after the leaf is built (playing), then exit;
-    ``screenshot``: write the final window (PNG, atomically) when exiting.
+    ``frames``: simulate to that frame, draw it, then exit; ``window_frames``: exit after that
+    many window frames with the leaf (playing); ``screenshot``: write the final window (PNG,
+    atomically) when exiting.
     """
     _configure_threads()
-    if frames is not None and frames < 0:
-        raise LeafsimError(f"--frames {frames}: expected a non-negative number of frames")
+    for name, v in (("--frames", frames), ("--window-frames", window_frames)):
+        if v is not None and v < 0:
+            raise LeafsimError(f"{name} {v}: expected a non-negative number of frames")
     if screenshot is not None:
         folder = Path(screenshot).parent if str(Path(screenshot).parent) else Path(".")
         if not folder.is_dir():
@@ -534,7 +567,7 @@ def run_app(species=None, config=None, seed: int = 0, overrides=None, frames=Non
         raise LeafsimError("gui: no display (DISPLAY is not set); run it on a desktop or under "
                            "xvfb-run -a -s '-screen 0 1280x800x24' leafsim gui ...")
     session.rebuild_async()
-    app = LeafApp(session, frames=frames, play=play)
+    app = LeafApp(session, frames=frames, play=play, window_frames=window_frames)
     immapp.run(app.runner_params(), app.addons())
     if screenshot is not None:
         img = hello_imgui.final_app_window_screenshot()

@@ -53,7 +53,7 @@ def window_child(args) -> None:
     _configure_threads()
     session = Session(args.species, seed=0, build=False, overrides=parse_set_args(args.set))
     session.rebuild_async()
-    app = LeafApp(session, frames=args.frames, play=True)
+    app = LeafApp(session, window_frames=args.frames, play=True)
     app.render_scale = args.scale
     app.show_ground = app.shadows = bool(int(str(args.ground).split(",")[0]))
     marks = {}

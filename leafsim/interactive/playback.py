@@ -35,6 +35,7 @@ class Playback:
         self.sim_error: str | None = None
         self._threaded = False
         self._play_wanted = False
+        self._pause_at: int | None = None
         self._speed_wanted: float | None = None
         self._snap_seq = -1
         self._epoch = 0
@@ -49,6 +50,8 @@ class Playback:
         self.worker = SimWorker(run, record, render)
         self.worker.set_speed(self._speed_wanted)
         self.worker.play(self._play_wanted if old is None else (old.playing and not old.drying))
+        if old is None and self._pause_at is not None:
+            self.worker.play_until(self._pause_at)
         if old is not None:
             old.stop()
         if self._threaded:
@@ -113,6 +116,13 @@ class Playback:
         self._play_wanted = bool(on)
         if self.worker is not None:
             self.worker.play(on and self.sim_error is None)
+
+    def play_until(self, frame: int) -> None:
+        """Play as fast as possible up to simulation frame ``frame``, then pause (before the
+        first model: once it is there)."""
+        self._pause_at = int(frame)
+        if self.worker is not None:
+            self.worker.play_until(frame)
 
     @property
     def playing(self) -> bool:

@@ -33,16 +33,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from leafsim.sim.run import Run
+from leafsim.sim.run import DRY_END_FRACTION, DRY_MAX_FRAMES, Run
 
 #: nice increment of the worker thread (Linux: per thread); the UI and llvmpipe keep priority
 WORKER_NICE = 5
 #: the worker publishes at most this many snapshots per wall second while it runs freely
 PUBLISH_HZ = 60.0
-#: "dry to end" stops when the water left falls to this fraction of the initial water
-DRY_END_FRACTION = 0.02
-#: ... or after this many frames (a leaf that never dries, e.g. evaporation switched off)
-DRY_MAX_FRAMES = 200000
 
 
 @dataclass
@@ -115,6 +111,7 @@ class SimWorker:
         self._steps = 0            # single steps requested
         self._dry = False
         self._dry_until = 0
+        self._pause_at: int | None = None  # play pauses at this frame (scripted runs)
         self._stop = False
         self._thread: threading.Thread | None = None
         self._records: list = []
@@ -225,8 +222,13 @@ class SimWorker:
             self.error = f"simulation diverged (NaN/Inf) at frame {s.frame}: press Reset or lower dynamics.dt"
         done = self._dry and (self.water_fraction(s) <= DRY_END_FRACTION or self.error is not None
                               or s.frame >= self._dry_until)
-        if done or publish_now or self.error is not None or time.perf_counter() - self._t_pub >= 1.0 / PUBLISH_HZ:
+        pause = self._pause_at is not None and s.frame >= self._pause_at
+        if done or pause or publish_now or self.error is not None or time.perf_counter() - self._t_pub >= 1.0 / PUBLISH_HZ:
             self._publish(ms)  # before the flags change: whoever sees "done" sees its frame
+        if pause:
+            with self._cond:
+                self._playing = False
+                self._pause_at = None
         if done:
             with self._cond:
                 self._dry = self._playing = False
@@ -290,6 +292,14 @@ class SimWorker:
     def play(self, on: bool) -> None:
         with self._cond:
             self._playing = bool(on)
+            self._cond.notify_all()
+
+    def play_until(self, frame: int) -> None:
+        """Play as fast as possible and pause at simulation frame ``frame`` (published)."""
+        with self._cond:
+            self._pause_at = int(frame)
+            self._speed = None
+            self._playing = self.run.state.frame < frame
             self._cond.notify_all()
 
     @property

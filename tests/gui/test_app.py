@@ -31,15 +31,16 @@ def run_gui(test_fn, species="oak", overrides=None, play=False):
     """Run the app with ``test_fn(ctx, app)`` driving it; returns the app afterwards."""
     from imgui_bundle.immapp import testing
 
-    from leafsim.gui.app import LeafApp, _configure_threads
+    from leafsim.gui.app import LeafApp, _configure_threads, without_test_time_limit
     from leafsim.interactive.session import Session
 
     _configure_threads()
     session = Session(species, overrides=overrides)
     app = LeafApp(session, play=play)
     # under llvmpipe the app starts with a cheap view (half size, no ground): fast test frames
-    testing.run(test_function=lambda ctx: test_fn(ctx, app), runner_params=app.runner_params(),
-                add_ons_params=app.addons())
+    rp = app.runner_params()
+    without_test_time_limit(rp)  # the tests wait for progress; a busy machine may take minutes
+    testing.run(test_function=lambda ctx: test_fn(ctx, app), runner_params=rp, add_ons_params=app.addons())
     return app
 
 
@@ -387,6 +388,24 @@ def test_cli_gui_screenshot(tmp_path, xdisplay):
     img = cv2.imread(str(out))
     assert img is not None and img.shape[0] >= 400 and img.shape[1] >= 600
     assert [p.name for p in tmp_path.iterdir()] == ["shot.png"]
+
+
+@pytest.mark.parametrize("frames", [0, 12])
+def test_gui_frames_counts_simulation_frames(frames):
+    """``gui --frames N`` simulates to frame N exactly, draws it and exits by itself, however
+    fast the machine draws windows (it used to count window frames: 300 gave simulation frame
+    0, 83 or 471)."""
+    from imgui_bundle import immapp
+
+    from leafsim.gui.app import LeafApp, _configure_threads
+    from leafsim.interactive.session import Session
+
+    _configure_threads()
+    session = Session("oak", overrides={"mesh.spacing": 0.06}, build=False)
+    session.rebuild_async()
+    app = LeafApp(session, frames=frames)
+    immapp.run(app.runner_params(), app.addons())
+    assert app.exit_code == 0 and session.frame == frames and app.leaf_frames >= 1
 
 
 def test_cli_gui_screenshot_bad_folder(tmp_path, xdisplay):
