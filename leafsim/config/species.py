@@ -141,6 +141,10 @@ def load_library(path: str | Path | None = None) -> dict[str, Species]:
     data = read_json(path, "species config")
     if not isinstance(data, dict) or not isinstance(data.get("species"), dict) or not data["species"]:
         raise LeafsimError(f"{path}: expected an object with a non-empty 'species' object")
+    stray = [k for k in data if k != "species" and not str(k).startswith("_")]
+    if stray:  # e.g. a species entry pasted at the top level, which would be silently ignored
+        raise LeafsimError(f"{path}: unknown top-level key {_show(stray[0])} (a config holds \"species\": {{...}} and "
+                           "\"_comment\" keys; a species entry goes inside \"species\")")
     return {_check_key(path, k): _parse_entry(path, k, v) for k, v in data["species"].items()}
 
 

@@ -66,6 +66,8 @@ def _entry(**kw):
     ({"species": {"x": {"length_m": 0.1}}}, "needs either 'image'"),
     ({"species": {"x": _entry(outline={"points": [[0, 0], [1]]})}}, "key 'outline.points'"),
     ({"species": {"x": _entry(lateral_profile=[[50, 1], [10, 1]])}}, "key 'lateral_profile'"),
+    # the README's entry pasted at the top level used to be silently ignored
+    ({"species": {"x": _entry()}, "birch": _entry()}, "unknown top-level key 'birch'"),
 ])
 def test_bad_entries_name_file_species_and_key(tmp_path, data, needle):
     p = _write(tmp_path, data)
@@ -79,6 +81,22 @@ def test_missing_config_and_unknown_species(tmp_path):
         load_library(tmp_path / "nope.json")
     with pytest.raises(LeafsimError, match="unknown species 'fern'.*maple"):
         get_species("fern")
+
+
+def test_the_readme_species_snippet_loads(tmp_path):
+    """The README's "Adding a species" JSON, with its photo path pointing at a shipped photo,
+    is a loadable config with the species in it."""
+    from helpers.paths import REPO
+
+    text = (REPO / "README.md").read_text()
+    block = text.split("## Adding a species", 1)[1].split("```json", 1)[1].split("```", 1)[0]
+    data = json.loads(block)
+    (tmp_path / "images").mkdir()
+    (tmp_path / "images" / "birch.jpg").write_bytes((data_dir("images") / "populus_01.jpg").read_bytes())
+    p = tmp_path / "mine.json"
+    p.write_text(json.dumps(data))
+    sp = get_species("birch", p)
+    assert sp.name == "Birch" and sp.params["veins.main.kappa"] == 3.0 and sp.has_photo
 
 
 def test_user_adds_a_species(tmp_path):
