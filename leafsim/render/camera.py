@@ -124,10 +124,38 @@ class OrbitCamera:
         k = 2.0 * self.distance * math.tan(math.radians(self.fov) / 2.0) / max(viewport_height, 1.0)
         self.target = self.target + (-dx * right + dy * up) * k
 
-    def frame_bounds(self, points, margin: float = 1.15) -> None:
-        """Aim at the bounding box of ``points (n, 3)`` and back off until it all fits."""
+    def frame_bounds(self, points, margin: float = 1.15, aspect: float | None = None) -> None:
+        """Aim at the bounding box of ``points (n, 3)`` and back off until it all fits.
+
+        Without ``aspect`` the box's bounding sphere fits the vertical field of view (any
+        orbit keeps it in view).  With the viewport's ``aspect`` (width / height) the box's
+        eight corners, as this camera sees them, fill the view to within ``margin`` on the
+        tighter axis, centred: a flat leaf seen from above fills the picture instead of half
+        of it."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         self.target = (lo + hi) / 2.0
         radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-4)
         self.distance = radius * margin / math.sin(math.radians(self.fov) / 2.0)
+        if aspect is None:
+            return
+        corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])])
+        back, up = self._dirs()
+        right = np.cross(up, back)
+        ty = math.tan(math.radians(self.fov) / 2.0) / margin
+        tx = ty * float(aspect)
+        for _ in range(4):  # centre the projected box, then fit it; converges in a few rounds
+            r = corners - self.target
+            x, y, z = r @ right, r @ up, r @ back
+            if self.ortho:
+                self.target = self.target + 0.5 * (x.max() + x.min()) * right + 0.5 * (y.max() + y.min()) * up
+                r = corners - self.target
+                self.distance = max(float(np.max(np.abs(r @ right)) / tx), float(np.max(np.abs(r @ up)) / ty), 1e-4)
+                return
+            depth = np.maximum(self.distance - z, 1e-9)
+            u, v = x / depth, y / depth
+            shift = 0.5 * (u.max() + u.min()) * right + 0.5 * (v.max() + v.min()) * up
+            self.target = self.target + shift * self.distance
+            r = corners - self.target
+            x, y, z = r @ right, r @ up, r @ back
+            self.distance = max(float(np.max(np.abs(x) / tx + z)), float(np.max(np.abs(y) / ty + z)), 1e-4)

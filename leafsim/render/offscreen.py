@@ -23,10 +23,11 @@ def write_png_atomic(rgb: np.ndarray, path) -> Path:
     return _write_png(path, np.asarray(rgb), rgb=True)
 
 
-def default_camera(points, pitch: float = 55.0, yaw: float = -90.0) -> OrbitCamera:
-    """An orbit camera framing ``points`` from the base side, apex up on screen."""
+def default_camera(points, pitch: float = 55.0, yaw: float = -90.0, aspect: float | None = None) -> OrbitCamera:
+    """An orbit camera framing ``points`` from the base side, apex up on screen; with the
+    picture's ``aspect`` (width / height) the leaf fills it (see :meth:`OrbitCamera.frame_bounds`)."""
     cam = OrbitCamera(yaw=yaw, pitch=pitch)
-    cam.frame_bounds(points)
+    cam.frame_bounds(points, margin=1.15 if aspect is None else 1.08, aspect=aspect)
     return cam
 
 
@@ -89,7 +90,7 @@ class OffscreenRenderer:
             self._prepare(mesh_or_update)
             r = self.renderer
             if camera is None:
-                camera = default_camera(np.stack([r.lo, r.hi]))
+                camera = default_camera(np.stack([r.lo, r.hi]), aspect=self.width / self.height)
             r.render(camera, self.width, self.height, options, framebuffer=self.fbo)
             if self.resolve is not self.fbo:
                 self.ctx.copy_framebuffer(self.resolve, self.fbo)

@@ -27,7 +27,7 @@ def render_overview(mesh: RenderMesh, layout: dict, overview: dict, path: Path) 
         lo, hi = pts.min(0), pts.max(0)
         pts = np.vstack([pts, [[lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0]]])
     cam = default_camera(pts, pitch=overview["pitch"], yaw=overview["yaw"])
-    cam.frame_bounds(pts, margin=1.02)
+    cam.frame_bounds(pts, margin=1.04, aspect=overview["width"] / overview["height"])
     # the ground just under the lowest leaf (the renderer's default; z = 0 exactly would
     # z-fight with leaves lying flat on it), at z = 0 under a canopy
     ground = 0.0 if layout["kind"] == "canopy" else None

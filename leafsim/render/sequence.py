@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from leafsim.appearance.view import LeafView
 from leafsim.render.offscreen import OffscreenRenderer, default_camera
 from leafsim.render.options import RenderOptions
@@ -36,9 +38,17 @@ class FrameWriter:
         path = self.out / f"frame_{k:05d}.png"
         if self.renderer is None:
             self.renderer = OffscreenRenderer(960, 720)
-            self.camera = default_camera(self.view.mesh(self.rest, self.params).positions)
+            self.camera = default_camera(_room_to_curl(self.view.mesh(self.rest, self.params).positions), aspect=960 / 720)
             self.renderer.render_png(self.view.mesh(state, self.params), path, camera=self.camera, options=opts)
         else:
             self.renderer.render_png(self.view.update(state, self.params), path, camera=self.camera, options=opts)
         self.written += 1
         return path
+
+
+def _room_to_curl(points: np.ndarray) -> np.ndarray:
+    """The fresh leaf's box with room above (margins curl up by up to ≈ 0.35 L) and a little
+    below, so a camera fixed by it keeps the drying leaf in the picture."""
+    lo, hi = points.min(0), points.max(0)
+    span = float(np.max(hi - lo))
+    return np.array([[lo[0], lo[1], lo[2] - 0.1 * span], [hi[0], hi[1], hi[2] + 0.35 * span]])

@@ -34,3 +34,23 @@ def test_drying_changes_the_rendered_leaf():
                 assert np.abs(views[a].astype(int) - views[b]).mean() > 1.0
     finally:
         r.release()
+
+
+def test_the_default_camera_fills_the_picture():
+    """Headless renders frame the leaf tightly for the picture's aspect: the leaf's silhouette
+    spans ≥ 80 % of the tighter axis (the bounding-sphere framing left it at 40-50 %), centred,
+    and nothing is cut off at the edges."""
+    s = Session("oak", overrides={"mesh.spacing": 0.06}, build=True)
+    for w, h in ((320, 240), (240, 320)):
+        r = OffscreenRenderer(w, h, samples=0)
+        try:
+            mesh = s.render_mesh()
+            img = r.render_array(mesh, camera=default_camera(mesh.positions, aspect=w / h)).astype(float)
+        finally:
+            r.release()
+        leaf = np.abs(img - img[1, 1]).sum(-1) > 30
+        ys, xs = np.nonzero(leaf)
+        span = max((xs.max() - xs.min() + 1) / w, (ys.max() - ys.min() + 1) / h)
+        assert span >= 0.8, (w, h, span)
+        assert not (leaf[0].any() or leaf[-1].any() or leaf[:, 0].any() or leaf[:, -1].any())
+        assert abs((xs.max() + xs.min()) / 2 - w / 2) < 0.05 * w and abs((ys.max() + ys.min()) / 2 - h / 2) < 0.05 * h
