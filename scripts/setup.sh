@@ -41,4 +41,8 @@ if [ ! -f .tools/node_modules/gltf-validator/package.json ]; then
   mkdir -p .tools
   npm install --prefix .tools --no-audit --no-fund --silent "$GLTF_VALIDATOR" >/dev/null
 fi
+# compile the numba kernels now (cached per source version under ~/.cache/leafsim), so the
+# first window does not sit at frame 0 for a minute; seconds when they are cached already
+echo "setup: compiling the simulation kernels (once per leafsim version; about a minute)"
+.venv/bin/python -m leafsim run --species oak --quality draft --frames 2 --json >/dev/null
 echo "setup: ready (.venv/bin/leafsim)"

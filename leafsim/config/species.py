@@ -27,7 +27,7 @@ from leafsim.config.params import show as _show
 DEFAULT_SPECIES = "maple"
 
 _ENTRY_KEYS = {
-    "name", "latin", "description", "image", "has_photo", "length_m", "base_px", "apex_px",
+    "name", "latin", "description", "image", "length_m", "base_px", "apex_px",
     "outline", "targets", "main_origin", "lateral_profile", "params", "photo_note", "photo_stage", "senescent_photo",
 }
 _REFERENCE_KEYS = {"image", "base_px", "apex_px"}

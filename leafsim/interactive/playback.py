@@ -117,6 +117,11 @@ class Playback:
         if self.worker is not None:
             self.worker.play(on and self.sim_error is None)
 
+    @property
+    def warming_up(self) -> bool:
+        """The first step is running (the kernels may be compiling)."""
+        return self.worker is not None and self.worker.warming_up
+
     def play_until(self, frame: int) -> None:
         """Play as fast as possible up to simulation frame ``frame``, then pause (before the
         first model: once it is there)."""

@@ -112,6 +112,7 @@ class SimWorker:
         self._dry = False
         self._dry_until = 0
         self._pause_at: int | None = None  # play pauses at this frame (scripted runs)
+        self._steps_done = 0  # steps finished by this worker (0: the first may be compiling)
         self._stop = False
         self._thread: threading.Thread | None = None
         self._records: list = []
@@ -214,6 +215,7 @@ class SimWorker:
             why = "diverged (NaN/Inf)" if not finite else f"failed ({type(e).__name__}: {e})"
             self.error = f"simulation {why} at frame {s.frame}: press Reset or lower dynamics.dt"
         self._rate.append((time.perf_counter(), s.time))
+        self._steps_done += n
         return ms
 
     def _after_step(self, ms: dict, publish_now: bool) -> None:
@@ -305,6 +307,12 @@ class SimWorker:
     @property
     def playing(self) -> bool:
         return self._playing or self._dry
+
+    @property
+    def warming_up(self) -> bool:
+        """Asked to step but no step finished yet: on a first run numba is compiling the
+        kernels (about a minute; they are cached for later runs)."""
+        return self._steps_done == 0 and self.error is None and (self._playing or self._dry or self._steps > 0)
 
     def set_speed(self, speed: float | None) -> None:
         """Simulated seconds per wall second, or None = as fast as possible."""

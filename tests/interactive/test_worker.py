@@ -177,3 +177,25 @@ def test_simulator_is_made_on_the_build_thread(monkeypatch):
     assert s.wait(120) and s.ready
     s.close()
     assert made == ["leafsim-build"]  # installing it on the UI thread constructs none
+
+
+def test_warming_up_until_the_first_step_and_play_until_pauses_there():
+    """The status bar says the kernels compile while a new worker's first step runs; play_until
+    pauses exactly at its frame (gui --frames)."""
+    s = Session("oak", overrides={"mesh.spacing": 0.05})
+    try:
+        pb = s.playback
+        assert not pb.warming_up  # not asked to step yet
+        pb.play(True)
+        assert pb.warming_up
+        pb.play(False)
+        pb.step(1)  # synchronous: the first step finishes
+        assert not pb.warming_up
+        pb.start_worker()
+        pb.play_until(7)
+        assert until(lambda: pb.take_snapshot() and s.frame == 7 and not pb.playing)
+        time.sleep(0.2)
+        pb.take_snapshot()
+        assert s.frame == 7 and not pb.playing
+    finally:
+        s.close()

@@ -50,6 +50,8 @@ class StatusBar:
         pb = s.playback
         if s.building:
             frac, text = max(s.progress, 0.01), f"building {s.species_key}: {s.progress_text}"
+        elif pb.warming_up:
+            frac, text = 0.0, "first step: compiling kernels"
         elif pb.drying:
             frac, text = max(pb.dry_progress(), 0.01), f"drying to the end: {100 * pb.dry_progress():.0f} %"
         elif s.ready:
@@ -58,5 +60,8 @@ class StatusBar:
         else:
             frac, text = 0.0, "starting"
         imgui.progress_bar(frac, (width, 0), text)
-        if pb.drying:
+        if pb.warming_up:
+            tip("The first step of a first run compiles the simulation kernels (about a minute on a small machine); "
+                "they are kept for later runs")
+        elif pb.drying:
             tip("Fast-forward until 2 % of the water is left; press Stop drying to cancel")
