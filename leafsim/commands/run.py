@@ -145,6 +145,8 @@ def cmd_run(args):
         save_checkpoint(ck, model, run.state, meta)  # the final state: --resume --frames M continues it
     if out is not None:
         save_npz(out / "final.npz", model, run.state)
+    if outputs.frames is not None and run.state.frame % args.every:
+        outputs.frames.write(run.state.frame, run.state)  # the last frame too (where --until stopped)
     rep = run_report(sp, params, args, run, stats, start, build_s, sim_s, outputs.frames)
     emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
 

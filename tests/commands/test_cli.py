@@ -180,9 +180,12 @@ def test_until_stops_at_the_first_frame_past_the_criterion(tmp_path, capsys):
     show the frame before it above F); ``--until dry`` with ``--frames`` stops at whichever
     comes first; bad values are one line."""
     stats = tmp_path / "s.jsonl"
+    out = tmp_path / "out"
     assert main(["run", "--species", "oak", "--set", "mesh.spacing=0.08", "--until", "water=0.95", "--stats", str(stats),
-                 "--json"]) == 0
+                 "--every", "100000", "--out", str(out), "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
+    # the first frame and the one where --until stopped
+    assert sorted(p.name for p in out.glob("frame_*.png")) == ["frame_00000.png", f"frame_{rep['frame']:05d}.png"]
     w = [(d["water_T"] + d["water_V"]) / rep["fresh_water_kg"] for d in map(json.loads, stats.read_text().splitlines())]
     assert rep["until"] == "water=0.95" and len(w) == rep["frames"] > 10
     assert w[-1] <= 0.95 < w[-2] and rep["water_fraction"] == pytest.approx(w[-1], abs=1e-6)
