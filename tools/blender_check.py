@@ -1,46 +1,64 @@
-"""One-off check that Blender imports a leafsim .glb with its drying animation (not run in CI).
+"""Render a leafsim glTF in Blender at the first and last frame of its drying, imported with
+the add-on (leafsim/export/blender_import.py), with Cycles on the CPU:
 
-Blender as a Python module is large, so it is not a project dependency; use a throwaway venv:
+    python3.11 -m venv /tmp/bpyenv && /tmp/bpyenv/bin/pip install bpy==4.2.0
+    /tmp/bpyenv/bin/python tools/blender_check.py [--plain] maple.glb OUT_DIR
 
-    python3 -m venv /tmp/bpy && /tmp/bpy/bin/pip install bpy
-    /tmp/bpy/bin/python tools/blender_check.py FILE.glb
-
-Prints, per mesh object, its vertex/face counts, shape keys (one per morph target) and the
-frame range of the action that drives them.
+writes OUT_DIR/first.png and OUT_DIR/last.png and prints what Blender imported (objects,
+vertex counts, colour attributes, shape keys, frame range).  bpy is Blender as a Python module
+(PyPI); it is not a leafsim dependency.
 """
 
+import importlib.util
+import math
 import sys
+from pathlib import Path
 
 import bpy
+from mathutils import Vector
 
-path = sys.argv[1]
+ADDON = Path(__file__).resolve().parent.parent / "leafsim" / "export" / "blender_import.py"
+GLB, OUT = sys.argv[-2], Path(sys.argv[-1])
+PLAIN = "--plain" in sys.argv  # Blender's own importer alone (the colour morphs are dropped)
+OUT.mkdir(parents=True, exist_ok=True)
+spec = importlib.util.spec_from_file_location("blender_import", ADDON)
+bi = importlib.util.module_from_spec(spec); spec.loader.exec_module(bi)
 bpy.ops.wm.read_factory_settings(use_empty=True)
-print("import:", bpy.ops.import_scene.gltf(filepath=path))
-for ob in bpy.data.objects:
-    if ob.type != "MESH":
-        continue
-    me = ob.data
-    keys = me.shape_keys
-    names = [k.name for k in keys.key_blocks] if keys else []
-    action = keys.animation_data.action if keys and keys.animation_data else None
-    print(f"mesh {ob.name}: {len(me.vertices)} vertices, {len(me.polygons)} faces, {len(names)} shape keys "
-          f"{names[:3]}{'…' if len(names) > 3 else ''}, materials {[m.name for m in me.materials]}, "
-          f"colour attributes {[a.name for a in me.color_attributes]}, "
-          f"action {action.name if action else None} frames {tuple(action.frame_range) if action else None}")
-print("blender", bpy.app.version_string, "fps", bpy.context.scene.render.fps)
-
-# play the animation to its last key: the evaluated mesh must be the last key frame's shape
-scene = bpy.context.scene
-for ob in bpy.data.objects:
-    keys = ob.data.shape_keys if ob.type == "MESH" else None
-    if not keys or not keys.animation_data:
-        continue
-    end = int(round(keys.animation_data.action.frame_range[1]))
-    scene.frame_set(end)
-    ev = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()
-    last = keys.key_blocks[-1].data
-    basis = keys.key_blocks[0].data
-    moved = max((ev.vertices[i].co - basis[i].co).length for i in range(len(basis)))
-    err = max((ev.vertices[i].co - last[i].co).length for i in range(len(basis)))
-    print(f"{ob.name} at frame {end}: max displacement from the first key {moved:.4g} m, from the last key {err:.3g} m")
-    ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh_clear()
+if PLAIN:
+    bpy.ops.import_scene.gltf(filepath=GLB)
+    objs = list(bpy.data.objects)
+    for o in objs:
+        act = o.data.shape_keys.animation_data.action if o.type == "MESH" and o.data.shape_keys else None
+        if act is not None:
+            bpy.context.scene.frame_end = int(round(act.frame_range[1]))
+else:
+    objs = bi.import_leafsim(GLB)
+sc = bpy.context.scene
+print("objects", [(o.name, o.type, len(o.data.vertices) if o.type == "MESH" else None) for o in objs])
+print("frame range", sc.frame_start, sc.frame_end)
+for o in objs:
+    if o.type == "MESH":
+        print(o.name, "attrs", [a.name for a in o.data.color_attributes][:5], "keys", len(o.data.shape_keys.key_blocks) if o.data.shape_keys else 0)
+# camera + light
+mins = Vector((1e9,)*3); maxs = Vector((-1e9,)*3)
+for o in objs:
+    if o.type == "MESH":
+        for v in o.data.vertices:
+            w = o.matrix_world @ v.co
+            mins = Vector(map(min, mins, w)); maxs = Vector(map(max, maxs, w))
+c = (mins + maxs) / 2; size = (maxs - mins).length
+cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam")); sc.collection.objects.link(cam)
+cam.location = c + Vector((0, -0.9 * size, 1.1 * size))
+cam.rotation_euler = (c - cam.location).to_track_quat('-Z', 'Y').to_euler()
+sc.camera = cam
+sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN")); sc.collection.objects.link(sun)
+sun.rotation_euler = (math.radians(35), math.radians(10), 0); sun.data.energy = 3.0
+world = bpy.data.worlds.new("w"); sc.world = world; world.use_nodes = True
+world.node_tree.nodes["Background"].inputs[1].default_value = 0.6
+sc.render.engine = "CYCLES"; sc.cycles.samples = 16; sc.cycles.device = "CPU"
+sc.render.resolution_x, sc.render.resolution_y = 480, 360
+for f, name in ((sc.frame_start, "first"), (sc.frame_end, "last")):
+    sc.frame_set(f)
+    sc.render.filepath = str(OUT / f"{name}.png")
+    bpy.ops.render.render(write_still=True)
+    print("rendered", f, name)

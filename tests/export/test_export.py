@@ -113,6 +113,30 @@ def test_every_face_is_wound_with_its_normals(leaf, tmp_path, fmt):
         assert wrong == 0, f"{name}: {wrong} of {checked} faces wound against their normals"
 
 
+def test_the_blender_addon_reads_the_colour_morphs(leaf, tmp_path):
+    """The Blender add-on's reader (standard library only, as in Blender) gets back exactly
+    the base colours and per-key-frame colour deltas the export wrote, with the shape keys'
+    names and the key times."""
+    from leafsim.export.blender_import import colour_morphs
+
+    model, params, view, states = leaf
+    for fmt in ("glb", "gltf"):
+        path = tmp_path / f"oak.{fmt}"
+        export_mesh(model, states, path, params=params, view=view, veins=True)
+        m = colour_morphs(path)
+        assert set(m) == {"blade", "veins"}
+        doc = _glb_json(path) if fmt == "glb" else json.loads(path.read_text())
+        blade = m["blade"]
+        assert blade["targets"] == doc["meshes"][0]["extras"]["targetNames"] and len(blade["deltas"]) == 2
+        assert blade["times"] == pytest.approx([s.time - states[0].time for s in states], rel=1e-6)
+        scene = trimesh.load(path, process=False)
+        c0 = np.asarray(blade["colours"])
+        assert c0.shape == (len(scene.geometry["blade"].vertices), 3) and (c0 > 0).all() and (c0 <= 1).all()
+        # base + delta of the last key = the last state's colours: the leaf ends autumn-coloured
+        last = c0 + np.asarray(blade["deltas"][-1])
+        assert np.abs(last - c0).max() > 0.05 and (last >= -1e-6).all() and (last <= 1 + 1e-6).all()
+
+
 def _glb_json(path) -> dict:
     data = path.read_bytes()
     magic, version, total = struct.unpack("<4sII", data[:12])

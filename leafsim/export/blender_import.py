@@ -1,0 +1,226 @@
+"""Blender add-on: import a leafsim glTF with its drying colour.
+
+A leafsim ``.glb`` / ``.gltf`` stores the drying as morph targets with ``POSITION``, ``NORMAL``
+and ``COLOR_0`` deltas and one animation keying their weights.  Blender's glTF importer turns
+the position deltas into shape keys driven by the animation but drops the colour deltas, so
+the leaf curls yet stays summer-green.  This add-on imports the file with Blender's own
+importer, then adds the colour deltas as colour attributes (``leafsim_dk``) and rebuilds the
+material's base colour as glTF defines it::
+
+    colour = COLOR_0 + Σ_k weight_k · ΔCOLOR_0_k
+
+with each weight_k driven by the shape key the importer made for target k, so colour and
+shape change together on the same animation.  It also sets the scene's frame range to the
+drying action's.
+
+Install: Blender → Edit → Preferences → Add-ons → Install from Disk… → this file (its path:
+``leafsim export … --json`` reports it as ``blender_addon``); then File → Import → "leafsim
+glTF (drying colour)".  Without the add-on: ``import_leafsim(path)`` from Blender's Python.
+
+This module imports ``bpy`` only inside the functions that need Blender; :func:`colour_morphs`
+reads the file with the standard library alone (tests use it outside Blender).
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from array import array
+from pathlib import Path
+
+bl_info = {
+    "name": "leafsim glTF import (drying colour)",
+    "author": "leafsim",
+    "version": (1, 0, 0),
+    "blender": (4, 2, 0),
+    "location": "File > Import > leafsim glTF (drying colour)",
+    "description": "Import a leafsim .glb/.gltf with its colour morph targets as animated vertex colours",
+    "category": "Import-Export",
+}
+
+_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+
+
+def _load(path: Path) -> tuple[dict, bytes]:
+    data = path.read_bytes()
+    if data[:4] == b"glTF":
+        n = struct.unpack("<I", data[12:16])[0]
+        doc = json.loads(data[20:20 + n])
+        off = 20 + n
+        blob = data[off + 8: off + 8 + struct.unpack("<I", data[off:off + 4])[0]] if off < len(data) else b""
+        return doc, blob
+    doc = json.loads(data)
+    uri = doc["buffers"][0].get("uri")
+    return doc, (path.parent / uri).read_bytes() if uri else b""
+
+
+def _floats(doc: dict, blob: bytes, index: int) -> list[tuple[float, ...]]:
+    """A float accessor as a list of tuples (leafsim writes tightly packed float32)."""
+    acc = doc["accessors"][index]
+    if acc["componentType"] != 5126:
+        raise ValueError(f"accessor {index}: expected float32 data")
+    view = doc["bufferViews"][acc["bufferView"]]
+    k = _COMPONENTS[acc["type"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    a = array("f")
+    a.frombytes(blob[start:start + 4 * k * acc["count"]])
+    if struct.pack("=I", 1) != struct.pack("<I", 1):
+        a.byteswap()
+    return [tuple(a[i * k:(i + 1) * k]) for i in range(acc["count"])]
+
+
+def colour_morphs(path) -> dict:
+    """``{mesh name: {"colours": [(r, g, b), …], "deltas": [[(dr, dg, db), …] per target],
+    "targets": [shape key names], "times": [s]}}`` for every mesh of a leafsim glTF that has
+    colour morph targets (colours linear RGB, as stored)."""
+    doc, blob = _load(Path(path))
+    times = []
+    for anim in doc.get("animations", []):
+        times = [t[0] for t in _floats(doc, blob, anim["samplers"][0]["input"])]
+    out = {}
+    for mesh in doc.get("meshes", []):
+        prim = mesh["primitives"][0]
+        targets = prim.get("targets") or []
+        if "COLOR_0" not in prim["attributes"] or not targets or "COLOR_0" not in targets[0]:
+            continue
+        names = (mesh.get("extras") or {}).get("targetNames") or [f"target_{k}" for k in range(len(targets))]
+        out[mesh["name"]] = {"colours": [c[:3] for c in _floats(doc, blob, prim["attributes"]["COLOR_0"])],
+                             "deltas": [[c[:3] for c in _floats(doc, blob, t["COLOR_0"])] for t in targets],
+                             "targets": list(names), "times": times}
+    return out
+
+
+# ---------------------------------------------------------------------------------- in Blender
+def _colour_attribute(mesh, name: str, values) -> None:
+    attr = mesh.color_attributes.get(name) or mesh.color_attributes.new(name, "FLOAT_COLOR", "POINT")
+    flat = []
+    for r, g, b in values:
+        flat += (r, g, b, 1.0)
+    attr.data.foreach_set("color", flat)
+
+
+def _drive(socket, key, shape_name: str) -> None:
+    """``socket.default_value`` follows the value of shape key ``shape_name`` of ``key``."""
+    fc = socket.driver_add("default_value")
+    drv = fc.driver
+    drv.type = "AVERAGE"
+    var = drv.variables.new()
+    var.name = "w"
+    var.type = "SINGLE_PROP"
+    var.targets[0].id_type = "KEY"
+    var.targets[0].id = key
+    var.targets[0].data_path = f'key_blocks["{shape_name}"].value'
+
+
+def _wire_material(obj, morph: dict) -> None:
+    """Base colour = Σ as in the module docstring, into every Principled BSDF of ``obj``."""
+    key = obj.data.shape_keys
+    names = [kb.name for kb in key.key_blocks][1:] if key is not None else []
+    for slot in obj.material_slots:
+        mat = slot.material
+        if mat is None or not mat.use_nodes:
+            continue
+        nodes, links = mat.node_tree.nodes, mat.node_tree.links
+        bsdf = next((n for n in nodes if n.type == "BSDF_PRINCIPLED"), None)
+        if bsdf is None:
+            continue
+        base = nodes.new("ShaderNodeAttribute")
+        base.attribute_name = "leafsim_colour"
+        acc = base.outputs["Vector"]
+        for k, shape in enumerate(morph["targets"]):
+            if shape not in names:
+                continue
+            delta = nodes.new("ShaderNodeAttribute")
+            delta.attribute_name = f"leafsim_d{k}"
+            weight = nodes.new("ShaderNodeValue")
+            weight.label = f"weight of {shape}"
+            _drive(weight.outputs[0], key, shape)
+            mix = nodes.new("ShaderNodeVectorMath")
+            mix.operation = "MULTIPLY_ADD"
+            links.new(delta.outputs["Vector"], mix.inputs[0])
+            links.new(weight.outputs[0], mix.inputs[1])
+            links.new(acc, mix.inputs[2])
+            acc = mix.outputs["Vector"]
+        for link in list(bsdf.inputs["Base Color"].links):
+            links.remove(link)
+        links.new(acc, bsdf.inputs["Base Color"])
+
+
+def import_leafsim(path) -> list:
+    """Import a leafsim glTF into the current Blender scene with its drying colour; returns
+    the imported objects."""
+    import bpy
+
+    before = set(bpy.data.objects)
+    bpy.ops.import_scene.gltf(filepath=str(path))
+    objects = [o for o in bpy.data.objects if o not in before]
+    morphs = colour_morphs(path)
+    for obj in objects:
+        morph = morphs.get(obj.data.name) if obj.type == "MESH" else None
+        if morph is None and obj.type == "MESH":
+            morph = morphs.get(obj.name)
+        if morph is None:
+            continue
+        mesh = obj.data
+        if len(mesh.vertices) != len(morph["colours"]):
+            raise RuntimeError(f"{obj.name}: {len(mesh.vertices)} vertices in Blender, {len(morph['colours'])} in the file "
+                               "(import without merging vertices)")
+        _colour_attribute(mesh, "leafsim_colour", morph["colours"])
+        for k, d in enumerate(morph["deltas"]):
+            _colour_attribute(mesh, f"leafsim_d{k}", d)
+        _wire_material(obj, morph)
+    scene = bpy.context.scene
+    ranges = [o.data.shape_keys.animation_data.action.frame_range for o in objects
+              if o.type == "MESH" and o.data.shape_keys and o.data.shape_keys.animation_data
+              and o.data.shape_keys.animation_data.action]
+    if ranges:
+        scene.frame_start = int(min(r[0] for r in ranges))
+        scene.frame_end = int(round(max(r[1] for r in ranges)))
+    return objects
+
+
+def _operator():
+    import bpy
+    from bpy_extras.io_utils import ImportHelper
+
+    class ImportLeafsim(bpy.types.Operator, ImportHelper):
+        """Import a leafsim glTF with its drying colour"""
+
+        bl_idname = "import_scene.leafsim_gltf"
+        bl_label = "Import leafsim glTF"
+        filename_ext = ".glb"
+        filter_glob: bpy.props.StringProperty(default="*.glb;*.gltf", options={"HIDDEN"})
+
+        def execute(self, context):
+            try:
+                import_leafsim(self.filepath)
+            except Exception as e:  # shown in Blender's status bar, not a traceback
+                self.report({"ERROR"}, f"leafsim import: {e}")
+                return {"CANCELLED"}
+            return {"FINISHED"}
+
+    return ImportLeafsim
+
+
+_classes: list = []
+
+
+def _menu(self, context):
+    self.layout.operator("import_scene.leafsim_gltf", text="leafsim glTF (drying colour)")
+
+
+def register():
+    import bpy
+
+    cls = _operator()
+    _classes.append(cls)
+    bpy.utils.register_class(cls)
+    bpy.types.TOPBAR_MT_file_import.append(_menu)
+
+
+def unregister():
+    import bpy
+
+    bpy.types.TOPBAR_MT_file_import.remove(_menu)
+    while _classes:
+        bpy.utils.unregister_class(_classes.pop())
