@@ -37,6 +37,9 @@ class _Parser(argparse.ArgumentParser):
         raise LeafsimError(f"{where}: {message}" if where else message)
 
 
+JSON_HELP = "print exactly one JSON object on stdout instead of text (no progress bar)"
+CONFIG_HELP = "species config file (default: the shipped configs/leaves.json; see docs/species.md)"
+
 #: seeds are non-negative integers below 2**63 (numpy's generators take them as-is)
 SEED_MAX = 2**63 - 1
 
@@ -53,7 +56,7 @@ def _seed(text: str) -> int:
 
 def _common(p: argparse.ArgumentParser, seed=True):
     p.add_argument("--species", default=None, help="species key from the config (see `leafsim species`)")
-    p.add_argument("--config", default=None, help="species config JSON (default: configs/leaves.json)")
+    p.add_argument("--config", default=None, metavar="FILE", help=CONFIG_HELP)
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                    help="override a declared parameter, e.g. --set veins.main.kappa=4 (repeatable)")
     if seed:
@@ -88,27 +91,28 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--play", action="store_true", help="start with the simulation playing")
 
     s = sub.add_parser("species", help="list the species library")
-    s.add_argument("--config", default=None)
-    s.add_argument("--json", action="store_true")
+    s.add_argument("--config", default=None, metavar="FILE", help=CONFIG_HELP)
+    s.add_argument("--json", action="store_true", help=JSON_HELP)
 
     pr = sub.add_parser("params", help="list every declared parameter")
-    pr.add_argument("--json", action="store_true")
+    pr.add_argument("--json", action="store_true", help=JSON_HELP)
     pr.add_argument("--markdown", action="store_true", help="print the docs/parameters.md table")
 
     o = sub.add_parser("outline", help="trace a leaf outline from a photo")
-    o.add_argument("image")
+    o.add_argument("image", help="a photo of one leaf on a plain background (PNG, JPEG, TIFF, WebP, BMP)")
     o.add_argument("--out", default=None, help="PNG with the traced outline, base, apex and lobe tips")
-    o.add_argument("--json", action="store_true")
-    o.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
+    o.add_argument("--json", action="store_true", help=JSON_HELP)
+    o.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                   help="set a parameter (outline.*, limits.image_pixels; repeatable)")
 
     v = sub.add_parser("veins", help="grow the venation of a species")
     _common(v)
     v.add_argument("--out", default=None, help="PNG of the veins over the photo / outline")
-    v.add_argument("--json", action="store_true")
+    v.add_argument("--json", action="store_true", help=JSON_HELP)
 
     b = sub.add_parser("build", help="build the two-layer blade model")
     _common(b)
-    b.add_argument("--json", action="store_true")
+    b.add_argument("--json", action="store_true", help=JSON_HELP)
 
     r = sub.add_parser("run", help="simulate headless")
     _common(r)
@@ -120,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--checkpoint-every", type=int, default=None, metavar="K",
                    help=f"save the whole state to OUT/{CHECKPOINT} every K frames (default {CHECKPOINT_EVERY} with --out; 0 = never)")
     r.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out (same command otherwise)")
-    r.add_argument("--json", action="store_true")
+    r.add_argument("--json", action="store_true", help=JSON_HELP)
 
     cp = sub.add_parser("compare", help="the model top-down beside the species photo (and a senescent one): IoU, margin, veins, colour")
     _common(cp)
@@ -129,15 +133,15 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "the best-matching stage for a senescent photo named in the config")
     cp.add_argument("--effects", default=None, help="comma-separated effects for the drying run (others off), e.g. osmosis,colour")
     cp.add_argument("--out", default=None, help="montage PNG: photo | model | overlay per row, metrics, colour classes")
-    cp.add_argument("--json", action="store_true")
+    cp.add_argument("--json", action="store_true", help=JSON_HELP)
 
     be = sub.add_parser("bench", help="benchmark the simulation kernels")
-    be.add_argument("--json", action="store_true")
+    be.add_argument("--json", action="store_true", help=JSON_HELP)
     be.add_argument("--quick", action="store_true", help="small sizes only")
     ac = sub.add_parser("accuracy", help="accuracy against cost: every solver setting against a converged reference")
     ac.add_argument("--species", default="maple", help="species to dry (default maple)")
-    ac.add_argument("--config", default=None)
-    ac.add_argument("--seed", type=int, default=0)
+    ac.add_argument("--config", default=None, metavar="FILE", help=CONFIG_HELP)
+    ac.add_argument("--seed", type=int, default=0, help="seed of the leaf (default 0)")
     ac.add_argument("--out", default=None, help="folder for accuracy.json, accuracy.md and accuracy_pareto.png")
     ac.add_argument("--quick", action="store_true", help="a coarse, fast-drying leaf and few settings (for tests)")
     ac.add_argument("--floor", type=int, default=0, metavar="K",
@@ -146,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--floor-reference", action="store_true", help="measure the floor on the reference too (slow)")
     ac.add_argument("--groups", default=None, metavar="G,G",
                     help="only these sweeps (mesh, iterations, mass, tolerance, dt, relaxation, osmosis, precision, quality)")
-    ac.add_argument("--json", action="store_true")
+    ac.add_argument("--json", action="store_true", help=JSON_HELP)
     _scene_export_parsers(sub)
     return ap
 
@@ -157,7 +161,7 @@ def _scene_export_parsers(sub) -> None:
     sc.add_argument("--out", default=None, help="output folder (default out/SCENE_NAME)")
     sc.add_argument("--workers", type=int, default=None, help="local worker processes (default: the CPU count)")
     sc.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this Dask scheduler, e.g. tcp://host:8786")
-    sc.add_argument("--json", action="store_true")
+    sc.add_argument("--json", action="store_true", help=JSON_HELP)
 
     ex = sub.add_parser("export", help="simulate one leaf and write it as a mesh (glTF, OBJ, PLY)")
     _common(ex)
@@ -169,7 +173,7 @@ def _scene_export_parsers(sub) -> None:
     ex.add_argument("--veins", action="store_true", help="add the veins as a second mesh")
     ex.add_argument("--texture", default="colours", choices=["colours", "photo"], help="baked pigment colours or the species photo")
     ex.add_argument("--effects", default=None, help="comma-separated effects to enable (others off)")
-    ex.add_argument("--json", action="store_true")
+    ex.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
 def one_line(text: str) -> str:

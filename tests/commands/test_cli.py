@@ -204,3 +204,15 @@ def test_argument_errors_carry_one_prefix(capsys, argv):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("leafsim: ") and not err.startswith("leafsim: leafsim") and err.count("\n") == 1
+
+
+def test_every_option_has_help():
+    import argparse
+
+    from leafsim.cli import build_parser
+
+    ap = build_parser()
+    subs = next(a for a in ap._actions if isinstance(a, argparse._SubParsersAction))
+    missing = [f"{name} {'/'.join(a.option_strings) or a.dest}" for name, p in subs.choices.items() for a in p._actions
+               if not isinstance(a, argparse._HelpAction) and not a.help]
+    assert not missing, missing
