@@ -217,3 +217,46 @@ def test_cli_export_animation_and_bad_input(tmp_path):
     r = _cli("export", "--species", "nosuch", "--out", str(tmp_path / "x.glb"))
     assert r.returncode == 2 and "unknown species" in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["chestnut.glb"]
+
+
+@pytest.mark.parametrize("frames", [0, 80])
+def test_an_exported_glb_renders_like_the_app(tmp_path, frames):
+    """The exported glb drawn as glTF viewers draw it (double-sided, back faces lit with the
+    flipped normal) against the app's own renderer on the same state, both from above: the
+    same colour (mean chromaticity within 0.01, young and aged) and the same silhouette; the
+    veins render lighter than the blade under them, never dark (a vein wound against its
+    normals rendered black in Blender)."""
+    from helpers.gltf_render import render_top
+    from leafsim.render.camera import OrbitCamera
+    from leafsim.render.offscreen import OffscreenRenderer
+    from leafsim.render.options import RenderOptions
+
+    sp = get_species("oak")
+    params = sp.params.with_overrides({"mesh.spacing": 0.06, "colour.age_rate": 5.0})
+    _, _, model = build_leaf(sp, params, 0)
+    sim = Simulator(model, params, seed=0)
+    st = sim.state()
+    for _ in range(frames):
+        sim.step(st)
+    photo = load_photo_rgba(sp.image)
+    view = LeafView(model, photo, sim.state().pigments, photo_tint=False, photo_colour=sp.photo_colour)
+    path = tmp_path / "oak.glb"
+    export_mesh(model, st, path, params=params, view=view, veins=True)
+    glb, blade_only = render_top(path), render_top(path, only={"blade"})
+    mesh = view.mesh(st, params)
+    cam = OrbitCamera(yaw=-90.0, pitch=90.0, ortho=True)
+    cam.frame_bounds(mesh.positions, aspect=1.0)
+    with OffscreenRenderer(400, 400, samples=0) as r:
+        app = r.render_array(mesh, camera=cam, options=RenderOptions(albedo="colours", ground=False, shadows=False,
+                                                                      veins=False, background=(0.0, 0.0, 0.0)))
+
+    def chroma(img):
+        c = img[img.astype(int).sum(-1) > 30].astype(float)
+        return (c / c.sum(1, keepdims=True)).mean(0), len(c) / (img.shape[0] * img.shape[1])
+
+    (cg, ag), (ca, aa) = chroma(blade_only), chroma(app)
+    assert np.abs(cg - ca).max() < 0.01, (cg, ca)
+    assert abs(ag - aa) < 0.25 * aa  # the same leaf fills about the same share of the picture
+    vein = np.abs(glb.astype(int) - blade_only).sum(-1) > 6
+    assert vein.sum() > 300
+    assert glb[vein].astype(float).mean() > blade_only[vein].astype(float).mean()  # lighter, not black
