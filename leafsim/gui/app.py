@@ -185,6 +185,12 @@ class LeafApp:
         self.software_gl = any(k in gl for k in ("llvmpipe", "softpipe", "swrast"))
         if self.software_gl and "LEAFSIM_SELF_SHADOW" not in os.environ:
             self.self_shadow = False
+        # slider values are drawn centred under the grab: a see-through, narrow grab keeps them legible
+        style = imgui.get_style()
+        style.grab_min_size = 6.0
+        for col, alpha in ((imgui.Col_.slider_grab, 0.45), (imgui.Col_.slider_grab_active, 0.6)):
+            r, g, b, _ = style.color_(col)
+            style.set_color_(col, imgui.ImVec4(r, g, b, alpha))
 
     def before_exit(self) -> None:
         self.session.close()

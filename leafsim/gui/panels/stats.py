@@ -29,7 +29,9 @@ class StatsPanel:
         imgui.text(f"particles {c['particles']} (T {c['particles_T']}, V {c['particles_V']})")
         imgui.text(f"springs {c['springs']}   triangles {c['triangles']}   hinges {c['hinges']}")
         ms = pb.last_ms
-        imgui.text(f"step ms (total {sum(ms.values()):.2f}): " + " ".join(f"{k[:4]} {v:.1f}" for k, v in ms.items()))
+        imgui.text(f"step {sum(ms.values()):.2f} ms:")  # the stages wrap to the panel's width
+        imgui.same_line()
+        imgui.text_wrapped("  ".join(f"{k[:4]} {v:.1f}" for k, v in ms.items()))
         if app.timing:
             imgui.text_disabled("frame: " + "  ".join(f"{k} {v:.1f}" for k, v in app.timing.items()) + " ms")
         h = pb.history
@@ -49,17 +51,18 @@ class StatsPanel:
         x = np.ascontiguousarray(x[sl])
         pw = imgui.get_content_region_avail().x
         fit = implot.AxisFlags_.auto_fit
-        if implot.begin_plot("water", (pw, 140)):
-            implot.setup_axes("frame", "water / initial", fit, 0)
+        if implot.begin_plot("water / initial", (pw, 170)):
+            implot.setup_axes("frame", "", fit, 0)
             implot.setup_axis_limits(implot.ImAxis_.y1, 0.0, 1.05, imgui.Cond_.once)
-            implot.setup_legend(implot.Location_.north_east)
+            # below the plot, in a row: inside, it covered the curves and was cut at the edge
+            implot.setup_legend(implot.Location_.south, implot.LegendFlags_.outside | implot.LegendFlags_.horizontal)
             implot.plot_line("total", x, np.ascontiguousarray(np.asarray(h["water"], np.float64)[sl]))
             for key, label in (("water_T", "bottom T"), ("water_V", "top V")):
                 v = np.asarray(h[key], np.float64)
                 implot.plot_line(label, x, np.ascontiguousarray(v[sl] / max(v[0], 1e-300)))
             implot.end_plot()
-        if implot.begin_plot("constraint residual", (pw, 120)):
-            implot.setup_axes("frame", "log10 max |C|/l", fit, fit)
+        if implot.begin_plot("log10 max |C| / l (constraint residual)", (pw, 130), implot.Flags_.no_legend):
+            implot.setup_axes("frame", "", fit, fit)
             r = np.nan_to_num(np.asarray(h["residual"], np.float64), nan=1.0)[sl]
             ok = r > 0  # the fresh leaf (frame 0) has none
             implot.plot_line("residual", np.ascontiguousarray(x[ok]), np.log10(r[ok]))
