@@ -104,6 +104,7 @@ class LeafApp:
         self._last_recorded_frame = -1
         self.status = Status()
         self.exit_code = 0
+        self.fatal: str | None = None  # why a scripted run (--frames) failed, for stderr
         self.camera = OrbitCamera()
         self.ctx = self.renderer = None
         self.rendered_gen = -1
@@ -288,10 +289,11 @@ class LeafApp:
             self.status.clear("build")
         if s.build_error:
             self.fail(s.build_error, "build")
-            s.build_error = None
-            if self.scripted:
+            if self.scripted:  # a script gets the reason on stderr (run_app prints it), not a window
+                self.fatal = s.build_error
                 self.exit_code = 2
                 self._exit()
+            s.build_error = None
         if s.playback.take_snapshot():
             self.dirty = True
             if self.take is not None and s.frame >= self._last_recorded_frame + max(self.record_every, 1):
@@ -300,7 +302,7 @@ class LeafApp:
         if pb.sim_error and self.status.get("sim") is None:
             self.status.error("sim", pb.sim_error, holds=lambda: pb.sim_error is not None)
             if self.frames is not None:  # the frame asked for will never come
-                sys.stderr.write(f"leafsim: {pb.sim_error}\n")
+                self.fatal = pb.sim_error
                 self.exit_code = 2
                 self._exit()
             if self.take is not None:
@@ -575,6 +577,8 @@ def run_app(species=None, config=None, seed: int = 0, overrides=None, frames=Non
     session.rebuild_async()
     app = LeafApp(session, frames=frames, play=play, window_frames=window_frames)
     immapp.run(app.runner_params(), app.addons())
+    if app.fatal is not None:
+        raise LeafsimError(app.fatal)  # one line on stderr, exit 2
     if screenshot is not None:
         img = hello_imgui.final_app_window_screenshot()
         if img is None or getattr(img, "size", 0) == 0:

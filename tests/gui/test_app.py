@@ -408,6 +408,18 @@ def test_gui_frames_counts_simulation_frames(frames):
     assert app.exit_code == 0 and session.frame == frames and app.leaf_frames >= 1
 
 
+def test_cli_gui_build_error_is_one_line_on_stderr(tmp_path, xdisplay):
+    """A scripted window whose leaf cannot be built exits 2 with the reason on stderr (it used to
+    exit 2 silently, the window showing 'building the first leaf ...')."""
+    env = {**os.environ, "DISPLAY": xdisplay}
+    r = subprocess.run([sys.executable, "-m", "leafsim", "gui", "--species", "oak", "--set", "limits.max_particles=1000",
+                        "--frames", "5", "--screenshot", str(tmp_path / "x.png")], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=HANG_S)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.startswith("leafsim: ") and "limits.max_particles" in r.stderr and r.stderr.count("\n") == 1
+    assert not (tmp_path / "x.png").exists()
+
+
 def test_cli_gui_screenshot_bad_folder(tmp_path, xdisplay):
     env = {**os.environ, "DISPLAY": xdisplay}
     r = subprocess.run([sys.executable, "-m", "leafsim", "gui", "--species", "oak", "--frames", "2",
