@@ -3,17 +3,14 @@ working copy downscaled to the pixel limit, and the mask morphology helpers."""
 
 from __future__ import annotations
 
-import errno
 import math
 import os
-import stat
-from pathlib import Path
 
 import cv2
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import MAX_IMAGE_BYTES
+from leafsim.base.fileio import MAX_IMAGE_BYTES, regular_input
 
 _DEBUG = False
 #: a working copy smaller than this on its long side is too coarse to trace [px]
@@ -26,22 +23,9 @@ def load_image(path: str | os.PathLike) -> np.ndarray:
     Raises LeafsimError ``<path>: cannot read image (<reason>)`` for a missing, unreadable,
     empty or corrupt file.
     """
-    p = Path(path)
     where = str(path)
-    try:
-        st = os.stat(p)
-    except FileNotFoundError:
-        raise LeafsimError(f"{where}: cannot read image (file not found)") from None
-    except OSError as exc:
-        reason = "a loop of symbolic links" if exc.errno == errno.ELOOP else (exc.strerror or str(exc))
-        raise LeafsimError(f"{where}: cannot read image ({reason})") from None
-    if stat.S_ISDIR(st.st_mode):
-        raise LeafsimError(f"{where}: cannot read image (is a folder, expected an image file)")
-    if not stat.S_ISREG(st.st_mode):  # a named pipe would block the reader, a device never end
-        raise LeafsimError(f"{where}: cannot read image (not a regular file: a device, named pipe or socket)")
-    if st.st_size > MAX_IMAGE_BYTES:
-        raise LeafsimError(f"{where}: cannot read image ({st.st_size / 2**20:.0f} MiB, more than the "
-                           f"{MAX_IMAGE_BYTES / 2**20:.0f} MiB leafsim reads)")
+    # a regular file of bounded size: a named pipe would block the reader, a device never end
+    p = regular_input(path, "image", MAX_IMAGE_BYTES)
     try:
         data = np.fromfile(str(p), dtype=np.uint8)
     except OSError as exc:

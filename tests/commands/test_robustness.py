@@ -54,7 +54,7 @@ def test_outputs_onto_special_files_are_refused_untouched(tmp_path, fifo):
 
 
 def test_inputs_that_are_not_bounded_files_are_refused(tmp_path, fifo):
-    one_line(*run_cli("outline", fifo), "not a regular file")  # a named pipe would hang the reader
+    one_line(*run_cli("outline", fifo), "it is a named pipe, expected a regular file")  # it would hang the reader
     if os.path.exists("/dev/zero"):
         one_line(*run_cli("species", "--config", "/dev/zero"), "character device")
     cfg = json.loads(Path("configs/leaves.json").read_text())
