@@ -65,7 +65,7 @@ def cmd_export(args):
     rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view,
                       layers=args.layers, veins=args.veins, texture=args.texture)
     rep.update(species=sp.key, seed=args.seed, frames=run.state.frame)
-    if fmt in ("glb", "gltf") and len(keys) > 1 and args.texture == "colours":
+    if fmt in ("glb", "gltf") and len(keys) > 1:
         from leafsim.export import blender_import  # the add-on that brings the colour morphs into Blender
 
         rep["blender_addon"] = str(Path(blender_import.__file__).resolve())

@@ -10,7 +10,9 @@ material's base colour as glTF defines it::
     colour = COLOR_0 + Σ_k weight_k · ΔCOLOR_0_k
 
 with each weight_k driven by the shape key the importer made for target k, so colour and
-shape change together on the same animation.  It also sets the scene's frame range to the
+shape change together on the same animation.  A ``--texture photo`` export carries instead the
+factor the ageing multiplies the photo by, as ``_AGEING`` with its own morph deltas (COLOR_0
+must stay within 0-1, the factor does not); the base colour is then the photo times it.  It also sets the scene's frame range to the
 drying action's.
 
 Install: Blender → Edit → Preferences → Add-ons → Install from Disk… → this file (its path:
@@ -71,8 +73,10 @@ def _floats(doc: dict, blob: bytes, index: int) -> list[tuple[float, ...]]:
 
 def colour_morphs(path) -> dict:
     """``{mesh name: {"colours": [(r, g, b), …], "deltas": [[(dr, dg, db), …] per target],
-    "targets": [shape key names], "times": [s]}}`` for every mesh of a leafsim glTF that has
-    colour morph targets (colours linear RGB, as stored)."""
+    "targets": [shape key names], "times": [s], "photo_factor": bool}}`` for every mesh of a
+    leafsim glTF that has colour morph targets: ``COLOR_0`` (linear RGB, as stored), or with
+    the photo as texture ``_AGEING``, the factor the ageing multiplies the photo by
+    (``photo_factor`` True)."""
     doc, blob = _load(Path(path))
     times = []
     for anim in doc.get("animations", []):
@@ -81,12 +85,13 @@ def colour_morphs(path) -> dict:
     for mesh in doc.get("meshes", []):
         prim = mesh["primitives"][0]
         targets = prim.get("targets") or []
-        if "COLOR_0" not in prim["attributes"] or not targets or "COLOR_0" not in targets[0]:
+        key = next((k for k in ("COLOR_0", "_AGEING") if k in prim["attributes"] and targets and k in targets[0]), None)
+        if key is None:
             continue
         names = (mesh.get("extras") or {}).get("targetNames") or [f"target_{k}" for k in range(len(targets))]
-        out[mesh["name"]] = {"colours": [c[:3] for c in _floats(doc, blob, prim["attributes"]["COLOR_0"])],
-                             "deltas": [[c[:3] for c in _floats(doc, blob, t["COLOR_0"])] for t in targets],
-                             "targets": list(names), "times": times}
+        out[mesh["name"]] = {"colours": [c[:3] for c in _floats(doc, blob, prim["attributes"][key])],
+                             "deltas": [[c[:3] for c in _floats(doc, blob, t[key])] for t in targets],
+                             "targets": list(names), "times": times, "photo_factor": key == "_AGEING"}
     return out
 
 
@@ -141,6 +146,13 @@ def _wire_material(obj, morph: dict) -> None:
             links.new(weight.outputs[0], mix.inputs[1])
             links.new(acc, mix.inputs[2])
             acc = mix.outputs["Vector"]
+        image = next((n for n in nodes if n.type == "TEX_IMAGE"), None)
+        if morph.get("photo_factor") and image is not None:  # the photo times the ageing factor
+            mul = nodes.new("ShaderNodeVectorMath")
+            mul.operation = "MULTIPLY"
+            links.new(image.outputs["Color"], mul.inputs[0])
+            links.new(acc, mul.inputs[1])
+            acc = mul.outputs["Vector"]
         for link in list(bsdf.inputs["Base Color"].links):
             links.remove(link)
         links.new(acc, bsdf.inputs["Base Color"])

@@ -83,6 +83,8 @@ class GltfBuilder:
             attrs["COLOR_0"] = self.accessor(s0.colours)
         if s0.thickness is not None:
             attrs["_THICKNESS"] = self.accessor(s0.thickness)
+        if s0.ageing is not None:
+            attrs["_AGEING"] = self.accessor(s0.ageing)
         prim = {"attributes": attrs, "indices": self.accessor(s0.triangles.ravel(), ELEMENT_ARRAY_BUFFER),
                 "material": material, "mode": 4}
         mesh = {"name": name, "primitives": [prim]}
@@ -102,6 +104,8 @@ class GltfBuilder:
              "NORMAL": self.accessor(s.normals - s0.normals)}
         if s0.colours is not None:
             t["COLOR_0"] = self.accessor(s.colours - s0.colours)
+        if s0.ageing is not None:
+            t["_AGEING"] = self.accessor(s.ageing - s0.ageing)
         return t
 
     def animation(self, nodes: list[int], times: list[float]) -> None:

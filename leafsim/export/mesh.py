@@ -32,6 +32,9 @@ from leafsim.sim.model import Model, State
 FORMATS = ("glb", "gltf", "obj", "ply")
 LAYERS = ("shell", "mid")
 TEXTURES = ("colours", "photo")
+#: the ageing factor on a photo texture is clipped to this (a green pixel needs × 10 and more
+#: to turn red; the app's photo albedo clips at 64)
+MAX_AGEING = 64.0
 #: veins are drawn this much lighter than the blade under them (multiplier of the albedo)
 VEIN_LIGHTEN = 1.35
 #: largest photo side embedded as a texture (pixels)
@@ -44,6 +47,8 @@ class Surface:
 
     positions, normals : (n, 3) float32 (y-up); uv : (n, 2) float32 or None;
     colours : (n, 3) float32 linear RGB or None; thickness : (n,) float32 or None (mid-surface);
+    ageing : (n, 3) float32 or None: with the photo as texture, the factor rgb(now) / rgb(young)
+        the ageing multiplies it by (above 1 where green turns red or yellow);
     triangles : (m, 3) uint32, counter-clockwise seen from outside.
     """
 
@@ -53,6 +58,7 @@ class Surface:
     uv: np.ndarray | None = None
     colours: np.ndarray | None = None
     thickness: np.ndarray | None = None
+    ageing: np.ndarray | None = None
 
 
 def to_y_up(p: np.ndarray) -> np.ndarray:
@@ -156,6 +162,13 @@ class MeshSource:
             v = vein_surface(self.model, self.view.remap, top, n, self.uv, col)
             if v is not None:
                 out["veins"] = v
+        if self.texture == "photo":  # the ageing as a factor on the photo, per vertex of each surface
+            _, tint = self.view.colours(state, self.params)
+            f = np.ones((len(self.view.T), 3)) if tint is None else np.clip(np.asarray(tint, np.float64), 0.0, MAX_AGEING)
+            blade.ageing = (f if self.layers == "mid" else np.concatenate([f, f])).astype(np.float32)
+            if "veins" in out:
+                out["veins"].ageing = np.concatenate([np.concatenate([f[self.view.remap[i]], f[self.view.remap[i]]])
+                                                      for i, _, _ in self.model.vein_polylines() if len(i) >= 2]).astype(np.float32)
         return out
 
     def photo_png(self) -> bytes | None:

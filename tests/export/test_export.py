@@ -137,6 +137,38 @@ def test_the_blender_addon_reads_the_colour_morphs(leaf, tmp_path):
         assert np.abs(last - c0).max() > 0.05 and (last >= -1e-6).all() and (last <= 1 + 1e-6).all()
 
 
+def test_a_photo_export_carries_the_ageing(tmp_path):
+    """--texture photo in glTF: the factor the ageing multiplies the photo by (the app's photo
+    albedo), rgb(now)/rgb(young), travels as the custom attribute _AGEING with morph deltas (it
+    exceeds 1, which COLOR_0 may not): 1 on the fresh leaf, the view's factor at the last key;
+    the file passes the validator and the Blender add-on's reader gets it back."""
+    from leafsim.export.blender_import import colour_morphs
+
+    sp = get_species("grapevine")
+    params = sp.params.with_overrides({"mesh.spacing": 0.08, "colour.age_rate": 5.0})
+    _, _, model = build_leaf(sp, params, 0)
+    sim = Simulator(model, params, seed=0)
+    st = sim.state()
+    states = [st.copy()]
+    for _ in range(2):
+        for _ in range(40):
+            sim.step(st)
+        states.append(st.copy())
+    view = LeafView(model, load_photo_rgba(sp.image), sim.state().pigments, photo_colour=sp.photo_colour)
+    path = tmp_path / "vine.glb"
+    export_mesh(model, states, path, params=params, view=view, texture="photo", veins=True)
+    assert_clean(path)
+    m = colour_morphs(path)
+    assert set(m) == {"blade", "veins"} and m["blade"]["photo_factor"]
+    c0 = np.asarray(m["blade"]["colours"])
+    last = c0 + np.asarray(m["blade"]["deltas"][-1])
+    assert np.allclose(c0, 1.0, atol=1e-5)  # the fresh leaf is the photo itself
+    _, tint = view.colours(states[-1], params)
+    n = len(tint)
+    assert np.allclose(last[:n], tint, rtol=1e-4, atol=1e-4) and np.allclose(last[n:], tint, rtol=1e-4, atol=1e-4)
+    assert last.max() > 1.2  # above what COLOR_0 could hold
+
+
 def _glb_json(path) -> dict:
     data = path.read_bytes()
     magic, version, total = struct.unpack("<4sII", data[:12])
