@@ -6,9 +6,10 @@ from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import write_png_atomic
-from leafsim.commands.common import emit, png_output, species_params
+from leafsim.commands.common import Progress, emit, png_output, species_params
 from leafsim.compare.metrics import montage
-from leafsim.compare.run import run_compare
+from leafsim.compare.run import DRY_LEFT, run_compare
+from leafsim.sim.run import Stop
 
 
 def stage_arg(text: str | None):
@@ -30,7 +31,18 @@ def cmd_compare(args):
         raise LeafsimError(f"--photo {args.photo}: file not found")
     png_output("--out", args.out)
     sp, params = species_params(args, effects=True)
-    rep = run_compare(sp, params, seed=args.seed, photo=args.photo, stage=stage)
+    bar: list = []
+
+    def progress(run):  # a bar toward "dry" on a terminal (none with --json)
+        if not bar:
+            bar.append(Progress(args, run, Stop(water_left=DRY_LEFT), f"{sp.key} drying"))
+        bar[0].update()
+
+    try:
+        rep = run_compare(sp, params, seed=args.seed, photo=args.photo, stage=stage, progress=progress)
+    finally:
+        if bar:
+            bar[0].close()
     rows = rep.pop("_rows")
     if args.out:
         write_png_atomic(args.out, montage(rep, rows), rgb=True)

@@ -65,6 +65,7 @@ class _Leaf:
         self.frame = C.frame_for(self.shape) if frame is None else frame
         self.td = TopDown(self.frame)
         self._mesh = None
+        self.progress = None  # called with the Run after every frame of the drying (a progress bar)
 
     def render(self, state, veins=True):
         if self._mesh is None:
@@ -121,7 +122,8 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, la
 
     if not look(run.state):
         for _ in run.frames(until=look):
-            pass
+            if leaf.progress is not None:
+                leaf.progress(run)
     return run.state, at, (None if best is None else (best[0], best[1], tried))
 
 
@@ -130,13 +132,15 @@ def _stage_info(leaf: _Leaf, state) -> dict:
     return {"frame": state.frame, "time_s": round(state.time, 4), "water": round(w, 4)}
 
 
-def run_compare(sp, params, seed=0, photo=None, stage=None, effects=None) -> dict:
+def run_compare(sp, params, seed=0, photo=None, stage=None, effects=None, progress=None) -> dict:
     """Compare species ``sp`` with its photos (module docstring); returns the report with the
-    rows' pictures under the private key ``_rows`` (for :func:`leafsim.compare.metrics.montage`)."""
+    rows' pictures under the private key ``_rows`` (for :func:`leafsim.compare.metrics.montage`).
+    ``progress(run)`` is called after every frame of the drying run."""
     t0 = time.perf_counter()
     if photo is None and sp.image is None:
         raise LeafsimError(f"species '{sp.key}' has no photo (drawn outline): give --photo IMAGE to compare with")
     leaf = _Leaf(sp, params, seed, effects)
+    leaf.progress = progress
     try:
         ref_path = Path(photo) if photo is not None else sp.image
         given = (None, None) if photo is not None else (sp.base_px, sp.apex_px)
