@@ -85,6 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--frames", type=int, default=None, metavar="N",
                    help="simulate to frame N as fast as possible, draw it and exit (scripted screenshots: the same "
                         "picture on any machine)")
+    g.add_argument("--until", default=None, metavar="dry",
+                   help="dry the leaf to the end as fast as possible (the 'Dry to end' button), draw it and exit")
     g.add_argument("--window-frames", type=int, default=None, metavar="N",
                    help="exit after N window frames drawn with the leaf, playing (timing the window)")
     g.add_argument("--screenshot", default=None, help="save the final window to this PNG (with --frames or --window-frames)")

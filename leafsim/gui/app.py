@@ -89,10 +89,11 @@ class LeafApp:
     """
 
     def __init__(self, session, frames: int | None = None, play: bool = False, window_size=(1280, 800),
-                 title: str = "leafsim", window_frames: int | None = None):
+                 title: str = "leafsim", window_frames: int | None = None, until_dry: bool = False):
         self.session = session
         self.frames = frames
         self.window_frames = window_frames
+        self.until_dry = bool(until_dry)
         self.window_size = tuple(int(v) for v in window_size)
         self.title = title
         self.view = "shaded"
@@ -148,7 +149,9 @@ class LeafApp:
         self.status_bar, self.overlay = StatusBar(self), ViewOverlay(self)
         session.playback.start_worker()
         session.playback.set_speed(None)
-        if frames is not None:
+        if until_dry:
+            session.playback.dry_to_end(True)
+        elif frames is not None:
             session.playback.play_until(frames)
         elif play or window_frames is not None:
             session.playback.play(True)
@@ -301,7 +304,7 @@ class LeafApp:
         pb = s.playback
         if pb.sim_error and self.status.get("sim") is None:
             self.status.error("sim", pb.sim_error, holds=lambda: pb.sim_error is not None)
-            if self.frames is not None:  # the frame asked for will never come
+            if self.frames is not None or self.until_dry:  # the frame asked for will never come
                 self.fatal = pb.sim_error
                 self.exit_code = 2
                 self._exit()
@@ -327,14 +330,16 @@ class LeafApp:
             self.leaf_frames += 1
             if self.t_first_leaf is None:
                 self.t_first_leaf = time.perf_counter()
-            if ((self.frames is not None and s.frame >= self.frames)
+            pb = s.playback
+            if ((self.frames is not None and not self.until_dry and s.frame >= self.frames)
+                    or (self.until_dry and pb.dry_done and not pb.drying and s.frame == pb.worker.run.state.frame)
                     or (self.window_frames is not None and self.leaf_frames >= self.window_frames)):
                 self._exit()
 
     @property
     def scripted(self) -> bool:
-        """Run by a script (``--frames`` / ``--window-frames``): exits by itself."""
-        return self.frames is not None or self.window_frames is not None
+        """Run by a script (``--frames`` / ``--until dry`` / ``--window-frames``): exits by itself."""
+        return self.frames is not None or self.window_frames is not None or self.until_dry
 
     def _exit(self) -> None:
         hello_imgui.get_runner_params().app_shall_exit = True
@@ -555,10 +560,11 @@ class LeafApp:
 
 
 def run_app(species=None, config=None, seed: int = 0, overrides=None, frames=None, screenshot=None,
-            play: bool = False, window_frames=None) -> int:
+            play: bool = False, window_frames=None, until_dry: bool = False) -> int:
     """Run the GUI; returns the exit code.
 
-    ``frames``: simulate to that frame, draw it, then exit; ``window_frames``: exit after that
+    ``frames``: simulate to that frame, draw it, then exit; ``until_dry``: the same at the "Dry to
+    end" threshold (2 % of the water); ``window_frames``: exit after that
     many window frames with the leaf (playing); ``screenshot``: write the final window (PNG,
     atomically) when exiting.
     """
@@ -575,7 +581,7 @@ def run_app(species=None, config=None, seed: int = 0, overrides=None, frames=Non
         raise LeafsimError("gui: no display (DISPLAY is not set); run it on a desktop or under "
                            "xvfb-run -a -s '-screen 0 1280x800x24' leafsim gui ...")
     session.rebuild_async()
-    app = LeafApp(session, frames=frames, play=play, window_frames=window_frames)
+    app = LeafApp(session, frames=frames, play=play, window_frames=window_frames, until_dry=until_dry)
     immapp.run(app.runner_params(), app.addons())
     if app.fatal is not None:
         raise LeafsimError(app.fatal)  # one line on stderr, exit 2

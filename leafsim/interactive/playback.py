@@ -36,6 +36,7 @@ class Playback:
         self._threaded = False
         self._play_wanted = False
         self._pause_at: int | None = None
+        self._dry_wanted = False
         self._speed_wanted: float | None = None
         self._snap_seq = -1
         self._epoch = 0
@@ -52,6 +53,8 @@ class Playback:
         self.worker.play(self._play_wanted if old is None else (old.playing and not old.drying))
         if old is None and self._pause_at is not None:
             self.worker.play_until(self._pause_at)
+        if old is None and self._dry_wanted:
+            self.worker.dry_to_end(True)
         if old is not None:
             old.stop()
         if self._threaded:
@@ -144,8 +147,16 @@ class Playback:
         if self.worker is not None and self.sim_error is None:
             self.worker.request_steps(n)
 
+    @property
+    def dry_done(self) -> bool:
+        """The last "dry to end" reached the dry threshold (or its frame budget)."""
+        return self.worker is not None and self.worker.dry_done
+
     def dry_to_end(self, on: bool = True) -> None:
-        """Fast-forward until the leaf is dry (:meth:`SimWorker.dry_to_end`)."""
+        """Fast-forward until the leaf is dry (:meth:`SimWorker.dry_to_end`; before the first
+        model: once it is there)."""
+        if self.worker is None:
+            self._dry_wanted = bool(on)
         if self.worker is not None:
             self.worker.dry_to_end(on)
 

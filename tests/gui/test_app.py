@@ -408,6 +408,25 @@ def test_gui_frames_counts_simulation_frames(frames):
     assert app.exit_code == 0 and session.frame == frames and app.leaf_frames >= 1
 
 
+def test_gui_until_dry_ends_at_the_dry_frame():
+    """``gui --until dry`` runs "Dry to end", draws the dry leaf and exits by itself."""
+    from imgui_bundle import immapp
+
+    from leafsim.gui.app import LeafApp, _configure_threads
+    from leafsim.interactive.session import Session
+    from leafsim.sim.run import DRY_END_FRACTION
+
+    _configure_threads()
+    session = Session("oak", overrides={"mesh.spacing": 0.06, "osmosis.evaporation_top": 50.0,
+                                        "osmosis.evaporation_bottom": 50.0}, build=False)
+    session.rebuild_async()
+    app = LeafApp(session, until_dry=True)
+    immapp.run(app.runner_params(), app.addons())
+    assert app.exit_code == 0 and session.frame > 0
+    assert session.water_fraction() <= DRY_END_FRACTION + 1e-9
+    assert session.frame == session.playback.worker.run.state.frame  # the drawn frame is the last one
+
+
 def test_cli_gui_build_error_is_one_line_on_stderr(tmp_path, xdisplay):
     """A scripted window whose leaf cannot be built exits 2 with the reason on stderr (it used to
     exit 2 silently, the window showing 'building the first leaf ...')."""
