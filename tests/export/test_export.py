@@ -23,10 +23,10 @@ from leafsim.sim.model import LAYER_T
 from leafsim.sim.simulator import Simulator
 
 
-@pytest.fixture(scope="module")
-def leaf():
-    """Oak on a tiny mesh, its photo, and states at frames 0, 40, 80."""
-    sp = get_species("oak")
+def _drying(key: str):
+    """Species ``key`` on a tiny mesh, ageing fast: (species, model, params, simulator, states at
+    frames 0, 40, 80)."""
+    sp = get_species(key)
     params = sp.params.with_overrides({"mesh.spacing": 0.08, "colour.age_rate": 5.0})
     _, _, model = build_leaf(sp, params, 0)
     sim = Simulator(model, params, seed=0)
@@ -36,6 +36,13 @@ def leaf():
         for _ in range(40):
             sim.step(st)
         states.append(st.copy())
+    return sp, model, params, sim, states
+
+
+@pytest.fixture(scope="module")
+def leaf():
+    """Oak on a tiny mesh, its photo, and states at frames 0, 40, 80."""
+    sp, model, params, _, states = _drying("oak")
     return model, params, LeafView(model, load_photo_rgba(sp.image)), states
 
 
@@ -144,16 +151,7 @@ def test_a_photo_export_carries_the_ageing(tmp_path):
     the file passes the validator and the Blender add-on's reader gets it back."""
     from leafsim.export.blender_import import colour_morphs
 
-    sp = get_species("grapevine")
-    params = sp.params.with_overrides({"mesh.spacing": 0.08, "colour.age_rate": 5.0})
-    _, _, model = build_leaf(sp, params, 0)
-    sim = Simulator(model, params, seed=0)
-    st = sim.state()
-    states = [st.copy()]
-    for _ in range(2):
-        for _ in range(40):
-            sim.step(st)
-        states.append(st.copy())
+    sp, model, params, sim, states = _drying("grapevine")
     view = LeafView(model, load_photo_rgba(sp.image), sim.state().pigments, photo_colour=sp.photo_colour)
     path = tmp_path / "vine.glb"
     export_mesh(model, states, path, params=params, view=view, texture="photo", veins=True)
