@@ -106,9 +106,15 @@ class LeafView:
 
         T = self.T
         contents = self.photo_contents(params)
-        change = pigments_to_rgb(pig, params, contents)[T] / pigments_to_rgb(self.pigments0, params, contents)[T]
-        self.young_photo_colour()
-        rgb = (self._young[0][T] * self._young[1][:, None] * change).astype(np.float32)
+        now = pigments_to_rgb(pig, params, contents)[T]
+        young = self.young_photo_colour()[T]
+        # the photo's own cast (what the fitted pigments do not explain: white balance, hairs)
+        # fades with the living tissue: colour = model(now) × (photo / model(young))^C, so the
+        # young leaf is the photo and dead tissue the species' colour (never a tinted brown)
+        cast = np.maximum(young, 1e-4) / np.maximum(pigments_to_rgb(self.pigments0, params, contents)[T], 1e-4)
+        live = np.clip(pig.chlorophyll[T], 0.0, 1.0)[:, None]
+        change = now * np.power(cast, live) / np.maximum(young, 1e-4)
+        rgb = (young * self._young[1][:, None] * change).astype(np.float32)
         if not self.use_texture(params):
             return rgb, None
         return rgb, (np.clip(change, 0.0, 64.0).astype(np.float32) if self.photo_tint else np.ones_like(rgb))

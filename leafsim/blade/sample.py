@@ -18,6 +18,7 @@ from leafsim.sim.model import (
     KIND_SURFACE,
     KIND_VEIN,
 )
+from leafsim.sim.senescence import random_field
 from leafsim.veins.graph import VeinGraph
 
 #: index of each ``mesh.veins_included`` choice in the vein orders
@@ -49,15 +50,7 @@ def patch_field(xy: np.ndarray, area: np.ndarray, ref: np.ndarray, length: float
     2003, Plant Physiol. 132:2166).  A Gaussian-correlated field with correlation length
     ``PATCH_LENGTH`` × length from 64 random Fourier features; a function of position only, so
     the same seed gives the same patches at any mesh spacing."""
-    rng = np.random.default_rng([int(seed), 0x9A7C4])
-    k = 64
-    omega = rng.standard_normal((k, 2)) / (PATCH_LENGTH * float(length))
-    phase = rng.uniform(0.0, 2.0 * np.pi, k)
-    f = np.cos(np.asarray(xy, float) @ omega.T + phase).sum(1) * math.sqrt(2.0 / k)
-    w = np.asarray(area, float) * ref
-    mean = float(np.dot(w, f) / max(w.sum(), 1e-300))
-    sd = math.sqrt(float(np.dot(w, (f - mean) ** 2) / max(w.sum(), 1e-300)))
-    return (f - mean) / max(sd, 1e-12)
+    return random_field(xy, np.asarray(area, float) * ref, PATCH_LENGTH * float(length), [int(seed), 0x9A7C4])
 
 
 def margin_points(ring: np.ndarray, r: float, spacing: float, detail: float) -> np.ndarray:

@@ -29,7 +29,10 @@ DEFAULT_SPECIES = "maple"
 _ENTRY_KEYS = {
     "name", "latin", "description", "image", "length_m", "base_px", "apex_px",
     "outline", "targets", "main_origin", "lateral_profile", "params", "photo_note", "photo_stage", "senescent_photo",
+    "variants",
 }
+#: what a variant may change (the leaf's shape and photo are its species')
+_VARIANT_KEYS = {"name", "latin", "description", "params"}
 _REFERENCE_KEYS = {"image", "base_px", "apex_px"}
 _OUTLINE_KEYS = {"points", "smooth", "teeth"}
 _TEETH_KEYS = {"count", "depth", "skip_base"}
@@ -145,7 +148,39 @@ def load_library(path: str | Path | None = None) -> dict[str, Species]:
     if stray:  # e.g. a species entry pasted at the top level, which would be silently ignored
         raise LeafsimError(f"{path}: unknown top-level key {_show(stray[0])} (a config holds \"species\": {{...}} and "
                            "\"_comment\" keys; a species entry goes inside \"species\")")
-    return {_check_key(path, k): _parse_entry(path, k, v) for k, v in data["species"].items()}
+    entries = {}
+    for k, v in data["species"].items():
+        for name, entry in [(k, v), *_variants(path, k, v).items()]:
+            if name in entries or (name != k and name in data["species"]):
+                raise _err(path, k, "variants" if name != k else None, f"species key {_show(name)} is defined twice")
+            entries[name] = entry
+    return {_check_key(path, k): _parse_entry(path, k, v) for k, v in entries.items()}
+
+
+def _variants(path: Path, key: str, e: Any) -> dict:
+    """The entries a species' ``variants`` stand for: ``{"red": {"name": ..., "params": {...}}}``
+    becomes the species ``<key>_red``, the entry with that name, latin name and description and
+    its parameters over the entry's (e.g. a grapevine's white and red cultivars)."""
+    if not isinstance(e, dict) or "variants" not in e:
+        return {}
+    vs = e["variants"]
+    if not isinstance(vs, dict) or not vs:
+        raise _err(path, key, "variants", "expected an object of named variants, e.g. {\"red\": {\"params\": {...}}}")
+    out = {}
+    for name, v in vs.items():
+        if not isinstance(name, str) or not name.isidentifier():
+            raise _err(path, key, "variants", f"variant name {_show(name)}: expected a word (letters, digits, _)")
+        if not isinstance(v, dict) or set(v) - _VARIANT_KEYS:
+            bad = sorted(set(v) - _VARIANT_KEYS)[0] if isinstance(v, dict) else None
+            raise _err(path, key, f"variants.{name}" + (f".{bad}" if bad else ""),
+                       f"expected an object with some of {', '.join(sorted(_VARIANT_KEYS))}")
+        params = v.get("params", {})
+        if not isinstance(params, dict):
+            raise _err(path, key, f"variants.{name}.params", "expected an object of parameter values")
+        base = {k: x for k, x in e.items() if k != "variants"}
+        out[f"{key}_{name}"] = {**base, **{k: x for k, x in v.items() if k != "params"},
+                                "params": {**e.get("params", {}), **params}}
+    return out
 
 
 def _check_key(path: Path, key: str) -> str:

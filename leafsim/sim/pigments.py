@@ -150,6 +150,7 @@ from numba import njit
 
 from leafsim.base.cache import configure_numba_cache
 from leafsim.config.params import ParamSet
+from leafsim.sim.senescence import SPOT_KILL
 
 configure_numba_cache()  # before the first @njit(cache=True): the cache folder keyed to the kernel sources
 
@@ -168,36 +169,32 @@ _MAX_EXPOSURE = 0.1
 _MAX_DG = 0.02
 _MAX_SUBSTEPS = 100_000
 
-#: Suggested palette values per species (copied into configs/leaves.json by the species config).
+#: Suggested palette values per species (copied into configs/leaves.json by the species config);
+#: every species also takes the spatial pattern of :data:`PATTERN` (where the blade turns first).
+PATTERN: dict[str, float] = {"colour.patchiness": 0.5, "colour.patch_size": 0.01, "colour.margin_first": 1.5, "colour.margin_width": 0.003, "colour.vein_islands": 0.6, "colour.island_width": 0.002, "colour.vein_browning": 0.4}
 PALETTES: dict[str, dict[str, float]] = {
-    # Acer (sugar/red maple): strong anthocyanin on top of carotenoids → scarlet/orange; browns late.
-    "maple": {"colour.chlorophyll": 1.0, "colour.carotenoid": 1.2, "colour.anthocyanin": 1.6,
-              "colour.anthocyanin_fade": 0.8, "colour.browning": 0.6, "colour.onset": 0.25},
-    # Quercus robur/petraea: little carotenoid, heavy tannins → russet then brown, held on the tree.
-    "oak": {"colour.chlorophyll": 1.2, "colour.carotenoid": 0.5, "colour.anthocyanin": 0.4,
-            "colour.browning": 6.0, "colour.onset": 0.35, "colour.chlorophyll_decay": 4.0},
+    # Acer platanoides (Norway maple): carotenoids unmasked → clear yellow; a little anthocyanin that
+    # varies from leaf to leaf (colour.variation) → sometimes orange.  (Sugar/red maple: the config's
+    # maple_sugar variant, anthocyanin 1.6 → scarlet.)
+    "maple": {**PATTERN, **{"colour.chlorophyll": 1.0, "colour.carotenoid": 1.4, "colour.anthocyanin": 0.15, "colour.anthocyanin_fade": 0.8, "colour.browning": 0.7, "colour.onset": 0.25, "colour.variation": 0.3}},
+    # Quercus robur/petraea: little carotenoid, no anthocyanin, heavy tannins → tan, then russet
+    # brown, the margin first.
+    "oak": {**PATTERN, **{"colour.chlorophyll": 1.2, "colour.carotenoid": 0.5, "colour.anthocyanin": 0.0, "colour.browning": 8.0, "colour.onset": 0.35, "colour.chlorophyll_decay": 4.0, "colour.margin_first": 2.5}},
     # Castanea sativa: high carotenoid → golden yellow, then copper-brown.
-    "chestnut": {"colour.chlorophyll": 1.0, "colour.carotenoid": 1.4, "colour.anthocyanin": 0.0,
-                 "colour.browning": 1.2, "colour.onset": 0.3},
+    "chestnut": {**PATTERN, **{"colour.chlorophyll": 1.0, "colour.carotenoid": 1.4, "colour.anthocyanin": 0.0, "colour.browning": 1.2, "colour.onset": 0.3}},
     # Juglans regia: early, dull yellow, browns and drops quickly.
-    "walnut": {"colour.chlorophyll": 0.9, "colour.carotenoid": 1.1, "colour.anthocyanin": 0.0,
-               "colour.browning": 2.0, "colour.onset": 0.15},
+    "walnut": {**PATTERN, **{"colour.chlorophyll": 0.9, "colour.carotenoid": 1.1, "colour.anthocyanin": 0.0, "colour.browning": 2.0, "colour.onset": 0.15}},
     # Phytolacca americana: betacyanins (treated as the anthocyanin channel), few carotenoids
     # → magenta / purple-red.
-    "pokeweed": {"colour.chlorophyll": 1.0, "colour.carotenoid": 0.1, "colour.anthocyanin": 2.5,
-                 "colour.anthocyanin_fade": 0.6, "colour.browning": 0.3, "colour.onset": 0.2},
-    # Vitis vinifera (red-berried cultivar): anthocyanin + carotenoid → red with yellow patches.
-    "grapevine": {"colour.chlorophyll": 0.9, "colour.carotenoid": 1.0, "colour.anthocyanin": 1.0,
-                  "colour.anthocyanin_fade": 1.0, "colour.browning": 1.0, "colour.onset": 0.25},
-    # Populus tremula/tremuloides: brilliant golden yellow, very little red.
-    # Drying, it dies faster than it senesces (slow drought senescence, patchy): dark necrotic
-    # patches in green, as the senescent photo shows.
-    "aspen": {"colour.chlorophyll": 0.9, "colour.carotenoid": 1.2, "colour.anthocyanin": 0.05,
-              "colour.browning": 0.5, "colour.onset": 0.3, "colour.carotenoid_decay": 0.2,
-              "colour.drought": 0.1, "colour.stress_water": 0.6, "colour.necrosis": 2.0},
-    # Carpinus betulus: yellow then ochre/orange-brown.
-    "hornbeam": {"colour.chlorophyll": 1.0, "colour.carotenoid": 1.3, "colour.anthocyanin": 0.0,
-                 "colour.browning": 1.5, "colour.onset": 0.3},
+    "pokeweed": {**PATTERN, **{"colour.chlorophyll": 1.0, "colour.carotenoid": 0.1, "colour.anthocyanin": 2.5, "colour.anthocyanin_fade": 0.6, "colour.browning": 0.3, "colour.onset": 0.2}},
+    # Vitis vinifera, white-berried cultivar: yellow, then brown (the red-berried cultivar is the
+    # config's grapevine_red variant: anthocyanin 1.2).
+    "grapevine": {**PATTERN, **{"colour.chlorophyll": 0.9, "colour.carotenoid": 1.2, "colour.anthocyanin": 0.0, "colour.browning": 1.0, "colour.onset": 0.25}},
+    # Populus tremula/tremuloides: golden yellow → yellow-brown → brown, small dark leaf spots
+    # (Marssonina-like).
+    "aspen": {**PATTERN, **{"colour.chlorophyll": 0.9, "colour.carotenoid": 1.3, "colour.anthocyanin": 0.0, "colour.browning": 0.6, "colour.onset": 0.3, "colour.carotenoid_decay": 0.2, "colour.spots": 3000.0, "colour.spot_radius": 0.0006}},
+    # Carpinus betulus: golden yellow, then yellow-brown.
+    "hornbeam": {**PATTERN, **{"colour.chlorophyll": 1.0, "colour.carotenoid": 1.3, "colour.anthocyanin": 0.0, "colour.browning": 1.0, "colour.onset": 0.3, "colour.carotenoid_decay": 0.3}},
 }
 
 
@@ -326,6 +323,7 @@ ONE32 = np.float32(1.0)
 #: fast-math without 'nnan'/'ninf' so NaN water can be caught (treated as dry).
 FASTMATH_FLAGS = {"nsz", "arcp", "contract", "afn", "reassoc"}
 ZERO32 = np.float32(0.0)
+SPOT_KILL32 = np.float32(SPOT_KILL)
 
 
 @njit(inline="always", fastmath=FASTMATH_FLAGS)
@@ -359,19 +357,20 @@ def _expneg(x, mode):  # pragma: no cover - numba; mode is a literal at every ca
 
 
 @njit(inline="always", fastmath=FASTMATH_FLAGS)
-def _particle(c, k, a, b, nn, wi, h, e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, mode):  # pragma: no cover
+def _particle(c, k, a, b, nn, wi, ri, si, h, e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, mode):  # pragma: no cover
     """One (sub-)step of one particle: ΔG = h season units, dry exposure e = dry_rate·dt,
-    drought exposure dr = drought·dt (season units at full water stress)."""
+    drought exposure dr = drought·dt (season units at full water stress); ri the particle's
+    senescence rate and si its spot share (:mod:`leafsim.sim.senescence`)."""
     half = np.float32(0.5)
     wi = min(wi if wi >= ZERO32 else ZERO32, ONE32)  # NaN → 0 (needs the no-'nnan' flag set)
     lack = ONE32 - wi
     d = min(lack * inv_dry, ONE32)          # dryness, 1 = dead dry tissue
     stress = ONE32 + ws * lack               # water loss speeds seasonal senescence
     sig = min(max((w_s - wi) * np.float32(20.0), ZERO32), ONE32)  # drought stress below w_s
-    hs = stress * h + dr * sig * (ONE32 - d)  # senescence exposure: season and drought, living cells
+    hs = ri * (stress * h + dr * sig * (ONE32 - d))  # senescence exposure: season and drought, living cells
     esen = kc * hs                          # programmed chlorophyll breakdown
     d2 = d * d
-    enec = e * d2 * d2                      # death: what chlorophyll is left turns necrotic
+    enec = e * d2 * d2 + SPOT_KILL32 * si * hs  # death (dry tissue, or spot tissue as it senesces): what chlorophyll is left turns necrotic
     fc = _expneg(esen, mode)
     # phi = (1 − e^−x)/x: the breakdown per unit exposure, without 0/0
     phi = ONE32 - esen * (half - esen * (np.float32(1.0 / 6.0) - esen * (
@@ -380,14 +379,14 @@ def _particle(c, k, a, b, nn, wi, h, e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, m
         phi = phi if esen < np.float32(0.1) else (ONE32 - fc) / esen
     # anthocyanin: 2·(1 − C)·ΔC_sen in living cells, then fading
     a = (a + np.float32(2.0) * (ONE32 - d) * esen * phi * c * (ONE32 - c)) * _expneg(
-        kaf * stress * h + np.float32(0.05) * enec, mode)
+        kaf * ri * stress * h + np.float32(0.05) * enec, mode)
     c = c * fc
     lost = c * (ONE32 - _expneg(enec, mode))
     c = c - lost
     nn = nn + lost
     k = k * _expneg(kk * hs + np.float32(0.1) * enec, mode)
     gone = ONE32 - c
-    b = max(b, ONE32 - (ONE32 - b) * _expneg(kb * (half * stress * h + enec) * gone * gone, mode))  # no float32 round-down
+    b = max(b, ONE32 - (ONE32 - b) * _expneg(kb * (half * ri * stress * h + enec) * gone * gone, mode))  # no float32 round-down
     # every factor is in [0, 1]: C and K never grow, N and B never shrink, even in float32
     return c, k, a, b, nn
 
@@ -395,36 +394,36 @@ def _particle(c, k, a, b, nn, wi, h, e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, m
 # Explicit top-level kernels (not a factory: numba's on-disk cache cannot tell closures apart
 # and would recompile them in every process).  Straight-line bodies: the loop vectorises.
 @njit(cache=True, fastmath=FASTMATH_FLAGS, nogil=True, error_model="numpy")
-def _kernel_tiny(C, K, A, B, N, w, h, e, dr, co):  # pragma: no cover - numba
+def _kernel_tiny(C, K, A, B, N, w, R, S, h, e, dr, co):  # pragma: no cover - numba
     """One step of all particles when every exponent is ≤ 0.01 (ordinary physics steps);
     ``co`` = (kc, ws, kk, kaf, kb, inv_dry, w_s) as float32."""
     h, e, dr = np.float32(h), np.float32(e), np.float32(dr)
     kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
     for i in range(C.shape[0]):
-        C[i], K[i], A[i], B[i], N[i] = _particle(C[i], K[i], A[i], B[i], N[i], w[i], h, e, dr, kc, ws, kk, kaf, kb,
+        C[i], K[i], A[i], B[i], N[i] = _particle(C[i], K[i], A[i], B[i], N[i], w[i], R[i], S[i], h, e, dr, kc, ws, kk, kaf, kb,
                                                  inv_dry, w_s, 0)
 
 
 @njit(cache=True, fastmath=FASTMATH_FLAGS, nogil=True, error_model="numpy")
-def _kernel_small(C, K, A, B, N, w, h, e, dr, co):  # pragma: no cover - numba
+def _kernel_small(C, K, A, B, N, w, R, S, h, e, dr, co):  # pragma: no cover - numba
     """One step of all particles when every exponent is ≤ 0.1."""
     h, e, dr = np.float32(h), np.float32(e), np.float32(dr)
     kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
     for i in range(C.shape[0]):
-        C[i], K[i], A[i], B[i], N[i] = _particle(C[i], K[i], A[i], B[i], N[i], w[i], h, e, dr, kc, ws, kk, kaf, kb,
+        C[i], K[i], A[i], B[i], N[i] = _particle(C[i], K[i], A[i], B[i], N[i], w[i], R[i], S[i], h, e, dr, kc, ws, kk, kaf, kb,
                                                  inv_dry, w_s, 1)
 
 
 @njit(cache=True, fastmath=FASTMATH_FLAGS, nogil=True, error_model="numpy")
-def _kernel_substeps(C, K, A, B, N, w, hs, e, dr, co):  # pragma: no cover - numba
+def _kernel_substeps(C, K, A, B, N, w, R, S, hs, e, dr, co):  # pragma: no cover - numba
     """Large steps: sub-steps with season exposures hs[j] (follows the onset), dry exposure e
     and drought exposure dr per sub-step."""
     e, dr = np.float32(e), np.float32(dr)
     kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
     for i in range(C.shape[0]):
-        c, k, a, b, nn, wi = C[i], K[i], A[i], B[i], N[i], w[i]
+        c, k, a, b, nn, wi, ri, si = C[i], K[i], A[i], B[i], N[i], w[i], R[i], S[i]
         for j in range(hs.shape[0]):
-            c, k, a, b, nn = _particle(c, k, a, b, nn, wi, hs[j], e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, 2)
+            c, k, a, b, nn = _particle(c, k, a, b, nn, wi, ri, si, hs[j], e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, 2)
         C[i], K[i], A[i], B[i], N[i] = c, k, a, b, nn
 
 
@@ -448,8 +447,30 @@ def _coefficients(pig: PigmentState, params: Mapping[str, Any]) -> tuple:
     return co
 
 
+_UNIFORM: dict = {}
+
+
+def _field_arrays(pig: PigmentState, field) -> tuple:
+    """(rate, spot, max rate, max spot) for the kernels: the field's arrays, checked, or a
+    uniform blade's (ones, zeros; kept per particle count)."""
+    n = pig.n
+    if field is None:
+        if n not in _UNIFORM:
+            if len(_UNIFORM) > 8:
+                _UNIFORM.clear()
+            _UNIFORM[n] = (np.ones(n, np.float32), np.zeros(n, np.float32), 1.0, 0.0)
+        return _UNIFORM[n]
+    rate, spot = field[0], field[1]
+    for name, a in (("rate", rate), ("spot", spot)):
+        if not (isinstance(a, np.ndarray) and a.dtype == np.float32 and a.flags.c_contiguous and a.shape == (n,)):
+            raise ValueError(f"step_pigments: field {name} must be a C-contiguous float32 array of shape ({n},)")
+    if len(field) == 4:  # the maxima given (computed once when the field was made)
+        return field
+    return rate, spot, float(rate.max()) if n else 1.0, float(spot.max()) if n else 0.0
+
+
 def step_pigments(pig: PigmentState, water_rel: np.ndarray, age: float, dt: float,
-                  params: Mapping[str, Any]) -> None:
+                  params: Mapping[str, Any], field: tuple | None = None) -> None:
     """Advance the pigments in place from ``pig.age`` to season clock ``age`` over ``dt`` s.
 
     Parameters
@@ -461,6 +482,9 @@ def step_pigments(pig: PigmentState, water_rel: np.ndarray, age: float, dt: floa
         clock that goes backwards ages nothing (pigments cannot come back).
     dt : simulated seconds since the last call (drives drying damage via colour.dry_rate).
     params : ParamSet with the ``colour.*`` values (read live every call).
+    field : optional (rate (n,), spot (n,)) float32 C-contiguous arrays from
+        :func:`leafsim.sim.senescence.senescence_field` (where the blade turns first, and its
+        spots), optionally followed by their maxima; None = a uniform blade (rate 1, no spots).
 
     Cost: O(n), about 2 ns per particle for ordinary steps (all exponents below 0.1: one
     vectorised pass with polynomial exps); larger steps are sub-stepped.
@@ -485,10 +509,13 @@ def step_pigments(pig: PigmentState, water_rel: np.ndarray, age: float, dt: floa
     if dG == 0.0 and dry == 0.0 and dr == 0.0:
         return
     kc, ws, kk, kaf, kb = (float(x) for x in args[:5])
+    rate, spot, rmax, smax_spot = _field_arrays(pig, field)
     # the largest exponent any particle can see this step picks the cheapest accurate kernel
-    smax = (1.0 + ws) * dG + dr
-    xmax = max(kc * smax, kaf * (1.0 + ws) * dG + 0.05 * dry, kk * smax + 0.1 * dry, kb * (0.5 * (1.0 + ws) * dG + dry), dry)
-    arrays = (pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.necrosis, w)
+    smax = rmax * ((1.0 + ws) * dG + dr)
+    dry_all = dry + SPOT_KILL * smax_spot * smax
+    xmax = max(kc * smax, kaf * rmax * (1.0 + ws) * dG + 0.05 * dry_all, kk * smax + 0.1 * dry_all,
+               kb * (0.5 * rmax * (1.0 + ws) * dG + dry_all), dry_all)
+    arrays = (pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.necrosis, w, rate, spot)
     if xmax <= 0.01:
         _kernel_tiny(*arrays, dG, dry, dr, args)
         return

@@ -68,12 +68,26 @@ def _entry(**kw):
     ({"species": {"x": _entry(lateral_profile=[[50, 1], [10, 1]])}}, "key 'lateral_profile'"),
     # the README's entry pasted at the top level used to be silently ignored
     ({"species": {"x": _entry()}, "birch": _entry()}, "unknown top-level key 'birch'"),
+    ({"species": {"x": _entry(variants=[1])}}, "species 'x', key 'variants'"),
+    ({"species": {"x": _entry(variants={"red": {"image": "a.png"}})}}, "key 'variants.red.image'"),
+    ({"species": {"x": _entry(variants={"red": {"params": {"colour.nope": 1}}})}}, "species 'x_red': unknown parameter"),
+    ({"species": {"x": _entry(variants={"red": {}}), "x_red": _entry()}}, "'x_red' is defined twice"),
 ])
 def test_bad_entries_name_file_species_and_key(tmp_path, data, needle):
     p = _write(tmp_path, data)
     with pytest.raises(LeafsimError) as e:
         load_library(p)
     assert str(p) in str(e.value) and needle in str(e.value) and "\n" not in str(e.value)
+
+
+def test_variants_are_species_with_their_own_colours():
+    lib = load_library()
+    white, red = lib["grapevine"], lib["grapevine_red"]
+    assert red.image == white.image and red.length_m == white.length_m
+    assert white.params["colour.anthocyanin"] == 0.0 < red.params["colour.anthocyanin"]
+    # everything else of the entry is the species'
+    assert red.params["colour.vein_islands"] == white.params["colour.vein_islands"]
+    assert lib["maple_sugar"].params["colour.anthocyanin"] > 5 * lib["maple"].params["colour.anthocyanin"]
 
 
 def test_missing_config_and_unknown_species(tmp_path):

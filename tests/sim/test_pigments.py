@@ -159,14 +159,17 @@ def test_vein_mass_makes_veins_paler_but_same_trend():
         init_pigments(4, p, 0, rest_relative_mass=np.ones(3))
 
 
+#: the autumn colour on the tree (season 0.9) the literature gives each species (HSV hue in
+#: degrees of sRGB): Norway maple clear yellow to orange, oak tan (yellow-brown) to russet, aspen/hornbeam
+#: golden yellow, a white grapevine yellow, pokeweed purple-red (docs/method.md §9)
 PALETTE_HUES = {
-    "maple": lambda h, s, v: h < 40 or h > 330,
+    "maple": lambda h, s, v: 28 <= h <= 60 and v > 0.6,
     "chestnut": lambda h, s, v: 35 <= h <= 65,
-    "oak": lambda h, s, v: 15 <= h <= 45 and v < 0.62 and s < 0.7,
+    "oak": lambda h, s, v: 20 <= h <= 50 and v < 0.62 and s < 0.7,
     "pokeweed": lambda h, s, v: h > 300 or h < 20,
     "aspen": lambda h, s, v: 35 <= h <= 65 and v > 0.7,
     "hornbeam": lambda h, s, v: 30 <= h <= 60,
-    "grapevine": lambda h, s, v: h < 40 or h > 330,
+    "grapevine": lambda h, s, v: 38 <= h <= 65 and v > 0.6,
     "walnut": lambda h, s, v: 30 <= h <= 60,
 }
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from leafsim.sim.model import Model, State
 from leafsim.sim.pigments import age_at, init_pigments, step_pigments
+from leafsim.sim.senescence import FIELD_KEYS, senescence_field
 
 
 class Colour:
@@ -18,11 +19,23 @@ class Colour:
 
     def __init__(self, model: Model):
         self.model = model
+        self._field = None  # ((field parameter values, seed), (rate, spot, max rate, max spot))
         self.w_rel = np.zeros(model.particle_count, np.float32)
         self.inv_w0 = 1.0 / np.maximum(model.particle_water0, 1e-300)
 
     def configure(self, params):
         self.params = params
+
+    def field(self, seed: int) -> tuple:
+        """(rate, spot, max rate, max spot) of :func:`leafsim.sim.senescence.senescence_field`
+        for the current parameters and the leaf's seed (the pigments' own, so a resumed run has
+        the same field), made again only when one of them changed."""
+        key = (tuple(float(self.params[k]) for k in FIELD_KEYS), int(seed))
+        if self._field is None or self._field[0] != key:
+            rate, spot = senescence_field(self.model, self.params, int(seed))
+            n = len(rate)
+            self._field = (key, (rate, spot, float(rate.max()) if n else 1.0, float(spot.max()) if n else 0.0))
+        return self._field[1]
 
     def init(self, state: State, seed: int) -> State:
         """``state`` with summer pigments (aged to the clock's start, ``colour.season``)."""
@@ -35,4 +48,4 @@ class Colour:
     def apply(self, state: State, dt: float) -> None:
         np.multiply(state.particle_water, self.inv_w0, out=self.w_rel, casting="unsafe")
         np.clip(self.w_rel, 0.0, 1.0, out=self.w_rel)
-        step_pigments(state.pigments, self.w_rel, age_at(state.time, self.params), dt, self.params)
+        step_pigments(state.pigments, self.w_rel, age_at(state.time, self.params), dt, self.params, self.field(state.pigments.seed))
