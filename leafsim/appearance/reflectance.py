@@ -38,7 +38,7 @@ SURFACE_REFLECTANCE = np.float32(0.03)
 
 
 @njit(cache=True, fastmath=FASTMATH_FLAGS, nogil=True, error_model="numpy")
-def _rgb_kernel(C, K, A, B, N, vein, s_chl, s_car, s_ant, s_nec, pallor, vbrown, absorb, base, surface, out):  # pragma: no cover
+def _rgb_kernel(C, K, A, B, N, vein, s_chl, s_car, s_ant, s_brn, s_nec, pallor, vbrown, absorb, base, surface, out):  # pragma: no cover
     """out[i] = surface + base·exp(−Σ c_p k_p) for every particle (vectorised, float32)."""
     k00, k01, k02 = absorb[0, 0], absorb[0, 1], absorb[0, 2]
     k10, k11, k12 = absorb[1, 0], absorb[1, 1], absorb[1, 2]
@@ -54,7 +54,7 @@ def _rgb_kernel(C, K, A, B, N, vein, s_chl, s_car, s_ant, s_nec, pallor, vbrown,
         c_chl = s_chl * tissue * C[i]
         c_car = s_car * K[i]
         c_ant = s_ant * A[i]
-        c_brn = B[i] * (ONE32 - vbrown * vein[i])
+        c_brn = s_brn * B[i] * (ONE32 - vbrown * vein[i])
         c_nec = s_nec * tissue * N[i]
         x0 = c_chl * k00 + c_car * k10 + c_ant * k20 + c_brn * k30 + c_nec * k40
         x1 = c_chl * k01 + c_car * k11 + c_ant * k21 + c_brn * k31 + c_nec * k41
@@ -73,7 +73,7 @@ def pigments_to_rgb(pig: PigmentState, params: Mapping[str, Any], contents: tupl
 
     Concentrations are ``c_chl = colour.chlorophyll·leaf_chl·(1 − vein_pallor·m̂)·C``,
     ``c_car = colour.carotenoid·leaf_car·K``, ``c_ant = colour.anthocyanin·leaf_ant·A``,
-    ``c_brn = (1 − colour.vein_browning·m̂)·B``, ``c_nec = colour.necrosis·(chlorophyll content)·(1 − vein_pallor·m̂)·N``;
+    ``c_brn = colour.brown_level·(1 − colour.vein_browning·m̂)·B``, ``c_nec = colour.necrosis·(chlorophyll content)·(1 − vein_pallor·m̂)·N``;
     all palette values act live.  ``contents`` = (chlorophyll, carotenoid, extra surface
     reflectance) replaces the palette's contents and the per-leaf factors (a leaf whose
     young colour was fitted to its photo, :func:`fit_photo_contents`).
@@ -89,6 +89,7 @@ def pigments_to_rgb(pig: PigmentState, params: Mapping[str, Any], contents: tupl
         surface = np.float32(SURFACE_REFLECTANCE + float(contents[2]))
     _rgb_kernel(pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.necrosis, pig.vein,
                 np.float32(chl), np.float32(car), np.float32(float(params["colour.anthocyanin"]) * leaf[2]),
+                np.float32(params["colour.brown_level"]),
                 np.float32(float(params["colour.necrosis"]) * max(chl, 1.0)),
                 np.float32(params["colour.vein_pallor"]), np.float32(params["colour.vein_browning"]),
                 ABSORPTION, BASE_REFLECTANCE, surface, out)

@@ -23,6 +23,9 @@ Metrics (:func:`compare_images`):
   distance ½ Σ |p − q| (0 = same mix, 1 = nothing in common); also the total-variation
   distances of the L* histogram (10 bins) and of the hue histogram (18 bins of 20°, pixels
   with C* ≥ 8).
+* **Spread** (:func:`colour_spread`): the within-leaf variation — circular spread of the hue,
+  spread of L*, and the dark spots (count, median diameter / L) — of photo and model, and
+  the model / photo ratios.
 * **Veins** (:func:`vein_agreement`): light or dark ridges of the photo's lightness at the
   scale of the main and lateral veins (Hessian eigenvalue, σ = 0.4 % of the leaf length), as
   many ridge pixels as the model's main and lateral veins cover; precision = share of model
@@ -217,6 +220,29 @@ def total_variation(p, q) -> float:
     return 0.5 * float(np.abs(np.asarray(p, float) - np.asarray(q, float)).sum())
 
 
+def colour_spread(rgb: np.ndarray, mask: np.ndarray, length_px: float) -> dict:
+    """Within-leaf colour variation of the masked pixels: the circular spread of the CIELAB hue
+    (degrees, pixels with C* ≥ 8), the spread of L*, and the dark spots — connected regions at
+    least 15 L* darker than the blade's median and at least (0.01 L)² large: their count and
+    median equivalent diameter over L."""
+    m = np.asarray(mask, bool)
+    if not m.any():
+        return {"hue_sd_deg": None, "lightness_sd": None, "spots": 0, "spot_diameter_L": None}
+    lab = _lab(rgb)
+    px = lab[m]
+    C = np.hypot(px[:, 1], px[:, 2])
+    z = np.exp(1j * np.arctan2(px[C >= 8, 2], px[C >= 8, 1]))
+    R = float(abs(z.mean())) if z.size else 0.0
+    hue_sd = float(np.degrees(np.sqrt(-2.0 * np.log(max(R, 1e-12))))) if z.size else None
+    dark = (m & (lab[..., 0] < float(np.median(px[:, 0])) - 15.0)).astype(np.uint8)
+    n, _, stats, _ = cv2.connectedComponentsWithStats(dark, connectivity=8)
+    areas = stats[1:, cv2.CC_STAT_AREA] if n > 1 else np.zeros(0)
+    areas = areas[areas >= (0.01 * length_px) ** 2]
+    return {"hue_sd_deg": None if hue_sd is None else round(hue_sd, 2), "lightness_sd": round(float(px[:, 0].std()), 2),
+            "spots": int(areas.size),
+            "spot_diameter_L": round(float(np.median(np.sqrt(4.0 * areas / np.pi))) / length_px, 4) if areas.size else None}
+
+
 def mean_lab(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return _lab(rgb)[np.asarray(mask, bool)].mean(axis=0)
 
@@ -287,6 +313,10 @@ def compare_images(ref: Reference, model_rgb: np.ndarray, model_mask: np.ndarray
     mp, mm = margin_length(ref.blade, length_px), margin_length(model_mask, length_px)
     de = float(np.linalg.norm(mean_lab(ref.rgb, ref.colour) - mean_lab(model_rgb, model_colour))) \
         if model_colour.any() and ref.colour.any() else None
+    sp, sm = colour_spread(ref.rgb, ref.colour, length_px), colour_spread(model_rgb, model_colour, length_px)
+
+    def ratio(key):
+        return round(sm[key] / sp[key], 3) if sp[key] and sm[key] is not None else None
     return {
         "iou": round(silhouette_iou(ref.blade, model_mask), 4),
         "margin_photo_px": round(mp, 1), "margin_model_px": round(mm, 1),
@@ -297,6 +327,8 @@ def compare_images(ref: Reference, model_rgb: np.ndarray, model_mask: np.ndarray
         "lightness_tv": round(total_variation(lp, lm), 4),
         "hue_tv": round(total_variation(hp, hm), 4),
         "mean_delta_e": None if de is None else round(de, 2),
+        "spread_photo": sp, "spread_model": sm,
+        "spread_ratio": {"hue": ratio("hue_sd_deg"), "lightness": ratio("lightness_sd")},
         "veins": None if model_veins is None else vein_agreement(ref.rgb, ref.blade, model_veins, length_px),
     }
 

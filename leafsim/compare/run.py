@@ -4,7 +4,9 @@
 Rows of a comparison: the young model against the species photo (or ``--photo``); with a
 senescent reference photo in the config (``senescent_photo``), the stage of a drying run
 that matches it best (least total-variation distance of the colour classes, sampled every
-``MATCH_EVERY`` frames until 2 % of the water is left) against it; with ``--stage`` one row
+``MATCH_EVERY`` frames until 2 % of the water is left) against it, and how the whole
+senescent window does against it (``senescent_window``: every sampled stage once the leaf
+has lost half its chlorophyll, through the dried one); with ``--stage`` one row
 for that stage (``young``, ``dried`` = 2 % of the water left, or a frame number).
 """
 
@@ -31,6 +33,10 @@ from leafsim.sim.simulator import Simulator
 
 #: senescent-stage matching samples the drying run every this many frames
 MATCH_EVERY = 50
+#: the senescent window: stages with less than this share of the leaf's chlorophyll left
+WINDOW_CHLOROPHYLL = 0.5
+#: the colour-bin TV a stage of the window should reach against the senescent photo
+WINDOW_TV = 0.35
 #: a drying run stops when this share of the water is left (as "Dry to end" does)
 DRY_LEFT = 0.02
 #: and after at most this many frames
@@ -49,6 +55,7 @@ class Row:
     veins: np.ndarray | None = None  # main + lateral vein lines in the comparison frame
     scale_k: float = 1.0  # the grown-back leaf's length ÷ the photo-sized leaf's (senescent rows)
     stage: dict | None = None  # frame, time, water left (when the state is not the leaf's own)
+    window: dict | None = None  # the senescent window's colour TV (senescent rows)
 
 
 class _Leaf:
@@ -98,10 +105,14 @@ def _reference(path, params, frame, length_m, base_px=None, apex_px=None):
 def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, last: int = MAX_FRAMES):
     """Run the leaf drying (to ``DRY_LEFT`` of the water, at most frame ``last``); returns
     (dried state, state at ``want_frame`` or None, best match to ``target``'s colours (state,
-    tv, frames sampled) or None)."""
+    tv, frames sampled, the senescent window's record) or None).  The window: every sampled
+    stage at which the leaf has visibly turned (less than ``WINDOW_CHLOROPHYLL`` of its
+    chlorophyll left, area-weighted), through the dried one."""
     run = Run(leaf.model, simulator=leaf.sim, state=leaf.state0.copy(), name=leaf.sp.key)
     w0 = float(leaf.model.particle_water0.sum())
     at, best, tried = None, None, 0
+    window: list[float] = []
+    area = leaf.model.particle_area * (leaf.model.particle_layer == 0)
     goal = target.colour if target is not None else None
     fp = C.colour_classes(target.rgb, goal) if target is not None else None
 
@@ -115,6 +126,8 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, la
             inner = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
             tv = C.total_variation(fp, C.colour_classes(rgb, inner))
             tried += 1
+            if state.pigments is not None and float(area @ state.pigments.chlorophyll) < WINDOW_CHLOROPHYLL * float(area.sum()):
+                window.append(tv)
             if best is None or tv < best[1]:
                 best = (state.copy(), tv)
         dry = float(state.particle_water.sum()) <= DRY_LEFT * w0
@@ -124,7 +137,22 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, la
         for _ in run.frames(until=look):
             if leaf.progress is not None:
                 leaf.progress(run)
-    return run.state, at, (None if best is None else (best[0], best[1], tried))
+    if target is not None and run.state.frame % MATCH_EVERY:  # the dried stage itself
+        rgb, mask = leaf.render(run.state, True)
+        inner = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        window.append(C.total_variation(fp, C.colour_classes(rgb, inner)))
+    return run.state, at, (None if best is None else (best[0], best[1], tried, _window(window)))
+
+
+def _window(tvs: list[float]) -> dict:
+    """The colour-bin TV against the senescent photo over the senescent window: how many stages,
+    median, 90th percentile and worst, the share within ``WINDOW_TV``, and the dried stage's."""
+    if not tvs:
+        return {"stages": 0}
+    a = np.asarray(tvs)
+    return {"stages": int(a.size), "median_tv": round(float(np.median(a)), 4), "p90_tv": round(float(np.percentile(a, 90)), 4),
+            "max_tv": round(float(a.max()), 4), f"share_tv_le_{WINDOW_TV}": round(float((a <= WINDOW_TV).mean()), 3),
+            "dried_tv": round(float(a[-1]), 4)}
 
 
 def _stage_info(leaf: _Leaf, state) -> dict:
@@ -156,7 +184,8 @@ def run_compare(sp, params, seed=0, photo=None, stage=None, effects=None, progre
     report = {"species": sp.key, "seed": seed, "frame_px_per_m": round(leaf.frame.scale, 2),
               "seconds": round(time.perf_counter() - t0, 2),
               "rows": [dict(kind=r.kind, reference=_rel(r.ref.path), stage=r.stage or _stage_info(leaf, r.state), note=r.note,
-                           **({"grown_back": round(r.scale_k, 4)} if r.scale_k != 1.0 else {}), **r.metrics)
+                           **({"grown_back": round(r.scale_k, 4)} if r.scale_k != 1.0 else {}),
+                           **({"senescent_window": r.window} if r.window is not None else {}), **r.metrics)
                        for r in rows]}
     report["_rows"] = rows
     return report
@@ -181,6 +210,7 @@ def _rows(leaf: _Leaf, own: C.Reference, stage, species_photo: bool) -> list[Row
         else:  # (a leaf that did not shrink, or lost its silhouette, is compared as it is)
             rows.append(Row("senescent", ref, best[0], note=note
                             + ("" if ref is own else "; another leaf of the species: its IoU is only indicative")))
+        rows[-1].window = best[3]
     return rows
 
 

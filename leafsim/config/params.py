@@ -258,6 +258,7 @@ _f("colour.carotenoid_decay", 0.6, 0.0, 10.0, "1/season", "Slow carotenoid loss 
 _f("colour.anthocyanin", 0.0, 0.0, 3.0, "", "Anthocyanin (or betacyanin) made during senescence: reds and purples (maple, pokeweed).", G, False)
 _f("colour.anthocyanin_fade", 1.2, 0.0, 20.0, "1/season", "Anthocyanin breakdown per season unit after the onset (so reds peak, then fade).", G, False)
 _f("colour.browning", 1.0, 0.0, 10.0, "", "Browning rate of dead tissue (oxidised phenolics); high for oak, low for maple.", G, False)
+_f("colour.brown_level", 1.0, 0.0, 2.0, "", "Browning pigments (oxidised phenolics, tannins) in fully browned tissue: how dark a dead leaf gets; tannin-rich oak and walnut 1, golden-yellow species (aspen, hornbeam, birch) about half, so they dry yellow-brown.", G, False)
 _f("colour.dry_threshold", 0.35, 0.0, 0.95, "× water₀", "Relative water content at or below which tissue counts as fully dry (dead).", G, False)
 _f("colour.dry_rate", 2.0, 0.0, 100.0, "1/s", "How fast dead dry tissue turns: the chlorophyll it still holds becomes dark pheophytin (necrosis) and it browns, per second of simulated time.", G, False, log=True)
 _f("colour.stress_water", 0.8, 0.05, 1.0, "× water₀", "Relative water content below which living tissue is drought-stressed and runs its senescence program (colour.drought).", G, False)

@@ -176,25 +176,25 @@ PALETTES: dict[str, dict[str, float]] = {
     # Acer platanoides (Norway maple): carotenoids unmasked → clear yellow; a little anthocyanin that
     # varies from leaf to leaf (colour.variation) → sometimes orange.  (Sugar/red maple: the config's
     # maple_sugar variant, anthocyanin 1.6 → scarlet.)
-    "maple": {**PATTERN, **{"colour.chlorophyll": 1.0, "colour.carotenoid": 1.4, "colour.anthocyanin": 0.15, "colour.anthocyanin_fade": 0.8, "colour.browning": 0.7, "colour.onset": 0.25, "colour.variation": 0.3}},
+    "maple": {**PATTERN, **{"colour.brown_level": 0.6, "colour.chlorophyll": 1.0, "colour.carotenoid": 1.4, "colour.anthocyanin": 0.15, "colour.anthocyanin_fade": 0.8, "colour.browning": 0.7, "colour.onset": 0.25, "colour.variation": 0.3}},
     # Quercus robur/petraea: little carotenoid, no anthocyanin, heavy tannins → tan, then russet
     # brown, the margin first.
-    "oak": {**PATTERN, **{"colour.chlorophyll": 1.2, "colour.carotenoid": 0.5, "colour.anthocyanin": 0.0, "colour.browning": 8.0, "colour.onset": 0.35, "colour.chlorophyll_decay": 4.0, "colour.margin_first": 2.5}},
+    "oak": {**PATTERN, **{"colour.brown_level": 1.0, "colour.chlorophyll": 1.2, "colour.carotenoid": 0.5, "colour.anthocyanin": 0.0, "colour.browning": 8.0, "colour.onset": 0.35, "colour.chlorophyll_decay": 4.0, "colour.margin_first": 2.5}},
     # Castanea sativa: high carotenoid → golden yellow, then copper-brown.
-    "chestnut": {**PATTERN, **{"colour.chlorophyll": 1.0, "colour.carotenoid": 1.4, "colour.anthocyanin": 0.0, "colour.browning": 1.2, "colour.onset": 0.3}},
+    "chestnut": {**PATTERN, **{"colour.brown_level": 0.8, "colour.chlorophyll": 1.0, "colour.carotenoid": 1.4, "colour.anthocyanin": 0.0, "colour.browning": 1.2, "colour.onset": 0.3}},
     # Juglans regia: early, dull yellow, browns and drops quickly.
-    "walnut": {**PATTERN, **{"colour.chlorophyll": 0.9, "colour.carotenoid": 1.1, "colour.anthocyanin": 0.0, "colour.browning": 2.0, "colour.onset": 0.15}},
+    "walnut": {**PATTERN, **{"colour.brown_level": 1.0, "colour.chlorophyll": 0.9, "colour.carotenoid": 1.1, "colour.anthocyanin": 0.0, "colour.browning": 2.0, "colour.onset": 0.15}},
     # Phytolacca americana: betacyanins (treated as the anthocyanin channel), few carotenoids
     # → magenta / purple-red.
-    "pokeweed": {**PATTERN, **{"colour.chlorophyll": 1.0, "colour.carotenoid": 0.1, "colour.anthocyanin": 2.5, "colour.anthocyanin_fade": 0.6, "colour.browning": 0.3, "colour.onset": 0.2}},
+    "pokeweed": {**PATTERN, **{"colour.brown_level": 0.6, "colour.chlorophyll": 1.0, "colour.carotenoid": 0.1, "colour.anthocyanin": 2.5, "colour.anthocyanin_fade": 0.6, "colour.browning": 0.3, "colour.onset": 0.2}},
     # Vitis vinifera, white-berried cultivar: yellow, then brown (the red-berried cultivar is the
     # config's grapevine_red variant: anthocyanin 1.2).
-    "grapevine": {**PATTERN, **{"colour.chlorophyll": 0.9, "colour.carotenoid": 1.2, "colour.anthocyanin": 0.0, "colour.browning": 1.0, "colour.onset": 0.25}},
+    "grapevine": {**PATTERN, **{"colour.brown_level": 0.6, "colour.chlorophyll": 0.9, "colour.carotenoid": 1.2, "colour.anthocyanin": 0.0, "colour.browning": 1.0, "colour.onset": 0.25}},
     # Populus tremula/tremuloides: golden yellow → yellow-brown → brown, small dark leaf spots
     # (Marssonina-like).
-    "aspen": {**PATTERN, **{"colour.chlorophyll": 0.9, "colour.carotenoid": 1.3, "colour.anthocyanin": 0.0, "colour.browning": 0.6, "colour.onset": 0.3, "colour.carotenoid_decay": 0.2, "colour.spots": 3000.0, "colour.spot_radius": 0.0006}},
+    "aspen": {**PATTERN, **{"colour.brown_level": 0.5, "colour.chlorophyll": 0.9, "colour.carotenoid": 1.3, "colour.anthocyanin": 0.0, "colour.browning": 0.6, "colour.onset": 0.3, "colour.carotenoid_decay": 0.2, "colour.spots": 3000.0, "colour.spot_radius": 0.0006}},
     # Carpinus betulus: golden yellow, then yellow-brown.
-    "hornbeam": {**PATTERN, **{"colour.chlorophyll": 1.0, "colour.carotenoid": 1.3, "colour.anthocyanin": 0.0, "colour.browning": 1.0, "colour.onset": 0.3, "colour.carotenoid_decay": 0.3}},
+    "hornbeam": {**PATTERN, **{"colour.brown_level": 0.45, "colour.chlorophyll": 1.0, "colour.carotenoid": 1.3, "colour.anthocyanin": 0.0, "colour.browning": 1.0, "colour.onset": 0.3, "colour.carotenoid_decay": 0.3}},
 }
 
 
