@@ -108,21 +108,24 @@ leaf ≈ sRGB (56, 73, 40), oak (153, 183, 83), yellow hornbeam-like autumn leaf
 
 Palettes
 --------
-:data:`PALETTES` suggests ``colour.*`` values per species; the species config copies them.
-sRGB of the mean colour at season 0.9 on the tree (water_rel = 1), then dried:
+:data:`PALETTES` suggests ``colour.*`` values per species; the species config copies them
+(docs/method.md §7 cites the trajectories; docs/aging/ shows them at the defaults):
 
-* maple — anthocyanin 1.6 on carotenoid 1.2: scarlet ≈ (186, 67, 58); dried red-brown.
-* oak — carotenoid 0.5, browning 6, a little anthocyanin 0.4: russet ≈ (149, 104, 61); brown.
-* chestnut — carotenoid 1.4: golden yellow ≈ (197, 161, 56); then copper-brown.
-* walnut — early onset 0.15, carotenoid 1.1, browning 2: dull yellow/ochre ≈ (188, 146, 59).
-* pokeweed — betacyanins 2.5 (anthocyanin channel), carotenoid 0.3: magenta ≈ (172, 52, 90).
-* grapevine (red cultivar) — anthocyanin 1.0 + carotenoid 1.0: orange-red ≈ (191, 92, 64).
-* aspen — carotenoid 1.2 with slow decay, browning 0.5: golden ≈ (208, 168, 56).
-* hornbeam — carotenoid 1.3, browning 1.5: yellow-ochre ≈ (194, 158, 56), then brown.
+* maple (Norway maple) — carotenoid 1.4, a little anthocyanin 0.15 that varies between leaves:
+  clear yellow, sometimes orange; dried yellow-brown.  (Sugar/red maple: anthocyanin 1.6, the
+  config's ``maple_sugar`` variant: scarlet.)
+* oak — carotenoid 0.5, browning 8, no anthocyanin: tan, then russet brown.
+* chestnut — carotenoid 1.4: golden yellow, then copper-brown.
+* walnut — early onset 0.15, carotenoid 1.1, browning 2: dull yellow/ochre.
+* pokeweed — betacyanins 2.5 (anthocyanin channel), carotenoid 0.1: magenta / purple-red.
+* grapevine (white cultivar) — carotenoid 1.2: yellow; ``grapevine_red``: anthocyanin 1.2, red.
+* aspen — carotenoid 1.3 with slow decay, small leaf spots: golden, then yellow-brown.
+* hornbeam — carotenoid 1.3: golden yellow, then yellow-brown.
 
-Every palette starts at a summer green ≈ (70, 118, 50) (pokeweed, with few carotenoids, a
-lighter (70, 136, 57)); dried out they all end at nearly the same mid-brown ≈ (137, 88, 53):
-full browning dominates what is left of the other pigments.
+Every palette starts at a summer green ≈ (70, 118, 50).  How dark the dead leaf gets is the
+species' ``colour.brown_level`` (tannins: oak and walnut 1, the golden species about half).
+Every species also takes :data:`PATTERN`: where the blade turns first
+(:mod:`leafsim.sim.senescence`).
 
 Time: ``age`` is the season clock (0 summer, 1 late autumn; :func:`age_at` =
 ``colour.season + colour.age_rate·t``), ``dt`` is simulated seconds.  Per physics step the cost
