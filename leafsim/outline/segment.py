@@ -260,7 +260,36 @@ def segment_with_holes(img: np.ndarray, path: str = "image") -> tuple[np.ndarray
     opened = cv2.morphologyEx(fg, cv2.MORPH_OPEN, _disk(k_open))
     leaf = _pick_leaf(cv2.morphologyEx(opened, cv2.MORPH_CLOSE, _disk(k_close)), path)
     filled = _fill_holes(_restore_petiole(fg, opened, leaf, lab))
-    return filled, kept_holes(filled, leaf, HOLE_MIN_FRACTION)
+    holes = kept_holes(filled, leaf, HOLE_MIN_FRACTION)
+    return filled, (holes if lab is None else background_holes(holes, filled, lab))
+
+
+#: an opening shows the background when its median is within this much L* darker than the
+#: background's (the lobes around a closed sinus shade the sheet under it) ...
+HOLE_DARKER_L = 30.0
+#: ... and within this chroma distance (a, b) of it
+HOLE_CHROMA = 20.0
+
+
+def background_holes(holes: np.ndarray, filled: np.ndarray, lab: np.ndarray) -> np.ndarray:
+    """The holes that look like the background through the blade — its colour, at most a little
+    shaded — and not dark or brown lesions inside it (a necrotic spot, a tar spot, an insect's
+    dark feeding mark are tissue: they darken the blade, they do not open it).  ``lab``: the
+    photo in CIELAB; the background is the median of everything outside the leaf."""
+    if not holes.any():
+        return holes
+    outside = filled == 0
+    if not outside.any():
+        return holes
+    bg = np.median(lab[outside], axis=0)
+    n, labels = cv2.connectedComponents(holes, connectivity=4)
+    out = np.zeros_like(holes)
+    for i in range(1, n):
+        px = lab[labels == i]
+        med = np.median(px, axis=0)
+        if med[0] >= bg[0] - HOLE_DARKER_L and float(np.hypot(*(med[1:] - bg[1:]))) <= HOLE_CHROMA:
+            out[labels == i] = 255
+    return out
 
 
 def _pick_leaf(fg: np.ndarray, path: str) -> np.ndarray:

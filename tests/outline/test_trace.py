@@ -375,3 +375,21 @@ def test_overlapping_leaves_refused(tmp_path, capsys):
     assert main(["outline", str(p)]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and "found 2 petioles" in err and str(p) in err
+
+
+@pytest.mark.parametrize("lesion,hole", [((20, 20, 25), False), ((30, 50, 90), False), ((60, 60, 60), False),
+                                         (PAPER, True)])
+def test_lesions_are_tissue_and_only_background_openings_are_holes(tmp_path, lesion, hole):
+    """A black tar spot, a brown necrotic lesion or a grey dead patch inside the blade darkens
+    it; only an opening that shows the sheet behind it is a hole."""
+    img, poly = photo(600)
+    cv2.circle(img, (300, 250), 30, lesion, -1, cv2.LINE_AA)
+    cv2.ellipse(img, (270, 330), (20, 12), 30, 0, 360, lesion, -1, cv2.LINE_AA)
+    path = tmp_path / "lesion.png"
+    cv2.imwrite(str(path), img)
+    t = trace_outline(str(path))
+    assert len(t.holes_px) == (2 if hole else 0)
+    assert abs(polygon_area(t.contour_px)) == pytest.approx(abs(polygon_area(poly)), rel=0.01)
+    if hole:  # the openings themselves: π·30² and π·20·12 px
+        areas = sorted(abs(polygon_area(h)) for h in t.holes_px)
+        assert areas[0] == pytest.approx(np.pi * 20 * 12, rel=0.25) and areas[1] == pytest.approx(np.pi * 30 ** 2, rel=0.15)
