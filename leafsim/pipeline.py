@@ -117,13 +117,62 @@ def _check_given_ends(sp: Species, traced) -> None:
 
 
 def species_veins(sp: Species, shape: LeafShape, params: ParamSet, seed: int) -> VeinGraph:
-    """Grow the venation of a species (config targets win over automatic ones)."""
+    """Grow the venation of a species (config targets win over automatic ones); a photo
+    species takes its main veins (and laterals) from the photo (``veins.photo``)."""
     targets = None if sp.targets is None else sp.targets * sp.length_m
     if targets is not None:
         problem = targets_problem(targets, shape.contour, shape.length)
         if problem:
             raise sp.error("targets", problem)
-    return grow_veins(shape, params, seed, targets=targets, main_origin=sp.main_origin, lateral_profile=sp.lateral_profile)
+    given = None
+    if sp.image is not None and params["veins.photo"] != "off" and sp.targets is None:
+        given = photo_veins_world(sp, shape, params)
+    return grow_veins(shape, params, seed, targets=targets, main_origin=sp.main_origin, lateral_profile=sp.lateral_profile,
+                      given=given)
+
+
+#: traced photo venations kept for reuse, keyed like the traces
+_VEINS: dict = {}
+
+
+def photo_veins(sp: Species, params: ParamSet):
+    """The species photo's own veins (:func:`leafsim.outline.venation.trace_venation`), in photo
+    pixels, remembered per trace."""
+    from leafsim.outline.image import load_image
+    from leafsim.outline.venation import trace_venation
+
+    traced = species_trace(sp, params)
+    key = (id(traced), sp.main_origin)
+    if key not in _VEINS:
+        import cv2
+
+        img = load_image(sp.image)
+        size = (img.shape[1], img.shape[0])
+        up = lambda a: None if a is None else cv2.resize(a, size, interpolation=cv2.INTER_NEAREST)  # noqa: E731
+        L = float(np.linalg.norm(traced.apex_px - traced.base_px))
+        lobes = [t for t in traced.lobes_px if np.linalg.norm(t - traced.apex_px) > 0.08 * L] if sp.main_origin == "base" else []
+        pv = trace_venation(img, up(traced.mask), traced.base_px, traced.apex_px, lobes, sp.main_origin,
+                            exclude=up(traced.petiole_mask), holes=up(traced.hole_mask))
+        while len(_VEINS) >= 8:
+            _VEINS.pop(next(iter(_VEINS)))
+        _VEINS[key] = (traced, pv)  # the trace is kept alive with its veins (the key is its id)
+    return _VEINS[key][1]
+
+
+def photo_veins_world(sp: Species, shape: LeafShape, params: ParamSet) -> dict:
+    """:func:`photo_veins` in world metres for :func:`leafsim.veins.grow.grow_veins`'s ``given``:
+    {"mains": [midrib, ...], "laterals": [...] (empty for ``veins.photo`` = main), "parents": [...]}."""
+    pv = photo_veins(sp, params)
+    A = np.asarray(shape.px_to_world, float)
+
+    def world(p):
+        return np.asarray(p, float) @ A[:, :2].T + A[:, 2]
+
+    lat = params["veins.photo"] == "main+lateral"
+    mains = [world(p) for p in pv.all_mains()]
+    mains[0][0] = shape.base  # the midrib starts at the base exactly, ends near the apex
+    return {"mains": mains, "laterals": [world(p) for p in pv.laterals] if lat else [],
+            "parents": list(pv.parents) if lat else []}
 
 
 class BuiltLeaf(NamedTuple):

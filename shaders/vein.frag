@@ -26,6 +26,7 @@ flat in int v_order;
 #endif
 uniform int u_absolute;        // vein colours are absolute linear RGB
 uniform sampler2D u_tex;
+uniform vec3 u_tex_mean;       // mean linear colour of the photo's leaf area (LS_TEX 2)
 uniform vec3 u_vein_cols[4];
 uniform sampler2DShadow u_shadow;
 uniform mat4 u_light_mat;
@@ -48,7 +49,12 @@ void main() {
     float a = clamp(dist / max(v_target, 1e-3), 0.0, 1.0);
     // rounded cross-section: bend the normal towards the sides
     vec3 N = normalize(normalize(v_nrm) * sqrt(max(1.0 - a * a, 0.0)) * 1.3 + normalize(v_side) * sign(v_v) * a);
-#if LS_TEX
+#if LS_TEX == 2
+    // detail: the vertex colour times the photo's brightness under the vein (as the blade)
+    vec3 t = texture(u_tex, v_uv).rgb;
+    float lum = dot(t, vec3(0.2126, 0.7152, 0.0722));
+    vec3 base = v_base * clamp(lum / max(dot(u_tex_mean, vec3(0.2126, 0.7152, 0.0722)), 1e-4), 0.0, 3.0);
+#elif LS_TEX
     vec4 t = texture(u_tex, v_uv);
 #if LS_CUTOUT
     if (t.a < 0.5) discard;
@@ -58,7 +64,13 @@ void main() {
     vec3 base = v_base;
 #endif
     vec3 vc = u_vein_cols[clamp(v_order, 0, 3)];
+#if LS_TEX
+    // the photo shows its own veins (and the model's lie on them, traced from it): the vein
+    // takes the photo's colour under it and only its rounded shading, never a second, tinted line
+    vec3 albedo = u_absolute != 0 ? vc : base;
+#else
     vec3 albedo = u_absolute != 0 ? vc : clamp(base * vc, 0.0, 1.0);
+#endif
     vec3 V = normalize(u_eye - v_pos);
 #if LS_SHADOW
     float sh = shadow_pcf4(u_shadow, u_light_mat, v_pos + u_light_dir * u_shadow_offset, 1.5);

@@ -127,6 +127,7 @@ _f("outline.lobe_depth", 0.06, 0.0, 0.5, "× length", "Minimum sinus depth (rela
 
 # ---------------------------------------------------------------- veins (rebuild)
 G = "Veins: main"
+_c("veins.photo", "main+lateral", ("off", "main", "main+lateral"), "Photo species: take the midrib and main veins (main) and also the laterals (main+lateral) from the photo's own veins, traced as ridges of its lightness, so the model's veins lie on the photo's; the grower fills the rest. off = grow every vein (as for a drawn outline).", G, True)
 _f("veins.main.step", 0.035, 0.005, 0.2, "× length", "Base segment length of main veins, relative to the leaf length.", G, True)
 _f("veins.main.scale_jitter", 0.3, 0.0, 0.9, "", "Random scale of each segment: step × U(1−j, 1+j).", G, True)
 _f("veins.main.kappa", 5.0, 0.0, 45.0, "deg", "κ: local random angle added to each segment's direction, drawn in [−κ, κ].", G, True)

@@ -596,7 +596,7 @@ class Renderer:
 
     def _draw_veins(self, opts, vp, light, width, height, light_mat, self_shadow):
         mode = self._albedo_mode(opts)
-        defs = dict(LS_TEX=int(mode == 1), LS_CUTOUT=int(mode == 1 and bool(opts.texture_cutout)),
+        defs = dict(LS_TEX=mode, LS_CUTOUT=int(mode == 1 and bool(opts.texture_cutout)),
                     LS_SHADOW=int(self_shadow))
         v = self._variant("vein", **defs)
         _set(v, "u_shadow", 1)
@@ -609,6 +609,8 @@ class Renderer:
         _set(v, "u_width_scale", float(opts.vein_width_scale))
         _set(v, "u_absolute", int(opts.vein_absolute))
         _set(v, "u_tex", 0)
+        if mode == 2:
+            _set(v, "u_tex_mean", self.tex_mean)
         cols = list(opts.vein_colours)[:4]
         cols += [cols[-1]] * (4 - len(cols))
         _set(v, "u_vein_cols", [tuple(float(x) for x in c) for c in cols])

@@ -12,7 +12,15 @@ from leafsim.base.geometry import LeafShape
 from leafsim.config.params import ParamSet
 from leafsim.veins.graph import VeinGraph
 from leafsim.veins.grower import Grower
-from leafsim.veins.stages import grow_laterals, grow_main_veins, grow_net, grow_sublaterals, main_targets
+from leafsim.veins.stages import (
+    given_laterals,
+    given_main_veins,
+    grow_laterals,
+    grow_main_veins,
+    grow_net,
+    grow_sublaterals,
+    main_targets,
+)
 from leafsim.veins.stats import vein_stats
 
 
@@ -23,6 +31,7 @@ def grow_veins(
     targets: np.ndarray | None = None,
     main_origin: str = "base",
     lateral_profile: np.ndarray | None = None,
+    given: dict | None = None,
 ) -> VeinGraph:
     """Grow the whole venation of one leaf (deterministic for a given seed).
 
@@ -35,6 +44,9 @@ def grow_veins(
     main_origin : ``"base"`` (palmate: every main vein starts at the petiole) or
         ``"midrib"`` (pinnate lobes: secondary main veins branch off the midrib).
     lateral_profile : (k, 2) table, position along the main vein in % → lateral length factor.
+    given : veins traced from a photo, in metres: {"mains": [midrib, ...], "laterals": [...],
+        "parents": [...]} (:func:`leafsim.pipeline.photo_veins_world`); they replace the grown
+        main veins and, when any are given, the grown laterals.
     """
     p = params
     rng = np.random.default_rng(seed)
@@ -43,8 +55,14 @@ def grow_veins(
     taper = p["veins.taper"]
     graph = VeinGraph()
     apex_t, others, auto = main_targets(shape, p, targets, main_origin)
-    reached = grow_main_veins(g, graph, shape, p, apex_t, others, main_origin, taper)
-    if p["veins.lateral.enabled"]:
+    if given is not None and given.get("mains"):
+        reached = given_main_veins(g, graph, shape, p, given["mains"], main_origin, taper)
+        auto = False
+    else:
+        reached = grow_main_veins(g, graph, shape, p, apex_t, others, main_origin, taper)
+    if p["veins.lateral.enabled"] and given is not None and given.get("laterals"):
+        given_laterals(g, graph, shape, p, given["laterals"], given["parents"], taper)
+    elif p["veins.lateral.enabled"]:
         grow_laterals(g, graph, shape, p, rng, profile, taper)
     if p["veins.sub.enabled"]:
         grow_sublaterals(g, graph, shape, p, rng, taper)

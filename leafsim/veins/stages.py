@@ -106,6 +106,59 @@ def grow_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, 
     return reached
 
 
+def _inside_prefix(shape: LeafShape, pts: np.ndarray) -> np.ndarray:
+    """The polyline up to its first point outside the outline (or in a hole)."""
+    from leafsim.base.geometry import points_in_region
+
+    inside = points_in_region(pts, shape.contour, shape.holes)
+    inside[0] = True
+    k = int(np.argmin(inside)) if not inside.all() else len(pts)
+    return pts[:k]
+
+
+def given_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, mains, main_origin: str,
+                     taper: float) -> list[np.ndarray]:
+    """The main veins traced from the photo (the midrib first), in place of grown ones: a palmate
+    leaf's start at the base, a pinnate lobe's on the midrib; each is cut where it would leave
+    the outline.  Returns their ends (the targets "reached")."""
+    w_main = p["veins.main.width"] * shape.length
+    thr = p["veins.main.threshold"]
+    reached = []
+    for i, pts in enumerate(mains):
+        pts = _inside_prefix(shape, np.asarray(pts, float))
+        if len(pts) < 3:
+            continue
+        if i == 0 or main_origin == "base":
+            pts = np.vstack([shape.base[None].astype(float), pts[1:]])
+            parent, w0 = -1, (w_main if i == 0 else 0.75 * w_main)
+        else:
+            mid = graph.veins[0].points
+            j = int(np.argmin(np.linalg.norm(mid - pts[0], axis=1)))
+            pts = np.vstack([mid[j][None], pts[1:]])
+            parent, w0 = 0, 0.7 * float(np.interp(j / max(len(mid) - 1, 1), np.linspace(0, 1, len(mid)), graph.veins[0].widths))
+        g.add(pts)
+        graph.veins.append(Vein(MAIN, pts, taper_widths(pts, w0, taper, 1 - thr), parent, pts[-1].copy()))
+        reached.append(pts[-1].copy())
+    return reached
+
+
+def given_laterals(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, laterals, parents, taper: float) -> None:
+    """The laterals traced from the photo, each starting on the nearest point of its main vein."""
+    n_main = len(graph.veins)
+    for pts, parent in zip(laterals, parents):
+        if not (0 <= parent < n_main):
+            continue
+        pts = np.asarray(pts, float)
+        mv = graph.veins[parent]
+        j = int(np.argmin(np.linalg.norm(mv.points - pts[0], axis=1)))
+        pts = _inside_prefix(shape, np.vstack([mv.points[j][None], pts]))
+        if len(pts) < 3:
+            continue
+        w0 = float(mv.widths[j]) * p["veins.lateral.width"]
+        g.add(pts)
+        graph.veins.append(Vein(LATERAL, pts, taper_widths(pts, w0, taper), parent, pts[-1].copy()))
+
+
 def _lateral_sides(mode: str, counter: int) -> tuple:
     if mode == "opposite":
         return (1, -1)

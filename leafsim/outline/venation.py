@@ -1,0 +1,257 @@
+"""The photo's own venation: midrib, main and lateral veins traced from the image.
+
+A vein is a line of the blade lighter or darker than the tissue beside it (light on the
+underside of most leaves and on back-lit scans, dark on some upper sides).  Its strength at
+every pixel is the Hessian ridge measure of the lightness at the vein's scale (the larger
+eigenvalue's magnitude with the polarity the leaf shows); the cost of a pixel is small on
+strong ridges and large elsewhere.  Then:
+
+* **midrib** — the cheapest 8-connected path from the base (petiole junction) to the apex;
+* **main veins** — for a palmate leaf the cheapest path from the base to each lobe tip, for
+  pinnate lobes the cheapest from anywhere on the midrib (multi-source Dijkstra);
+* **laterals** — from every point of the main veins the cheapest path to the margin band
+  over the finer ridges (one shortest-path tree grown from the margin, so two laterals never
+  cross: where their paths merge the weaker one ends); a path is a lateral when its mean
+  ridge strength is well above the blade's and it is at least 8 % of the leaf length long.
+  Laterals closer than 4 % of the leaf length to a stronger one along most of their length
+  are the same vein and are dropped.
+
+Everything is computed on a copy scaled so the leaf is :data:`WORK_LENGTH` px long; the
+polylines come back in photo pixels, smoothed over 1 % of the leaf length.  Used by the
+vein grower (:func:`leafsim.veins.grow.grow_veins`'s ``given``) so the model's veins lie on the
+photo's, and by ``leafsim compare`` to measure how far they are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+#: the leaf's base→apex length on the working copy [px]
+WORK_LENGTH = 500.0
+#: ridge scale of the main veins and of the laterals, × leaf length
+MAIN_SIGMA, LATERAL_SIGMA = 0.006, 0.0035
+#: cost floor: a pixel on the strongest ridges costs this, the blade's median ≈ 1
+_FLOOR = 0.03
+
+
+@dataclass
+class PhotoVeins:
+    """Traced veins in photo pixels (x, y down): the midrib (base → apex), the other main veins
+    and the laterals, each an (k, 2) polyline from its start to its end; ``parents[i]`` is the
+    index in ``mains`` (0 = the midrib) a lateral leaves from; ``polarity`` is "light" or
+    "dark" (how the veins show); ``strength`` the midrib's mean ridge strength over the
+    blade's median (a photo without visible veins has ≈ 1)."""
+
+    midrib: np.ndarray
+    mains: list = field(default_factory=list)
+    laterals: list = field(default_factory=list)
+    parents: list = field(default_factory=list)
+    polarity: str = "light"
+    strength: float = 0.0
+
+    def all_mains(self) -> list:
+        return [self.midrib, *self.mains]
+
+
+def _ridge(L: np.ndarray, inner: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """(light ridge, dark ridge) strength at scale ``sigma`` px, scale-normalised, 0 outside."""
+    fill = float(np.median(L[inner])) if inner.any() else 0.0
+    g = cv2.GaussianBlur(np.where(inner, L, fill).astype(np.float32), (0, 0), sigma)
+    xx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3)
+    yy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3)
+    xy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3)
+    root = np.sqrt(0.25 * (xx - yy) ** 2 + xy ** 2)
+    lo, hi = 0.5 * (xx + yy) - root, 0.5 * (xx + yy) + root
+    s2 = sigma * sigma
+    return np.where(inner, np.maximum(-lo, 0) * s2, 0), np.where(inner, np.maximum(hi, 0) * s2, 0)
+
+
+class _Grid:
+    """The 8-connected pixel graph of a cost image (edge weight = mean cost × step length)."""
+
+    def __init__(self, cost: np.ndarray):
+        h, w = cost.shape
+        self.h, self.w = h, w
+        idx = np.arange(h * w).reshape(h, w)
+        rows, cols, wts = [], [], []
+        for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            x0, x1 = max(0, -dx), w - max(0, dx)
+            a = idx[0:h - dy, x0:x1]
+            b = idx[dy:h, x0 + dx:x1 + dx]
+            ca, cb = cost.reshape(-1)[a.reshape(-1)], cost.reshape(-1)[b.reshape(-1)]
+            rows.append(a.reshape(-1))
+            cols.append(b.reshape(-1))
+            wts.append(0.5 * (ca + cb) * np.hypot(dy, dx))
+        r, c, wv = np.concatenate(rows), np.concatenate(cols), np.concatenate(wts)
+        self.graph = coo_matrix((np.r_[wv, wv], (np.r_[r, c], np.r_[c, r])), shape=(h * w, h * w)).tocsr()
+
+    def index(self, p) -> int:
+        x, y = int(round(float(p[0]))), int(round(float(p[1])))
+        return min(max(y, 0), self.h - 1) * self.w + min(max(x, 0), self.w - 1)
+
+    def tree(self, sources) -> tuple[np.ndarray, np.ndarray]:
+        d, pred, _ = dijkstra(self.graph, directed=False, indices=np.asarray(sources, int), min_only=True,
+                              return_predecessors=True)
+        return d, pred
+
+    def path(self, pred: np.ndarray, end: int) -> np.ndarray:
+        """(k, 2) pixel path from the tree's source to ``end`` (x, y)."""
+        out = [end]
+        while pred[out[-1]] >= 0 and len(out) < self.h * self.w:
+            out.append(int(pred[out[-1]]))
+        out = np.asarray(out[::-1])
+        return np.column_stack([out % self.w, out // self.w]).astype(float)
+
+
+def _nearest_inside(mask: np.ndarray, p) -> np.ndarray:
+    ys, xs = np.nonzero(mask)
+    i = int(np.argmin((xs - p[0]) ** 2 + (ys - p[1]) ** 2))
+    return np.array([xs[i], ys[i]], float)
+
+
+def _smooth(path: np.ndarray, window: float) -> np.ndarray:
+    """Moving average over ``window`` px of arc length, ends kept, resampled every window/2."""
+    if len(path) < 3:
+        return path
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    s = np.r_[0.0, np.cumsum(seg)]
+    n = max(2, int(np.ceil(s[-1] / max(0.5 * window, 1e-9))) + 1)
+    t = np.linspace(0, s[-1], n)
+    xy = np.column_stack([np.interp(t, s, path[:, 0]), np.interp(t, s, path[:, 1])])
+    k = max(1, int(round(window / max(t[1] - t[0], 1e-9))))
+    if k > 1 and n > 2 * k:
+        ker = np.ones(2 * k + 1) / (2 * k + 1)
+        pad = np.pad(xy, ((k, k), (0, 0)), mode="edge")
+        sm = np.column_stack([np.convolve(pad[:, 0], ker, "valid"), np.convolve(pad[:, 1], ker, "valid")])
+        sm[0], sm[-1] = xy[0], xy[-1]
+        return sm
+    return xy
+
+
+def trace_venation(img: np.ndarray, mask: np.ndarray, base_px, apex_px, lobes_px=(), main_origin: str = "base",
+                   laterals: bool = True, exclude: np.ndarray | None = None, holes: np.ndarray | None = None) -> PhotoVeins:
+    """Trace the veins of the leaf in ``img`` (BGR, any size) inside ``mask`` (uint8 0/255, the
+    image's size), base and apex in its pixels (module docstring).  ``lobes_px``: lobe tips that
+    get a main vein (the apex excluded by the caller).  ``exclude`` (uint8, the image's size):
+    pixels no vein may follow — a petiole lying on the blade is a ridge too; ``holes`` (uint8,
+    the image's size): openings of the blade, whose edges are no veins either."""
+    base, apex = np.asarray(base_px, float), np.asarray(apex_px, float)
+    L0 = float(np.linalg.norm(apex - base))
+    f = min(1.0, WORK_LENGTH / max(L0, 1.0))
+    small = cv2.resize(img, None, fx=f, fy=f, interpolation=cv2.INTER_AREA) if f < 1 else img
+    m = cv2.resize(mask, (small.shape[1], small.shape[0]), interpolation=cv2.INTER_NEAREST) > 0 if f < 1 else mask > 0
+    L = L0 * f
+    to_s = lambda p: (np.asarray(p, float) + 0.5) * f - 0.5  # noqa: E731
+    back = lambda p: (np.asarray(p, float) + 0.5) / f - 0.5  # noqa: E731
+    light = cv2.cvtColor(small[..., :3].astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)[..., 0]
+    e = max(3, int(round(0.012 * L)) | 1)
+    inner = cv2.erode(m.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (e, e))) > 0
+    if not inner.any():
+        inner = m
+    if holes is not None and holes.any():
+        hs = cv2.resize(holes, (small.shape[1], small.shape[0]), interpolation=cv2.INTER_NEAREST) if f < 1 else holes
+        inner = inner & ~(cv2.dilate((hs > 0).astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (e, e))) > 0)
+    if exclude is not None and exclude.any():
+        ex = cv2.resize(exclude, (small.shape[1], small.shape[0]), interpolation=cv2.INTER_NEAREST) > 0 if f < 1 else exclude > 0
+        ex = cv2.dilate(ex.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        # the base itself stays reachable: a petiole ends at the junction
+        near_base = np.hypot(*np.meshgrid(np.arange(m.shape[1]) - to_s(base)[0], np.arange(m.shape[0]) - to_s(base)[1])) < 0.03 * L
+        inner = inner & ~(ex & ~near_base)
+    b, a = _nearest_inside(inner, to_s(base)), _nearest_inside(inner, to_s(apex))
+    best = None
+    for pol, R in zip(("light", "dark"), _ridge(light, inner, MAIN_SIGMA * L)):
+        scale = float(np.percentile(R[inner], 99.5)) or 1.0
+        cost = np.where(inner, 1.0 / (_FLOOR + R / scale), 1e4).astype(np.float64)
+        grid = _Grid(cost)
+        d, pred = grid.tree([grid.index(b)])
+        mid = grid.path(pred, grid.index(a))
+        # the polarity the leaf shows: the one whose midrib stands out more from the blade
+        on = R[mid[:, 1].astype(int), mid[:, 0].astype(int)]
+        strength = float(np.median(on)) / (float(np.median(R[inner])) or 1e-12)
+        if best is None or strength > best[0]:
+            best = (strength, pol, R, grid, mid)
+    strength, pol, R, grid, mid = best
+    mains = []
+    for tip in lobes_px:
+        t = _nearest_inside(inner, to_s(tip))
+        if main_origin == "base":
+            d, pred = grid.tree([grid.index(b)])
+        else:
+            d, pred = grid.tree([grid.index(p) for p in mid[len(mid) // 20: -max(1, len(mid) // 10)]])
+        mains.append(grid.path(pred, grid.index(t)))
+    out_l, parents = [], []
+    if laterals:
+        out_l, parents = _laterals(light, m, inner, [mid, *mains], L, pol)
+    w = 0.01 * L
+    return PhotoVeins(midrib=back(_smooth(mid, w)), mains=[back(_smooth(p, w)) for p in mains],
+                      laterals=[back(_smooth(p, w)) for p in out_l], parents=parents, polarity=pol,
+                      strength=round(strength, 2))
+
+
+def _laterals(light, m, inner, mains, L, pol) -> tuple[list, list]:
+    """Laterals leaving the main veins (module docstring): (paths from main vein to margin
+    band in working pixels, parent main index each)."""
+    R = _ridge(light, inner, LATERAL_SIGMA * L)[0 if pol == "light" else 1]
+    scale = float(np.percentile(R[inner], 99.0)) or 1.0
+    med = float(np.median(R[inner])) or 1e-12
+    cost = np.where(inner, 1.0 / (_FLOOR + R / scale), 1e4).astype(np.float64)
+    # keep the tree off the main veins themselves (a lateral must leave them)
+    main_px = np.zeros(m.shape, np.uint8)
+    for p in mains:
+        cv2.polylines(main_px, [np.round(p).astype(np.int32).reshape(-1, 1, 2)], False, 255, 1)
+    kw = max(3, int(round(0.012 * L)) | 1)  # a main vein's own ridge is that wide
+    near_main = cv2.dilate(main_px, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (kw, kw))) > 0
+    cost[near_main] = 1e4
+    grid = _Grid(cost)
+    band_w = max(2, int(round(0.02 * L)))
+    band = inner & ~(cv2.erode(inner.astype(np.uint8), np.ones((2 * band_w + 1, 2 * band_w + 1), np.uint8)) > 0) & ~near_main
+    if not band.any():
+        return [], []
+    _, pred = grid.tree(np.flatnonzero(band.reshape(-1)))
+    # candidate starts: pixels just beside every main vein (2 px off), every 2 % L
+    kr = kw + 4
+    ring = (cv2.dilate(main_px, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (kr, kr))) > 0) & ~near_main & inner
+    cands = []
+    for mi, p in enumerate(mains):
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        s = np.r_[0.0, np.cumsum(seg)]
+        ys, xs = np.nonzero(ring)
+        ring_pts = np.column_stack([xs, ys]).astype(float)
+        if not len(ring_pts):
+            continue
+        for t in np.arange(0.03 * L, s[-1] - 0.03 * L, 0.005 * L):
+            q = np.array([np.interp(t, s, p[:, 0]), np.interp(t, s, p[:, 1])])
+            dd = np.linalg.norm(ring_pts - q, axis=1)
+            for side_pts in (ring_pts[(dd < 0.5 * kr + 1.5)],):
+                for r in side_pts[:: max(1, len(side_pts) // 4)]:
+                    cands.append((mi, r))
+    d_main = cv2.distanceTransform(np.where(main_px > 0, 0, 255).astype(np.uint8), cv2.DIST_L2, 5)
+    scored = []
+    for mi, r in cands:
+        path = grid.path(pred, grid.index(r))[::-1]  # from the main vein to the margin
+        if len(path) < 0.08 * L:
+            continue
+        ix = path.astype(int)
+        if float(np.median(d_main[ix[:, 1], ix[:, 0]])) < 0.03 * L:
+            continue  # it runs along a main vein instead of leaving it
+        v = R[path[:, 1].astype(int), path[:, 0].astype(int)]
+        score = float(np.median(v)) / med
+        if score > 2.5:
+            scored.append((score, mi, path))
+    scored.sort(key=lambda x: -x[0])
+    taken = np.zeros(m.shape, np.uint8)
+    out, parents = [], []
+    for score, mi, path in scored:
+        ix = path.astype(int)
+        if float(np.mean(taken[ix[:, 1], ix[:, 0]] > 0)) > 0.3:
+            continue  # the same vein as a stronger one
+        cv2.polylines(taken, [np.round(path).astype(np.int32).reshape(-1, 1, 2)], False, 255,
+                      max(1, int(round(0.04 * L))))
+        out.append(path)
+        parents.append(mi)
+    return out, parents
