@@ -26,6 +26,9 @@ Metrics (:func:`compare_images`):
 * **Spread** (:func:`colour_spread`): the within-leaf variation — circular spread of the hue,
   spread of L*, and the dark spots (count, median diameter / L) — of photo and model, and
   the model / photo ratios.
+* **Vein offset** (:func:`vein_offset`): the photo's own veins traced
+  (:mod:`leafsim.outline.venation`) against the model's: how far, along every traced midrib,
+  main vein and lateral, the nearest model vein is (mean, 90th percentile; px and × L).
 * **Veins** (:func:`vein_agreement`): light or dark ridges of the photo's lightness at the
   scale of the main and lateral veins (Hessian eigenvalue, σ = 0.4 % of the leaf length), as
   many ridge pixels as the model's main and lateral veins cover; precision = share of model
@@ -291,6 +294,37 @@ def vein_agreement(photo_rgb: np.ndarray, blade: np.ndarray, model_veins: np.nda
         "chance_recall": round(float(np.mean(d_model[inner] <= tol)), 3),
         "tolerance_px": round(tol, 1), "veins": "main+lateral",
     }
+
+
+def vein_offset(photo_lines, model_lines, frame: Frame, length_px: float) -> dict | None:
+    """How far the model's veins sit from the photo's traced veins (both lists of world
+    polylines, the midrib first): along every photo vein, the distance to the nearest model vein
+    of the same kind (main or lateral) — mean and 90th percentile in px and over L — and the
+    midrib's mean distance alone.  None without traced veins."""
+    if not photo_lines or not model_lines:
+        return None
+    dt = cv2.distanceTransform(np.where(vein_mask(model_lines, frame), 0, 255).astype(np.uint8), cv2.DIST_L2, 5)
+
+    def along(lines):
+        out = []
+        for pts in lines:
+            q = frame.to_px(pts)
+            seg = np.linalg.norm(np.diff(q, axis=0), axis=1)
+            s = np.r_[0.0, np.cumsum(seg)]
+            t = np.arange(0.0, s[-1], 1.0)
+            x, y = np.interp(t, s, q[:, 0]), np.interp(t, s, q[:, 1])
+            ok = (x >= 0) & (y >= 0) & (x < frame.width - 0.5) & (y < frame.height - 0.5)
+            out.append(dt[np.round(y[ok]).astype(int), np.round(x[ok]).astype(int)])
+        return np.concatenate(out) if out else np.zeros(0)
+
+    d, mid = along(photo_lines), along(photo_lines[:1])
+    if not d.size:
+        return None
+    L = max(float(length_px), 1e-9)
+    return {"mean_px": round(float(d.mean()), 2), "p90_px": round(float(np.percentile(d, 90)), 2),
+            "mean_L": round(float(d.mean()) / L, 4), "p90_L": round(float(np.percentile(d, 90)) / L, 4),
+            "midrib_mean_px": round(float(mid.mean()), 2) if mid.size else None,
+            "midrib_mean_L": round(float(mid.mean()) / L, 4) if mid.size else None}
 
 
 def vein_mask(lines, frame: Frame) -> np.ndarray:

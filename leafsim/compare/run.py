@@ -25,7 +25,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.resources import display_path
 from leafsim.compare import metrics as C
 from leafsim.outline.trace import refuse_non_leaf, to_leaf_shape
-from leafsim.pipeline import build_leaf, trace_photo
+from leafsim.pipeline import build_leaf, photo_veins, trace_photo
 from leafsim.render.topdown import TopDown
 from leafsim.sim.model import LAYER_T
 from leafsim.sim.run import Run
@@ -155,6 +155,18 @@ def _window(tvs: list[float]) -> dict:
             "dried_tv": round(float(a[-1]), 4)}
 
 
+def _vein_offset(leaf: _Leaf, state) -> dict | None:
+    """The model's main veins and laterals against the species photo's traced ones (the young
+    leaf: both in the photo's frame).  Traced whatever ``veins.photo`` says, so the grown veins
+    of ``veins.photo = off`` are measured the same way."""
+    pv = photo_veins(leaf.sp, leaf.params)
+    A = np.asarray(leaf.shape.px_to_world, float)
+    world = [np.asarray(p, float) @ A[:, :2].T + A[:, 2] for p in [*pv.all_mains(), *pv.laterals]]
+    q = state.particle_q
+    model = [q[idx, :2] for idx, _, order in leaf.model.vein_polylines() if order <= 1]
+    return C.vein_offset(world, model, leaf.frame, leaf.sp.length_m * leaf.frame.scale)
+
+
 def _stage_info(leaf: _Leaf, state) -> dict:
     w = float(state.particle_water.sum() / max(leaf.model.particle_water0.sum(), 1e-300))
     return {"frame": state.frame, "time_s": round(state.time, 4), "water": round(w, 4)}
@@ -179,6 +191,8 @@ def run_compare(sp, params, seed=0, photo=None, stage=None, effects=None, progre
                 r.picture, r.mask = leaf.picture(r.state)
                 r.veins = leaf.vein_lines(r.state)
             r.metrics = C.compare_images(r.ref, r.picture, r.mask, r.veins, sp.length_m * leaf.frame.scale)
+        if photo is None and rows[0].kind == "young":
+            rows[0].metrics["vein_offset"] = _vein_offset(leaf, rows[0].state)
     finally:
         leaf.release()
     report = {"species": sp.key, "seed": seed, "frame_px_per_m": round(leaf.frame.scale, 2),
