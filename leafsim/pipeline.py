@@ -137,20 +137,24 @@ _VEINS: dict = {}
 
 def photo_veins(sp: Species, params: ParamSet):
     """The species photo's own veins (:func:`leafsim.outline.venation.trace_venation`), in photo
-    pixels, remembered per trace."""
+    pixels, remembered per trace.  The main veins head for the lobe tips the grower would
+    (:func:`leafsim.veins.stages.main_targets`)."""
     from leafsim.outline.image import load_image
     from leafsim.outline.venation import trace_venation
+    from leafsim.veins.stages import main_targets
 
     traced = species_trace(sp, params)
-    key = (id(traced), sp.main_origin)
+    shape = leaf_shape(sp, params)
+    _, others, _ = main_targets(shape, params, None, sp.main_origin)
+    A = np.vstack([np.asarray(shape.px_to_world, float), [0.0, 0.0, 1.0]])
+    lobes = [(np.linalg.inv(A) @ np.r_[t, 1.0])[:2] for t in others]
+    key = (id(traced), sp.main_origin, tuple(np.round(np.ravel(lobes), 3)))
     if key not in _VEINS:
         import cv2
 
         img = load_image(sp.image)
         size = (img.shape[1], img.shape[0])
         up = lambda a: None if a is None else cv2.resize(a, size, interpolation=cv2.INTER_NEAREST)  # noqa: E731
-        L = float(np.linalg.norm(traced.apex_px - traced.base_px))
-        lobes = [t for t in traced.lobes_px if np.linalg.norm(t - traced.apex_px) > 0.08 * L] if sp.main_origin == "base" else []
         pv = trace_venation(img, up(traced.mask), traced.base_px, traced.apex_px, lobes, sp.main_origin,
                             exclude=up(traced.petiole_mask), holes=up(traced.hole_mask))
         while len(_VEINS) >= 8:

@@ -116,6 +116,17 @@ def _inside_prefix(shape: LeafShape, pts: np.ndarray) -> np.ndarray:
     return pts[:k]
 
 
+def _until_crossing(g: Grower, pts: np.ndarray) -> np.ndarray:
+    """The polyline up to just before it first crosses a vein already in ``g`` (a traced vein
+    smoothed near a junction may clip its neighbour; veins never cross)."""
+    for i in range(len(pts) - 1):
+        t = g.first_hit(pts[i], pts[i + 1], skip_contour=True)
+        if t is not None:
+            end = pts[i] + (pts[i + 1] - pts[i]) * 0.8 * t
+            return np.vstack([pts[: i + 1], end[None]]) if i > 0 or t > 0.1 else pts[: i + 1]
+    return pts
+
+
 def given_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, mains, main_origin: str,
                      taper: float) -> list[np.ndarray]:
     """The main veins traced from the photo (the midrib first), in place of grown ones: a palmate
@@ -129,13 +140,21 @@ def given_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet,
         if len(pts) < 3:
             continue
         if i == 0 or main_origin == "base":
-            pts = np.vstack([shape.base[None].astype(float), pts[1:]])
+            # from the base straight to where the vein is 4 % L away from it: veins leaving one
+            # junction never cross there (the traced paths may braid within a few pixels)
+            far = np.flatnonzero(np.linalg.norm(pts - shape.base, axis=1) > 0.04 * shape.length)
+            if not len(far):
+                continue
+            pts = np.vstack([shape.base[None].astype(float), pts[far[0]:]])
             parent, w0 = -1, (w_main if i == 0 else 0.75 * w_main)
         else:
             mid = graph.veins[0].points
             j = int(np.argmin(np.linalg.norm(mid - pts[0], axis=1)))
             pts = np.vstack([mid[j][None], pts[1:]])
             parent, w0 = 0, 0.7 * float(np.interp(j / max(len(mid) - 1, 1), np.linspace(0, 1, len(mid)), graph.veins[0].widths))
+        pts = _until_crossing(g, pts)
+        if len(pts) < 3:
+            continue
         g.add(pts)
         graph.veins.append(Vein(MAIN, pts, taper_widths(pts, w0, taper, 1 - thr), parent, pts[-1].copy()))
         reached.append(pts[-1].copy())
@@ -151,7 +170,7 @@ def given_laterals(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, l
         pts = np.asarray(pts, float)
         mv = graph.veins[parent]
         j = int(np.argmin(np.linalg.norm(mv.points - pts[0], axis=1)))
-        pts = _inside_prefix(shape, np.vstack([mv.points[j][None], pts]))
+        pts = _until_crossing(g, _inside_prefix(shape, np.vstack([mv.points[j][None], pts])))
         if len(pts) < 3:
             continue
         w0 = float(mv.widths[j]) * p["veins.lateral.width"]
