@@ -27,14 +27,17 @@ class Colour:
         self.params = params
 
     def field(self, seed: int) -> tuple:
-        """(rate, spot, max rate, max spot) of :func:`leafsim.sim.senescence.senescence_field`
+        """(rate, spot, max rate, max spot, particles by falling rate, their rates) of
+        :func:`leafsim.sim.senescence.senescence_field`
         for the current parameters and the leaf's seed (the pigments' own, so a resumed run has
         the same field), made again only when one of them changed."""
         key = (tuple(float(self.params[k]) for k in FIELD_KEYS), int(seed))
         if self._field is None or self._field[0] != key:
             rate, spot = senescence_field(self.model, self.params, int(seed))
             n = len(rate)
-            self._field = (key, (rate, spot, float(rate.max()) if n else 1.0, float(spot.max()) if n else 0.0))
+            order = np.argsort(-rate, kind="stable")
+            self._field = (key, (rate, spot, float(rate.max()) if n else 1.0, float(spot.max()) if n else 0.0,
+                                 order, np.ascontiguousarray(rate[order], np.float64)))
         return self._field[1]
 
     def init(self, state: State, seed: int) -> State:
