@@ -127,6 +127,24 @@ def _until_crossing(g: Grower, pts: np.ndarray) -> np.ndarray:
     return pts
 
 
+def _branch_off_shared_trunk(graph: VeinGraph, pts: np.ndarray, parent: int, tol: float) -> tuple[np.ndarray, int]:
+    """A traced main vein that first runs along an earlier one (a grapevine's basal veins leave
+    the lower main veins, not the petiole) starts where it leaves it, as its branch."""
+    best = None
+    half = len(pts) // 2
+    for vi, v in enumerate(graph.veins):
+        d = np.min(np.linalg.norm(pts[1:half, None, :] - v.points[None, :, :], axis=2), axis=1) if half > 1 else np.zeros(0)
+        near = np.flatnonzero(d < tol)
+        if len(near) and (best is None or near[-1] > best[0]):
+            best = (int(near[-1]) + 1, vi)
+    if best is None:
+        return pts, parent
+    j, vi = best
+    trunk = graph.veins[vi].points
+    k = int(np.argmin(np.linalg.norm(trunk - pts[j], axis=1)))
+    return np.vstack([trunk[k][None], pts[j + 1:]]), vi
+
+
 def given_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, mains, main_origin: str,
                      taper: float) -> list[np.ndarray]:
     """The main veins traced from the photo (the midrib first), in place of grown ones: a palmate
@@ -147,6 +165,7 @@ def given_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet,
                 continue
             pts = np.vstack([shape.base[None].astype(float), pts[far[0]:]])
             parent, w0 = -1, (w_main if i == 0 else 0.75 * w_main)
+            pts, parent = _branch_off_shared_trunk(graph, pts, parent, 0.012 * shape.length)
         else:
             mid = graph.veins[0].points
             j = int(np.argmin(np.linalg.norm(mid - pts[0], axis=1)))
