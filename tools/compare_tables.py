@@ -47,6 +47,28 @@ def render(folder: Path) -> str:
             mix = [", ".join(f"{c} {f:.3f}" for c, f in sorted(d.items(), key=lambda x: -x[1]) if f >= 0.005)
                    for d in (r["colour_photo"], r["colour_model"])]
             out.append(f"| {k}{' (other leaf)' if k == 'aspen' else ''} | {mix[0]} | {mix[1]} |")
+    out += ["", "| species | senescent window: stages | median TV | p90 TV | worst TV | share ≤ 0.35 | dried stage TV |",
+            "|---|---|---|---|---|---|---|"]
+    for k, rep in reps.items():
+        for r in rep["rows"]:
+            w = r.get("senescent_window")
+            if w and w.get("stages"):
+                out.append(f"| {k}{' (other leaf)' if k == 'aspen' else ''} | {w['stages']} | {w['median_tv']:.3f} | {w['p90_tv']:.3f} | "
+                           f"{w['max_tv']:.3f} | {w['share_tv_le_0.35']:.2f} | {w['dried_tv']:.3f} |")
+    out += ["", "| species | row | hue spread photo / model (°) | L* spread photo / model | ratio hue / L* | dark spots photo / model |",
+            "|---|---|---|---|---|---|"]
+    for k, rep in reps.items():
+        for r in rep["rows"]:
+            sp, sm, q = r.get("spread_photo"), r.get("spread_model"), r.get("spread_ratio")
+            if sp and sm:
+                out.append(f"| {k} | {_row_name(k, r)} | {sp['hue_sd_deg']} / {sm['hue_sd_deg']} | {sp['lightness_sd']} / "
+                           f"{sm['lightness_sd']} | {q['hue']} / {q['lightness']} | {sp['spots']} / {sm['spots']} |")
+    out += ["", "| species | vein offset along the photo's traced veins: mean px (× L) | p90 px (× L) | midrib mean px (× L) |",
+            "|---|---|---|---|"]
+    for k, rep in reps.items():
+        o = rep["rows"][0].get("vein_offset")
+        if o:
+            out.append(f"| {k} | {o['mean_px']} ({o['mean_L']}) | {o['p90_px']} ({o['p90_L']}) | {o['midrib_mean_px']} ({o['midrib_mean_L']}) |")
     out += ["", "| species | row | matched stage | IoU | margin ratio | colour TV | mean ΔE |", "|---|---|---|---|---|---|---|"]
     for k, rep in reps.items():
         for r in rep["rows"]:

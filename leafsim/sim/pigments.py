@@ -41,15 +41,18 @@ All five are exact exponential updates, so any step size is stable and monotone;
 are sub-stepped (no exponent above 0.1 per sub-step; season and time advance together, so a
 step that crosses the onset while drying is resolved) so the couplings (anthocyanin from
 chlorophyll loss, browning from dead tissue) stay accurate.  With ``w = 1``
-and a constant ``age`` nothing changes at all.  Nothing here looks at positions or distances:
-the spatial pattern is the water field's.  Margins and intercostal areas turn first, and veins
-and their surroundings stay green longest, because the osmosis stage leaves them with less
-water (the margin evaporates more, light intercostal tissue holds less, veins carry extra
-water and feed their neighbours); where the blade's seeded patch field makes it lose water
-faster (``osmosis.patchiness``: patchy hydraulic failure) tissue is stressed earlier and, if it
-dies before it senesced, necrotic.  The drought stress switches on within 5 % of water, so a
-small difference in water becomes a difference in *when* a place turns: a visible front, not a
-uniform fade.  Uniform water and uniform mass give a uniform colour.
+and a constant ``age`` nothing changes at all.  Nothing here looks at positions or distances;
+the spatial pattern comes from two fields.  The water field's: margins and intercostal areas
+lose more water (the margin evaporates more, light intercostal tissue holds less, veins carry
+extra water and feed their neighbours), and where the blade's seeded patch field makes it lose
+water faster (``osmosis.patchiness``: patchy hydraulic failure) tissue is stressed earlier and,
+if it dies before it senesced, necrotic.  The drought stress switches on within 5 % of water, so
+a small difference in water becomes a difference in *when* a place turns.  And the senescence
+field's (:mod:`leafsim.sim.senescence`, the ``field`` argument): a per-particle rate ``r``
+multiplying the senescence exposure (``H ← r·H``, and the season's fading and browning) — the
+margin first, green islands along the veins, patches — and a spot share ``s`` whose tissue dies
+as it senesces (death exposure ``E + 12·s·H``).  Uniform water, uniform mass and no field give
+a uniform colour.
 
 Amounts are stored relative to the leaf's own summer content (``C``, ``K`` start at 1,
 ``A``, ``B`` at 0), so the palette parameters below act live (GUI sliders) at colour time.
