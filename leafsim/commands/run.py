@@ -20,6 +20,7 @@ from leafsim.commands.common import Progress, emit, species_params, stop_of
 from leafsim.pipeline import build_leaf
 from leafsim.render.sequence import FrameWriter
 from leafsim.sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
+from leafsim.sim.curl import dried_shape
 from leafsim.sim.run import Run, Stop
 from leafsim.sim.shape import save_npz, shape_metrics
 from leafsim.sim.stats import StatsStream
@@ -166,6 +167,7 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
         "nan": bool(any(s.get("nan") for s in stats)),
         "png_frames": 0 if frames is None else frames.written,
         **{f"shape_{k}": v for k, v in shape_metrics(model, state).items()},
+        **({f"shape_{k}": v for k, v in dried_shape(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
         **model.to_report(),
         "water_kg": float(state.particle_water.sum()),
     }

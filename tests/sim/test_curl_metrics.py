@@ -1,0 +1,78 @@
+"""Dried-shape measures (leafsim.sim.curl) on shapes whose answer is known: a flat blade, a
+sinusoidal wrinkle, a V fold along the midrib, a margin rolled up."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers.synthetic import ellipse_shape, synthetic_veins
+from leafsim.blade.build import build_blade
+from leafsim.config.params import ParamSet
+from leafsim.sim.curl import dried_shape, margin_roll, midrib_fold, wrinkles
+from leafsim.sim.model import LAYER_T
+
+
+@pytest.fixture(scope="module", params=[0.03, 0.02])
+def model(request):
+    s = ellipse_shape()
+    return build_blade(s, synthetic_veins(s), ParamSet({"mesh.spacing": request.param}), seed=1)
+
+
+def _with_z(model, z):
+    q = model.particle_rest.copy()
+    q[:, 2] = q[:, 2] + z(q[:, 0], q[:, 1])
+    return q
+
+
+def test_flat_blade_is_flat(model):
+    q = model.particle_rest
+    r = margin_roll(model, q)
+    assert r["margin_roll_deg"] < 1.0 and midrib_fold(model, q) < 1.0
+    w = wrinkles(model, q)
+    assert w["wrinkle_rms_L"] < 1e-4 and w["wrinkle_wavelength_L"] is None
+
+
+def test_sinusoidal_wrinkle_amplitude_and_wavelength(model):
+    L = float(np.ptp(model.particle_rest[:, 1]))
+    lam, amp = 0.12 * L, 0.004 * L  # 4 and 6 elements per wavelength on the two meshes
+    q = _with_z(model, lambda x, y: amp * np.sin(2 * np.pi * x / lam))
+    w = wrinkles(model, q)
+    assert w["wrinkle_wavelength_L"] == pytest.approx(lam / L, rel=0.15)
+    # the RMS is the mesh's own piecewise-linear surface's: a coarse mesh flattens the crests
+    assert 0.65 * amp / np.sqrt(2) / L < w["wrinkle_rms_L"] < 1.05 * amp / np.sqrt(2) / L
+    # a smooth bowl of the same height has (almost) no wrinkle
+    bowl = _with_z(model, lambda x, y: 0.3 * ((x / L) ** 2 + ((y - 0.5 * L) / L) ** 2) * L)
+    assert wrinkles(model, bowl)["wrinkle_rms_L"] < 0.1 * w["wrinkle_rms_L"]
+
+
+@pytest.mark.parametrize("angle", [30.0, 90.0])
+def test_v_fold_along_the_midrib(model, angle):
+    t = np.tan(np.radians(0.5 * angle))
+    q = model.particle_rest.copy()
+    # fold the halves up about the y axis by ±angle/2 (lengths kept)
+    c, s = np.cos(np.radians(0.5 * angle)), np.sin(np.radians(0.5 * angle))
+    x = q[:, 0]
+    q[:, 0], q[:, 2] = np.abs(x) * c * np.sign(x), np.abs(x) * s
+    assert t > 0
+    assert midrib_fold(model, q) == pytest.approx(angle, abs=3.0)
+
+
+def test_rolled_margin(model):
+    """The band within 15 % of the half-width of the margin bent up by 90°: the margin's
+    normals lie in the plane."""
+    q = model.particle_rest.copy()
+    x = q[:, 0]
+    w = float(np.abs(x).max())
+    band = 0.85 * w
+    out = np.abs(x) > band
+    d = np.abs(x[out]) - band
+    q[out, 0] = np.sign(x[out]) * band
+    q[out, 2] = d  # turned straight up
+    r = margin_roll(model, q)
+    side = np.abs(model.particle_rest[model.contour_particles, 0]) > band + 0.2 * (w - band)
+    assert side.mean() > 0.3
+    assert r["margin_roll_p90_deg"] > 70.0
+    d = dried_shape(model, model.state())
+    assert set(d) >= {"margin_roll_deg", "midrib_fold_deg", "wrinkle_rms_L", "wrinkle_wavelength_L"}
+    assert (model.particle_layer == LAYER_T).sum() > 100
