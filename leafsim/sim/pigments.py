@@ -142,7 +142,7 @@ Example
 >>> p = ParamSet(PALETTES["maple"])
 >>> pig = init_pigments(100, p, seed=1)
 >>> step_pigments(pig, np.ones(100, np.float32), age=0.9, dt=0.0, params=p)
->>> rgb = pigments_to_rgb(pig, p)          # (100, 3) float32 linear RGB, now red-orange
+>>> rgb = pigments_to_rgb(pig, p)          # (100, 3) float32 linear RGB, now yellow
 """
 
 from __future__ import annotations
