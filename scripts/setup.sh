@@ -45,4 +45,5 @@ fi
 # first window does not sit at frame 0 for a minute; seconds when they are cached already
 echo "setup: compiling the simulation kernels (once per leafsim version; about a minute)"
 .venv/bin/python -m leafsim run --species oak --quality draft --frames 2 --json >/dev/null
+.venv/bin/python -c "from leafsim.sim.pigments import precompile; precompile()"
 echo "setup: ready (.venv/bin/leafsim)"

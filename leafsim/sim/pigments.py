@@ -591,3 +591,18 @@ def _slow_count(field, rmax, k, dG, dr, dry, smax_spot) -> int:
     return int(np.searchsorted(-rates, -r_star, side="left"))
 
 
+
+
+def precompile() -> None:
+    """Compile (and cache) every pigment kernel now: the small, sub-step and per-index ones
+    are otherwise compiled when a drying leaf first needs them, a pause of seconds mid-run
+    (``scripts/setup.sh`` calls this)."""
+    one = np.ones(1, np.float32)
+    arrays = [one.copy() for _ in range(5)] + [one.copy(), one.copy(), np.zeros(1, np.float32)]
+    co = np.zeros(7, np.float32)
+    idx = np.zeros(1, np.int64)
+    _kernel_tiny(*arrays, 0.0, 0.0, 0.0, co)
+    _kernel_small(*arrays, 0.0, 0.0, 0.0, co)
+    _kernel_substeps(*arrays, np.zeros(1, np.float32), 0.0, 0.0, co)
+    _kernel_small_idx(*arrays, idx, 0.0, 0.0, 0.0, co)
+    _kernel_substeps_idx(*arrays, idx, np.zeros(1, np.float32), 0.0, 0.0, co)
