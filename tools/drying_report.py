@@ -23,6 +23,7 @@ from leafsim.config.species import get_species, load_library
 from leafsim.pipeline import build_leaf
 from leafsim.sim.metrics import Probe
 from leafsim.sim.run import Run
+from leafsim.sim.curl import dried_shape
 from leafsim.sim.shape import leaf_frame, shape_metrics
 from leafsim.sim.veinframe import vein_frame_curl
 
@@ -57,6 +58,7 @@ def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides:
            "margin_lift": round(f["margin_lift"], 4), "area_3d": round(f["area_3d"], 4),
            "area_top": round(f["area_top"], 4), "inverted": shape_metrics(model, st)["inverted"],
            "vein_frame_curl": round(vein_frame_curl(model, st.particle_q), 4),
+           **dried_shape(model, st),  # margin roll, midrib fold, wrinkles (leafsim.sim.curl)
            "particles": model.particle_count, "fresh_mass_g": round(1e3 * float(model.particle_mass0.sum()), 3)}
     if snap_dir is not None:
         _pictures(sp, p, model, st, snap_dir / f"{key}_{scene}.png")
@@ -106,6 +108,15 @@ def render(rows: list) -> str:
                    + (f"{g['vein_frame_curl']:+.3f} | " if "vein_frame_curl" in g else "— | ")
                    + (f"{_pct(f['area_top'])} | {_pct(f['area_3d'])} | {_pct(f['margin_lift'])} | " if f else "— | — | — | ")
                    + f"{g['inverted']}/{f.get('inverted', '—')} | {g['seconds']:.0f}/{f.get('seconds', float('nan')):.0f} |")
+    if any("midrib_fold_deg" in by[(k, "ground")] for k in keys):  # reports made since leafsim.sim.curl
+        out += ["", "| species | margin roll (mean / p90) | midrib fold | wrinkle RMS / L | wrinkle wavelength / L |",
+                "|---|---|---|---|---|"]
+        for k in keys:
+            g = by[(k, "ground")]
+            if "midrib_fold_deg" in g:
+                wl = g["wrinkle_wavelength_L"]
+                out.append(f"| {k} | {g['margin_roll_deg']:.0f}° / {g['margin_roll_p90_deg']:.0f}° | {g['midrib_fold_deg']:.0f}° | "
+                           f"{g['wrinkle_rms_L']:.4f} | {'smooth' if wl is None else f'{wl:.3f}'} |")
     ground = [by[(k, "ground")] for k in keys]
     for m in ("area_top", "area_3d", "margin_lift"):
         lo, hi = min(ground, key=lambda r: r[m]), max(ground, key=lambda r: r[m])
