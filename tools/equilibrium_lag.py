@@ -1,0 +1,122 @@
+"""How far a drying leaf's XPBD state lags its static equilibrium, and what a drying path on a
+coarser mesh (two-grid) gives: the measurements behind docs/performance.md ("How far the
+drying lags its equilibrium").
+
+    python tools/equilibrium_lag.py lag maple fine        # dry to 2 %, then 800 frames with and without drying
+    python tools/equilibrium_lag.py twogrid maple draft   # dry on the draft mesh, finish on the default one
+
+``lag``: the leaf at the defaults is dried to 2 % water; from that state it runs on twice,
+800 frames each: with osmosis off (the shape creeps towards the equilibrium of that water
+state) and on (the last water leaves).  ``twogrid``: the water, rest lengths and plastic
+angles come from osmosis and shrink on the default mesh (no mechanics); the mechanics runs
+on the coarse mesh of quality LEVEL until the default mesh is dry; its positions and
+velocities are then carried to the default mesh by a moving-least-squares affine fit over
+the 12 nearest coarse particles (a fixed sparse matrix from the rest positions), and the
+default mesh runs the rest of the accuracy protocol (to 1.15 × the time to dry).  Both print
+the probe scalars (leafsim.sim.metrics) and CPU seconds.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+import scipy.sparse as sps
+from scipy.spatial import cKDTree
+
+from leafsim.config.presets import QUALITY
+from leafsim.config.species import get_species
+from leafsim.measure.accuracy import DRY_WATER, SETTLE
+from leafsim.pipeline import build_leaf, leaf_shape
+from leafsim.sim.metrics import Probe, field_errors
+from leafsim.sim.run import Run
+
+
+def prolongation(coarse, fine, k: int = 12) -> sps.csr_matrix:
+    """(n_fine, n_coarse) matrix P with x_fine = P x_coarse: per fine particle the value at its
+    rest position of the affine least-squares fit (Gaussian weights) over its k nearest coarse
+    particles in the rest state (both layers, so the fit spans the thickness)."""
+    Xc, Xf = coarse.particle_rest, fine.particle_rest
+    d, idx = cKDTree(Xc).query(Xf, k=k)
+    h = d[:, -1:] + 1e-12
+    w = np.exp(-(d / (0.5 * h)) ** 2)
+    vals = np.empty((len(Xf), k))
+    for i in range(len(Xf)):
+        A = np.column_stack([np.ones(k), (Xc[idx[i]] - Xf[i]) / h[i, 0]])
+        AtW = A.T * w[i]
+        vals[i] = np.linalg.solve(AtW @ A + 1e-9 * np.eye(4), AtW)[0]
+    return sps.csr_matrix((vals.ravel(), (np.repeat(np.arange(len(Xf)), k), idx.ravel())), shape=(len(Xf), len(Xc)))
+
+
+def _line(tag: str, f: dict, ref: dict | None, L: float, extra: str = "") -> str:
+    s = f"{tag:34s} lift {f['margin_lift']:.4f}  3D {f['area_3d']:.4f}  top {f['area_top']:.4f}"
+    if ref is not None:
+        e = field_errors(f, ref, L)
+        s += f"  | against {ref['_name']}: position {e['position_rms']:.4f} L, lift {e['r_margin_lift']:.3f}, top {e['r_area_top']:.3f}"
+    return s + extra
+
+
+def _dry(run: Run, w0: float) -> int:
+    n = 0
+    while run.state.particle_water.sum() > DRY_WATER * w0:
+        run.step()
+        n += 1
+    return n
+
+
+def lag(species: str, level: str, frames: int = 800) -> None:
+    sp = get_species(species)
+    base = sp.params.with_overrides({"effects.colour": False})
+    p = base.with_overrides(QUALITY[level])
+    m = build_leaf(sp, p, 0).model
+    probe = Probe(leaf_shape(sp, base))
+    w0 = float(m.particle_water0.sum())
+    r = Run(m, p, seed=0)
+    t0 = time.process_time()
+    n = _dry(r, w0)
+    f0 = dict(probe.fields(m, r.state), _name="the state at 2 %")
+    print(_line(f"{level}, dry after {n} frames", f0, None, probe.length, f"  cpu {time.process_time() - t0:.1f} s"))
+    for tag, over in (("drying stopped", {"effects.osmosis": False}), ("drying on", {})):
+        st = r.state.copy()
+        rr = Run(m, p.with_overrides(over), state=st, seed=0)
+        for j in range(1, frames + 1):
+            rr.step()
+            if j % 100 == 0:
+                print(_line(f"{tag} +{j} (water {st.particle_water.sum() / w0:.4f})", probe.fields(m, st), f0, probe.length))
+
+
+def twogrid(species: str, level: str) -> None:
+    sp = get_species(species)
+    base = sp.params.with_overrides({"effects.colour": False})
+    pc = base.with_overrides(QUALITY[level])
+    mc, mf = build_leaf(sp, pc, 0).model, build_leaf(sp, base, 0).model
+    probe = Probe(leaf_shape(sp, base))
+    P = prolongation(mc, mf)
+    w0 = float(mf.particle_water0.sum())
+    t0 = time.process_time()
+    rf = Run(mf, base, effects=["osmosis", "shrink"], seed=0)
+    n = _dry(rf, w0)
+    t_os = time.process_time() - t0
+    rc = Run(mc, pc, seed=0)
+    t0 = time.process_time()
+    for _ in range(n):
+        rc.step()
+    t_c = time.process_time() - t0
+    print(f"{species}: default mesh dry after {n} frames; osmosis + shrink on it {t_os:.1f} s, mechanics on the {level} mesh {t_c:.1f} s")
+    st = rf.state
+    st.particle_q[:] = P @ rc.state.particle_q
+    st.particle_qd[:] = P @ rc.state.particle_qd
+    run = Run(mf, base, state=st, seed=0)
+    t0 = time.process_time()
+    end = int(np.ceil(SETTLE * n))
+    for j in range(1, end - n + 1):
+        run.step()
+        if j in (25, 50, 100, 200) or j == end - n:
+            print(_line(f"default mesh +{j}", probe.fields(mf, st), None, probe.length, f"  cpu {time.process_time() - t0:.1f} s"))
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 4 or sys.argv[1] not in ("lag", "twogrid"):
+        sys.exit("usage: python tools/equilibrium_lag.py lag|twogrid SPECIES LEVEL")
+    (lag if sys.argv[1] == "lag" else twogrid)(sys.argv[2], sys.argv[3])
