@@ -196,6 +196,19 @@ _b("osmosis.through_thickness", True, "Water also flows between the two layers t
 _i("osmosis.every", 1, 1, 50, "frames", "Solve osmosis and evaporation every k-th frame over k Δt (water moves far slower than the blade: a cheaper frame for a small error, see docs/accuracy.md).", G, False)
 _c("osmosis.solver", "auto", ("auto", "direct", "cg", "jacobi"), "Linear solver of the implicit osmosis step.", G, False)
 _f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True)
+_f("osmosis.g_min", 4.0, 0.1, 50.0, "mmol/(m²·s)", "Minimum (cuticular) leaf conductance to water vapour after the stomata have shut, both sides together per leaf area (Duursma et al. 2019 compile 1–11 for our genera); used when environment.drive = weather.", G, False, log=True)
+_f("osmosis.g_stomata", 60.0, 0.0, 1000.0, "mmol/(m²·s)", "Stomatal conductance of the detached leaf while its stomata are open (environment.drive = weather); they shut as the tissue loses water (osmosis.stomata_*_rwc).", G, False)
+_f("osmosis.stomata_top", 0.0, 0.0, 1.0, "", "Share of the stomatal conductance on the top (adaxial) surface: 0 = hypostomatous (the trees here), 0.5 = amphistomatous.", G, False)
+_f("osmosis.stomata_open_rwc", 0.97, 0.0, 1.0, "", "Relative water content above which the stomata are fully open (weather drive).", G, False)
+_f("osmosis.stomata_closed_rwc", 0.85, 0.0, 1.0, "", "Relative water content below which the stomata are shut and only the cuticle loses water (weather drive); linear between the two.", G, False)
+
+# ---------------------------------------------------------------- environment (live)
+G = "Environment"
+_c("environment.drive", "rates", ("rates", "weather"), "What drives evaporation: rates = the declared osmosis.evaporation_* per simulated second (a compressed clock); weather = temperature, humidity and wind through the cuticular, stomatal and boundary-layer conductances, in real time × environment.time_warp (docs/method.md §3).", G, False)
+_f("environment.temperature", 20.0, -10.0, 45.0, "°C", "Air (and leaf) temperature; sets the saturation vapour pressure (weather drive).", G, False)
+_f("environment.humidity", 0.5, 0.0, 0.99, "", "Relative humidity of the air, 0–1 (weather drive): the vapour-pressure deficit is e_s(T)(1 − RH).", G, False)
+_f("environment.wind", 0.5, 0.0, 20.0, "m/s", "Air speed over the leaf (weather drive): the boundary-layer conductance grows as √(u/d); still air counts as 0.1 m/s.", G, False)
+_f("environment.time_warp", 3.0e4, 1.0, 1.0e7, "s/s", "Real seconds of weather per simulated second (weather drive): drying takes hours to days, the blade's mechanics milliseconds, so the drying clock runs this much faster (3·10⁴: a day in ≈ 3 simulated seconds).", G, False, log=True)
 
 # ---------------------------------------------------------------- shrink (live)
 G = "Shrink"

@@ -97,6 +97,8 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
         raise LeafsimError(f"--resume: the model built now differs from the one in {path} (species config or code changed)")
     try:
         arrays = {f.name: np.array(data[f"state_{f.name}"]) for f in fields(State) if f.name != "pigments"}
+        if arrays["scalars"].shape == (2,):  # written before the weather clock: no weather time yet
+            arrays["scalars"] = np.append(arrays["scalars"], 0.0)
         pig = None
         if "pigments" in meta:
             pig = PigmentState(**{k: np.array(data[f"pig_{k}"]) for k in _PIGMENT_ARRAYS},

@@ -27,7 +27,7 @@ class State:
     particle_q : (n, 3) float64 positions [m];  particle_qd : (n, 3) velocities [m/s];
     particle_water : (n,) water [kg];  spring_rest : (s,) current rest lengths [m];
     hinge_plastic : (h,) plastic rest angle of the bending hinges [rad];
-    time [s], frame; pigments : :class:`leafsim.sim.pigments.PigmentState` or None (the
+    time [s], frame, weather_time [s]; pigments : :class:`leafsim.sim.pigments.PigmentState` or None (the
     :class:`~leafsim.sim.simulator.Simulator` gives every state it makes one).  Arrays are
     mutated in place by the simulator; ``copy()`` snapshots everything.
     """
@@ -39,12 +39,18 @@ class State:
     hinge_rest: np.ndarray
     hinge_plastic: np.ndarray
     vol_rest: np.ndarray
-    scalars: np.ndarray = field(default_factory=lambda: np.zeros(2))  # [time, frame]
+    scalars: np.ndarray = field(default_factory=lambda: np.zeros(3))  # [time, frame, weather time]
     pigments: Any = None
 
     @property
     def time(self) -> float:
         return float(self.scalars[0])
+
+    @property
+    def weather_time(self) -> float:
+        """Real seconds of weather the leaf has dried in (``environment.drive = weather``: Δt ×
+        the time warp in force at each frame; 0 while the rates drive)."""
+        return float(self.scalars[2])
 
     @property
     def frame(self) -> int:

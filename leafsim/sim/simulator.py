@@ -78,6 +78,8 @@ class Simulator:
             self._colour = self._colour or Colour(self.model)
             self._colour.configure(params)
         self.dt = params["dynamics.dt"]
+        # the weather clock: real seconds per frame when the weather drives the drying
+        self.weather_dt = self.dt * params["environment.time_warp"] if params["environment.drive"] == "weather" else 0.0
         if self._watch and self.dynamic:
             from leafsim.sim.watchdog import Watchdog
 
@@ -119,6 +121,7 @@ class Simulator:
             t0 = t1
         state.scalars[0] += self.dt
         state.scalars[1] += 1
+        state.scalars[2] += self.weather_dt
         if self.watchdog is not None:
             self.watchdog.check(state)
             t1 = time.perf_counter()

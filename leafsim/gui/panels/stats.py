@@ -7,6 +7,7 @@ import numpy as np
 from imgui_bundle import imgui, implot
 
 from leafsim.gui.photo import UV_CORNERS, panel_quad, screen_rotation
+from leafsim.sim.environment import clock_text
 
 
 class StatsPanel:
@@ -25,7 +26,7 @@ class StatsPanel:
             imgui.text("building the first leaf ...")
             return
         c = s.counts()
-        imgui.text(f"frame {s.frame}   t = {s.time:.3f} s   {'playing' if pb.playing else 'paused'}")
+        imgui.text(f"frame {s.frame}   {clock_text(s.state, s.params)}   {'playing' if pb.playing else 'paused'}")
         imgui.text(f"particles {c['particles']} (T {c['particles_T']}, V {c['particles_V']})")
         imgui.text(f"springs {c['springs']}   triangles {c['triangles']}   hinges {c['hinges']}")
         ms = pb.last_ms

@@ -11,6 +11,7 @@ from imgui_bundle import imgui
 from leafsim.appearance.colormaps import colormap
 from leafsim.gui.layout import HEAT_UNITS
 from leafsim.gui.photo import overlay_grid
+from leafsim.sim.environment import clock_text
 
 
 class ViewOverlay:
@@ -27,7 +28,7 @@ class ViewOverlay:
         if s.ready:
             self.photo_overlay(dl)
             sp = s.shown_species  # the leaf on screen: the old species while a switch builds
-            txt = f"{sp.name}  frame {s.frame}  t = {s.time:.3f} s  water {100 * s.water_fraction():.1f} %"
+            txt = f"{sp.name}  frame {s.frame}  {clock_text(s.state, s.params)}  water {100 * s.water_fraction():.1f} %"
             dl.add_text((x0 + 12, y0 + h - 24), imgui.get_color_u32((0.1, 0.1, 0.1, 1.0)), txt)
             if app.view in HEAT_UNITS and app.renderer is not None and app.renderer.mesh is not None:
                 self.legend(dl, x0 + w - 70, y0 + 44, h * 0.33)

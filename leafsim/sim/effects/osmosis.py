@@ -8,6 +8,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from leafsim.sim.environment import Weather
 from leafsim.sim.kernels import osmosis as ko
 from leafsim.sim.model import (
     LAYER_T,
@@ -107,8 +108,15 @@ class Osmosis:
         # layer is thin (edge_factor).  Light tissue and the margin therefore dry first relative
         # to their content — the pattern that drives margin-first shrinking and colour;
         # diffusion (osmosis) and the veins' water work against it.
-        self.loss_ref = self.model.particle_area * edge_factor(self.model, params["osmosis.edge_evaporation"],
-                                                               params["osmosis.edge_length"])
+        edge = edge_factor(self.model, params["osmosis.edge_evaporation"], params["osmosis.edge_length"])
+        self.weather = None
+        if params["environment.drive"] == "weather":
+            # the rates follow the weather and the tissue's water (environment.py); the margin's
+            # thinner boundary layer raises the air's conductance there, not the leaf's
+            self.weather = Weather(self.model, params, edge)
+            self.loss_ref = self.model.particle_area.copy()
+        else:
+            self.loss_ref = self.model.particle_area * edge
         self.loss_ref *= patch_factor(self.model, params["osmosis.patchiness"])
         self.dt = dt
         key = (D, dt, solver, through)
@@ -135,6 +143,8 @@ class Osmosis:
     def apply(self, state: State):
         w = state.particle_water
         M = self.M
+        if self.weather is not None:
+            self.weather.rates(w, out=self.rate)
         if self.solver == "direct":  # rhs, triangular solves and w = max(c, 0) M in one numba call
             ko.direct_step(M, w, self.loss_ref, self.rate, self.dt, *self.factors, self.c, self.rhs, self.loss)
             self.last_iterations = 1
