@@ -133,6 +133,9 @@ class Dynamics:
         # bending: D = E h³ / 12(1 − ν²) on discrete-shell hinges, veins add E_v I / ℓ̄
         self.kbend = E * h ** 3 / (12.0 * (1.0 - params["material.poisson"] ** 2))
         self.kdry = params["material.dry_stiffening"]
+        self.turgor = params["material.turgor_share"]
+        self.tlp = params["material.turgor_loss_rwc"]
+        self.dry_power = params["material.stiffening_power"]
         np.multiply(Ev, m.hinge_rod[self.hperm], out=self.hrod)
         self.replace = params["dynamics.voronoi"] == "replace"
         self.scene = params["dynamics.scene"]
@@ -160,7 +163,7 @@ class Dynamics:
         kb.pack_volumes(self.vidx, self.invm, self.vrest, self.vrec)
         if self.pbd and self.bending:
             kp.hinge_compliance(self.hidx, state.particle_water, m.particle_water0, self.kbend, self.kdry, self.hgeom,
-                                self.hrod, 1.0 / (self.h * self.h), self.halpha)
+                                self.hrod, 1.0 / (self.h * self.h), self.halpha, self.turgor, self.tlp, self.dry_power)
             np.take(state.hinge_rest, self.hperm, out=self.hrest)
             kb.pack_hinges(self.hidx, self.invm, self.hrest, self.halpha, self.hrec)
             hinges = (self.hidx, self.hrec, self.hlam, self.hblocks)

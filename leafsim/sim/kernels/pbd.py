@@ -222,10 +222,17 @@ def uninvert(q, invm, vidx, hmin, vonly, ground, dint):
 
 
 @njit(cache=True, fastmath=FASTMATH, nogil=True)
-def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha):
-    """XPBD compliance / Δt² of every hinge: k = D (1 + k_dry · clip(dry, 0, 1)) · geom + k_rod
-    [N·m/rad], D the blade's bending stiffness [N·m], geom = 3|e|²/(A₁+A₂), k_rod the vein's
-    E_v I/ℓ̄ share; dry = 1 − (w_a + w_b) / (w0_a + w0_b) over the hinge's shared edge a–b."""
+def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha, turgor=0.0, tlp=0.85, power=1.0):
+    """XPBD compliance / Δt² of every hinge: k = D s(dry) · geom + k_rod c(dry) [N·m/rad], D the
+    blade's bending stiffness [N·m], geom = 3|e|²/(A₁+A₂), k_rod the vein's E_v I/ℓ̄ share;
+    dry = 1 − (w_a + w_b) / (w0_a + w0_b) over the hinge's shared edge a–b, RWC = 1 − dry.
+
+    Turgor (share T of the fresh stiffness, lost linearly down to the turgor-loss point RWC =
+    ``tlp``: t = clip((RWC − tlp)/(1 − tlp), 0, 1)) and dry stiffening (k_dry, growing as dry^p):
+    c = (1 − T) + T t for the veins and s = c + (k_dry + T) dry^p for the lamina, so a fresh
+    leaf has D, a dried one D (1 + k_dry), and one at the turgor-loss point wilts.  T = 0,
+    p = 1 is the plain law D (1 + k_dry dry) + k_rod."""
+    plain = turgor == 0.0 and power == 1.0
     for e in range(hidx.shape[0]):
         a = hidx[e, 2]
         b = hidx[e, 3]
@@ -234,7 +241,14 @@ def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha):
             dry = 0.0
         elif dry > 1.0:
             dry = 1.0
-        halpha[e] = inv_h2 / (kbend * (1.0 + kdry * dry) * hgeom[e] + krod[e])
+        if plain:
+            halpha[e] = inv_h2 / (kbend * (1.0 + kdry * dry) * hgeom[e] + krod[e])
+        else:
+            t = (1.0 - dry - tlp) / max(1.0 - tlp, 1e-9)
+            t = min(max(t, 0.0), 1.0)
+            c = 1.0 - turgor + turgor * t
+            s = c + (kdry + turgor) * dry ** power
+            halpha[e] = inv_h2 / (kbend * s * hgeom[e] + krod[e] * c)
 
 
 @njit(cache=True, fastmath=FASTMATH, nogil=True)
