@@ -2,8 +2,9 @@
 coarser mesh (two-grid) gives: the measurements behind docs/performance.md ("How far the
 drying lags its equilibrium").
 
-    python tools/equilibrium_lag.py lag maple fine        # dry to 2 %, then 800 frames with and without drying
-    python tools/equilibrium_lag.py twogrid maple draft   # dry on the draft mesh, finish on the default one
+    python tools/equilibrium_lag.py lag maple fine                  # dry to 2 %, then 800 frames with and without drying
+    python tools/equilibrium_lag.py direct maple fine fine.pkl      # the accuracy protocol's run, probe fields pickled
+    python tools/equilibrium_lag.py twogrid maple draft 0.15 fine.pkl ref.pkl   # draft-mesh path to 15 % water
 
 ``lag``: the leaf at the defaults is dried to 2 % water; from that state it runs on twice,
 800 frames each: with osmosis off (the shape creeps towards the equilibrium of that water
@@ -86,37 +87,100 @@ def lag(species: str, level: str, frames: int = 800) -> None:
                 print(_line(f"{tag} +{j} (water {st.particle_water.sum() / w0:.4f})", probe.fields(m, st), f0, probe.length))
 
 
-def twogrid(species: str, level: str) -> None:
+def direct(species: str, level: str, out: str) -> None:
+    """The accuracy protocol's run (dry to 2 %, on to 1.15 × that time) at quality ``level``
+    (or ``reference``: leafsim accuracy's reference setting); probe fields pickled to ``out``."""
+    import pickle
+
+    from leafsim.measure.accuracy import reference_setting
+
+    sp = get_species(species)
+    base = sp.params.with_overrides({"effects.colour": False})
+    over = reference_setting(base).overrides if level == "reference" else QUALITY[level]
+    p = base.with_overrides(over)
+    m = build_leaf(sp, p, 0).model
+    probe = Probe(leaf_shape(sp, base))
+    r = Run(m, p, seed=0)
+    w0 = float(m.particle_water0.sum())
+    t0 = time.process_time()
+    n = _dry(r, w0)
+    at_dry = probe.fields(m, r.state)
+    cpu_dry = time.process_time() - t0
+    for _ in range(int(np.ceil(SETTLE * n)) - n):
+        r.step()
+    end = probe.fields(m, r.state)
+    cpu = time.process_time() - t0
+    with open(out, "wb") as f:
+        pickle.dump({"species": species, "level": level, "particles": m.particle_count, "dry_frames": n,
+                     "cpu_dry": cpu_dry, "cpu": cpu, "dry": at_dry, "end": end}, f)
+    print(_line(f"{level}: {m.particle_count} particles, cpu {cpu_dry:.0f} / {cpu:.0f} s", end, None, probe.length))
+
+
+def _relative(f: dict, ref: dict, probe) -> str:
+    """Position and height error relative to the reference's own deformation, as leafsim accuracy."""
+    L = probe.length
+    e = field_errors(f, ref, L)
+    deform = float(np.sqrt(((ref["q_own"] - probe.rest3) ** 2).sum(1).mean())) / L
+    height = float(np.sqrt(((ref["q"][:, 2] - ref["q"][:, 2].min()) ** 2).mean())) / L
+    return (f"position {e['position_rms'] / deform:.1%}, height {e['height_rms'] / height:.1%}, "
+            f"lift {e['r_margin_lift']:.1%}, 3D {e['r_area_3d']:.1%}, top {e['r_area_top']:.1%}")
+
+
+def twogrid(species: str, level: str, handover: float = DRY_WATER, against=()) -> None:
+    """Mechanics on the ``level`` mesh until the default mesh's water falls to ``handover``,
+    then on the default mesh to the protocol's end; errors against the pickled runs of
+    :func:`direct` (``against``: paths)."""
+    import pickle
+
     sp = get_species(species)
     base = sp.params.with_overrides({"effects.colour": False})
     pc = base.with_overrides(QUALITY[level])
     mc, mf = build_leaf(sp, pc, 0).model, build_leaf(sp, base, 0).model
     probe = Probe(leaf_shape(sp, base))
+    refs = []
+    for path in against:
+        with open(path, "rb") as f:
+            refs.append(pickle.load(f))
     P = prolongation(mc, mf)
     w0 = float(mf.particle_water0.sum())
-    t0 = time.process_time()
     rf = Run(mf, base, effects=["osmosis", "shrink"], seed=0)
-    n = _dry(rf, w0)
-    t_os = time.process_time() - t0
     rc = Run(mc, pc, seed=0)
     t0 = time.process_time()
-    for _ in range(n):
+    n = 0
+    while rf.state.particle_water.sum() > handover * w0:
+        rf.step()
         rc.step()
-    t_c = time.process_time() - t0
-    print(f"{species}: default mesh dry after {n} frames; osmosis + shrink on it {t_os:.1f} s, mechanics on the {level} mesh {t_c:.1f} s")
+        n += 1
+    t_path = time.process_time() - t0
     st = rf.state
     st.particle_q[:] = P @ rc.state.particle_q
     st.particle_qd[:] = P @ rc.state.particle_qd
     run = Run(mf, base, state=st, seed=0)
     t0 = time.process_time()
-    end = int(np.ceil(SETTLE * n))
-    for j in range(1, end - n + 1):
+    while st.particle_water.sum() > DRY_WATER * w0:
         run.step()
-        if j in (25, 50, 100, 200) or j == end - n:
-            print(_line(f"default mesh +{j}", probe.fields(mf, st), None, probe.length, f"  cpu {time.process_time() - t0:.1f} s"))
+    n_dry = st.frame
+    at_dry, t_dry = probe.fields(mf, st), time.process_time() - t0
+    for _ in range(int(np.ceil(SETTLE * n_dry)) - n_dry):
+        run.step()
+    end, t_end = probe.fields(mf, st), time.process_time() - t0
+    print(f"{species}: path on the {level} mesh for {n} frames (water {handover:g}), {t_path:.1f} s; "
+          f"default mesh to dry (frame {n_dry}) {t_dry:.1f} s, to the protocol end {t_end:.1f} s")
+    print(_line("two-grid at dry", at_dry, None, probe.length) + f"  cpu {t_path + t_dry:.1f} s")
+    print(_line("two-grid at the protocol end", end, None, probe.length) + f"  cpu {t_path + t_end:.1f} s")
+    for ref in refs:
+        print(f"  against {ref['level']} at dry ({ref['cpu_dry']:.0f} s): {_relative(at_dry, ref['dry'], probe)}")
+        print(f"  against {ref['level']} at the end ({ref['cpu']:.0f} s): {_relative(end, ref['end'], probe)}")
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 4 or sys.argv[1] not in ("lag", "twogrid"):
-        sys.exit("usage: python tools/equilibrium_lag.py lag|twogrid SPECIES LEVEL")
-    (lag if sys.argv[1] == "lag" else twogrid)(sys.argv[2], sys.argv[3])
+    a = sys.argv[1:]
+    if len(a) >= 3 and a[0] == "lag":
+        lag(a[1], a[2])
+    elif len(a) == 4 and a[0] == "direct":
+        direct(a[1], a[2], a[3])
+    elif len(a) >= 3 and a[0] == "twogrid":
+        twogrid(a[1], a[2], float(a[3]) if len(a) > 3 else DRY_WATER, a[4:])
+    else:
+        sys.exit("usage: python tools/equilibrium_lag.py lag SPECIES LEVEL | direct SPECIES LEVEL OUT.pkl | "
+                 "twogrid SPECIES LEVEL [HANDOVER_WATER [RUN.pkl ...]]")
