@@ -10,6 +10,7 @@ the GUI's session) builds a leaf with :func:`build_leaf` and simulates it with
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
@@ -201,4 +202,20 @@ def build_leaf(sp: Species, params: ParamSet, seed: int, report=None) -> BuiltLe
     veins = species_veins(sp, shape, params, seed)
     report(0.5, "blade: particles, Delaunay/Voronoi layers, springs")
     model = build_blade(shape, veins, params, seed)
+    coarse = path_params_for(params)
+    if coarse is not None:
+        report(0.85, "blade: the coarser mesh that carries the drying (dynamics.path)")
+        model = replace(model, path=build_blade(shape, veins, coarse, seed))
     return BuiltLeaf(shape, veins, model)
+
+
+def path_params_for(params: ParamSet) -> ParamSet | None:
+    """The parameters of the drying-path mesh (``dynamics.path``), or None when the leaf's own
+    mesh carries the whole drying (``own``, or a mesh not finer than the path's)."""
+    level = params["dynamics.path"]
+    if level == "own":
+        return None
+    from leafsim.sim.path import path_params
+
+    p = path_params(params, level)
+    return p if p["mesh.spacing"] > params["mesh.spacing"] * 1.001 else None

@@ -140,7 +140,7 @@ def run_setting(species, base: ParamSet, setting: Setting, t_end: float | None, 
     (upwards only, so nothing starts below the ground): the same leaf, started a little less
     than perfectly flat."""
     p = base.with_overrides({**setting.overrides, "effects.colour": False})
-    key = tuple(sorted((k, v) for k, v in p.items() if k.startswith(("mesh.", "mass.", "veins.", "outline."))))
+    key = tuple(sorted((k, v) for k, v in p.items() if k.startswith(("mesh.", "mass.", "veins.", "outline.", "dynamics.path"))))
     builds = builds if builds is not None else {}
     if key not in builds:
         builds[key] = build_leaf(species, p, seed).model

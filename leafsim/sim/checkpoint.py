@@ -46,7 +46,9 @@ def model_fingerprint(model: Model) -> str:
 
 def save_checkpoint(path, model: Model, state: State, meta: dict) -> None:
     """Write ``state`` (and ``meta``, plus format, frame and model fingerprint) atomically."""
-    arrays = {f"state_{f.name}": getattr(state, f.name) for f in fields(State) if f.name != "pigments"}
+    arrays = {f"state_{f.name}": getattr(state, f.name) for f in fields(State) if f.name not in ("pigments", "path")}
+    if state.path is not None:  # the drying-path mesh's state (leafsim.sim.path)
+        arrays.update({f"path_{f.name}": getattr(state.path, f.name) for f in fields(State) if f.name not in ("pigments", "path")})
     record = dict(meta, format=FORMAT, frame=state.frame, model=model_fingerprint(model))
     pig = state.pigments
     if pig is not None:
@@ -96,9 +98,12 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
     if meta.get("model") != model_fingerprint(model):
         raise LeafsimError(f"--resume: the model built now differs from the one in {path} (species config or code changed)")
     try:
-        arrays = {f.name: np.array(data[f"state_{f.name}"]) for f in fields(State) if f.name != "pigments"}
+        arrays = {f.name: np.array(data[f"state_{f.name}"]) for f in fields(State) if f.name not in ("pigments", "path")}
         if arrays["scalars"].shape == (2,):  # written before the weather clock: no weather time yet
             arrays["scalars"] = np.append(arrays["scalars"], 0.0)
+        coarse = None
+        if model.path is not None:
+            coarse = State(**{f.name: np.array(data[f"path_{f.name}"]) for f in fields(State) if f.name not in ("pigments", "path")})
         pig = None
         if "pigments" in meta:
             pig = PigmentState(**{k: np.array(data[f"pig_{k}"]) for k in _PIGMENT_ARRAYS},
@@ -107,7 +112,7 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
         raise LeafsimError(f"{path}: checkpoint is missing {e.args[0]}") from None
     except Exception as e:  # a damaged member: zlib, numpy or a wrong type
         raise LeafsimError(f"{path}: cannot read checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:80]})") from None
-    state = State(**arrays, pigments=pig)
+    state = State(**arrays, pigments=pig, path=coarse)
     check_state(state, model, f"{path}: checkpoint", frame=meta.get("frame"))
     return state
 
@@ -123,8 +128,12 @@ def check_state(state: State, model: Model, where: str, frame=None) -> None:
     leaf's total, rest lengths in (0, 2 l⁰], rest volumes within 10 × the fresh ones, hinge
     rest angles within ±π, time and frame non-negative (the frame the record names).  Raises one LeafsimError line naming the array."""
     fresh = model.state()
+    if (state.path is None) != (model.path is None):
+        raise _fail(where, "the drying-path mesh's state " + ("is missing" if state.path is None else "belongs to no path mesh"))
+    if state.path is not None:
+        check_state(state.path, model.path, f"{where} (drying-path mesh)")
     for f in fields(State):
-        if f.name == "pigments":
+        if f.name in ("pigments", "path"):
             continue
         a, ref = getattr(state, f.name), getattr(fresh, f.name)
         if not isinstance(a, np.ndarray) or a.shape != ref.shape or a.dtype != ref.dtype:

@@ -41,6 +41,7 @@ class State:
     vol_rest: np.ndarray
     scalars: np.ndarray = field(default_factory=lambda: np.zeros(3))  # [time, frame, weather time]
     pigments: Any = None
+    path: Any = None  # the State of the drying-path mesh (Model.path), while it carries the mechanics
 
     @property
     def time(self) -> float:
@@ -57,8 +58,9 @@ class State:
         return int(self.scalars[1])
 
     def copy(self) -> "State":
-        arrays = {f: np.array(getattr(self, f)) for f in self.__dataclass_fields__ if f != "pigments"}
-        return State(**arrays, pigments=None if self.pigments is None else self.pigments.copy())
+        arrays = {f: np.array(getattr(self, f)) for f in self.__dataclass_fields__ if f not in ("pigments", "path")}
+        return State(**arrays, pigments=None if self.pigments is None else self.pigments.copy(),
+                     path=None if self.path is None else self.path.copy())
 
 
 @dataclass(frozen=True)
@@ -108,6 +110,11 @@ class Model:
     particle_patch (n,) the seeded smooth patch field of :func:`leafsim.blade.build.patch_field`
     (zero mean, unit spread): where it is high the blade loses water faster
     (``osmosis.patchiness``); None for models made without it (zero).
+
+    Drying path
+    -----------
+    path : a coarser Model of the same leaf (same outline and veins) that carries the mechanics
+    while the leaf dries (``dynamics.path``, :mod:`leafsim.sim.path`); None: this mesh does.
 
     Veins for renderers
     -------------------
@@ -162,6 +169,7 @@ class Model:
     spacing: float
     vein_edge_share: float
     particle_patch: np.ndarray | None = None
+    path: "Model | None" = None
 
     # ------------------------------------------------------------------ counts
     @property
@@ -198,7 +206,8 @@ class Model:
         return out
 
     def state(self) -> State:
-        """A fresh State at rest: positions = rest, zero velocity, full water."""
+        """A fresh State at rest: positions = rest, zero velocity, full water (and a fresh
+        state of the drying-path mesh when the model has one)."""
         return State(
             particle_q=self.particle_rest.copy(),
             particle_qd=np.zeros_like(self.particle_rest),
@@ -207,6 +216,7 @@ class Model:
             hinge_rest=np.zeros(self.hinge_count),
             hinge_plastic=np.zeros(self.hinge_count),
             vol_rest=self.vol_rest0.copy(),
+            path=None if self.path is None else self.path.state(),
         )
 
     def to_report(self) -> dict:

@@ -46,6 +46,8 @@ class Simulator:
         self._shrink = None
         self._dynamics = None
         self._colour = None
+        self._path = None
+        self._path_was_active = True
         self._override = None if effects is None else set(effects)
         if self._override is not None:
             bad = self._override - set(EFFECTS)
@@ -72,6 +74,16 @@ class Simulator:
         if self.dynamic:
             self._dynamics = self._dynamics or Dynamics(self.model)
             self._dynamics.configure(params, e)
+        if self.dynamic and self.model.path is not None:
+            # the drying's mechanics on the model's coarser path mesh (leafsim.sim.path)
+            from leafsim.sim.path import DryingPath
+
+            if self._path is None:
+                self._path = DryingPath(self.model, params, e, seed=self.seed)
+            else:
+                self._path.set_params(params)
+        else:
+            self._path = None
         if self._colour is not None or e["colour"]:
             # pigments exist whenever a state exists (the young colour is drawn even when the
             # aging effect is off), so the stage is configured once made
@@ -97,7 +109,9 @@ class Simulator:
 
     @property
     def iterations(self) -> int:
-        """PBD iterations used in the last step."""
+        """PBD iterations used in the last step (on the path mesh while it carries the mechanics)."""
+        if self._path is not None and self._path_was_active:
+            return self._path.sim.iterations
         return self._dynamics.last_iterations if (self._dynamics and self.dynamic) else 0
 
     def step(self, state: State) -> dict:
@@ -115,9 +129,16 @@ class Simulator:
             ms["shrink"] = (t1 - t0) * 1e3
             t0 = t1
         if self.dynamic:
-            self._dynamics.apply(state)
+            path = self._path is not None and self._path.active(state)
+            if path:
+                if not self._path_was_active:
+                    self._path.sync(state)  # the hand-over level was raised live: start from here
+                self._path.step(state)
+            else:
+                self._dynamics.apply(state)
+            self._path_was_active = path
             t1 = time.perf_counter()
-            ms["dynamics"] = (t1 - t0) * 1e3
+            ms["path" if path else "dynamics"] = (t1 - t0) * 1e3
             t0 = t1
         state.scalars[0] += self.dt
         state.scalars[1] += 1

@@ -1,0 +1,115 @@
+"""The drying path on a coarser mesh (``dynamics.path``): the blade's mechanics runs on a
+coarser mesh of the same leaf while most of the water leaves, and the leaf's own mesh takes
+over for the rest (``dynamics.handover``).
+
+Drying is quasi-static: the dried shape depends on the path only through where the lobes
+buckle and set, which a coarser mesh follows, while the shape's detail needs the leaf's own
+mesh only at the end (docs/performance.md, "Handing over earlier": with the last 15 % of the
+water dried on the own mesh, maple's dried shape is as close to the converged reference as the
+direct run's, for 2.5–3.3× less CPU).
+
+During the path phase (the leaf's water fraction above the hand-over level) every frame:
+
+1. osmosis and shrink run on the leaf's own mesh as always (its water, rest lengths and
+   plastic angles stay its own, so nothing needs carrying over at the hand-over);
+2. the coarse mesh takes the own mesh's relative water field (restricted by a fixed matrix),
+   shrinks and steps its mechanics (its substeps and inertia scaling from ``--quality draft``);
+3. the own mesh's positions and velocities are the coarse ones prolonged by a fixed matrix.
+
+Both matrices are moving-least-squares affine fits over the 12 nearest particles of the other
+mesh in the rest state (both layers, so the fit spans the thickness): exact for any affine
+deformation, so a rigid motion or a uniform shrink carries over unchanged.  Water only falls,
+so the phase is a function of the state: a resumed run picks up where it was.
+
+Example
+-------
+>>> model = build_leaf(sp, ParamSet({"dynamics.path": "draft"}), seed=0).model   # doctest: +SKIP
+>>> model.path.particle_count < model.particle_count                                # doctest: +SKIP
+True
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sps
+from scipy.spatial import cKDTree
+
+from leafsim.sim.model import Model, State
+
+#: neighbours of each MLS fit
+NEIGHBOURS = 12
+#: the quality level whose mesh and solver settings a ``draft`` path uses
+PATH_LEVELS = {"draft": "draft"}
+
+
+def transfer_matrix(src: Model, dst: Model, k: int = NEIGHBOURS) -> sps.csr_matrix:
+    """(n_dst, n_src) matrix T with x_dst = T x_src: per ``dst`` particle the value at its rest
+    position of the affine least-squares fit (Gaussian weights) over its k nearest ``src``
+    particles in the rest state.  Rows sum to 1 and reproduce affine fields exactly."""
+    Xs, Xd = src.particle_rest, dst.particle_rest
+    k = min(k, len(Xs))
+    d, idx = cKDTree(Xs).query(Xd, k=k)
+    h = d[:, -1:] + 1e-12
+    w = np.exp(-(d / (0.5 * h)) ** 2)                                   # (n, k)
+    A = np.concatenate([np.ones((len(Xd), k, 1)), (Xs[idx] - Xd[:, None, :]) / h[:, :, None]], axis=2)  # (n, k, 4)
+    AtW = np.transpose(A, (0, 2, 1)) * w[:, None, :]                    # (n, 4, k)
+    M = AtW @ A + 1e-9 * np.eye(4)
+    vals = np.linalg.solve(M, AtW)[:, 0, :]                             # first row: the value at Xd
+    rows = np.repeat(np.arange(len(Xd)), k)
+    return sps.csr_matrix((vals.ravel(), (rows, idx.ravel())), shape=(len(Xd), len(Xs)))
+
+
+def path_params(params, level: str):
+    """The parameters the path mesh runs with: the leaf's, with the mesh and solver settings of
+    quality ``level``, no osmosis (its water comes from the own mesh) and no colour."""
+    from leafsim.config.presets import QUALITY
+
+    return params.with_overrides({**QUALITY[PATH_LEVELS[level]], "effects.osmosis": False, "effects.colour": False})
+
+
+class DryingPath:
+    """Steps the coarse mesh of ``model.path`` for a Simulator of ``model``.
+
+    Parameters
+    ----------
+    model : Model with ``path`` set; params : the leaf's ParamSet; effects : the enabled
+    effects of the leaf's simulator (the path runs shrink and dynamics with them).
+    """
+
+    def __init__(self, model: Model, params, effects: dict, seed: int = 0):
+        from leafsim.sim.simulator import Simulator
+
+        self.model, self.coarse = model, model.path
+        self.P = transfer_matrix(self.coarse, model)        # coarse → own (positions, velocities)
+        self.R = transfer_matrix(model, self.coarse)        # own → coarse (relative water)
+        self.level = params["dynamics.path"]
+        on = tuple(e for e in ("shrink", "pbd", "gravity", "bending", "ground", "self_collision") if effects.get(e))
+        self.sim = Simulator(self.coarse, path_params(params, self.level), effects=on, seed=seed)
+        self.handover = float(params["dynamics.handover"])
+        self._w0 = max(float(model.particle_water0.sum()), 1e-300)
+
+    def set_params(self, params) -> None:
+        self.handover = float(params["dynamics.handover"])
+        self.sim.set_params(path_params(params, self.level))
+
+    def active(self, state: State) -> bool:
+        """The coarse mesh carries the mechanics: the leaf still holds more than the hand-over
+        share of its water."""
+        return state.path is not None and float(state.particle_water.sum()) > self.handover * self._w0
+
+    def sync(self, state: State) -> None:
+        """Put the coarse mesh where the own mesh is (used when the path phase starts again,
+        after a live change of the hand-over level)."""
+        cs = state.path
+        cs.particle_q[:] = self.R @ state.particle_q
+        cs.particle_qd[:] = self.R @ state.particle_qd
+
+    def step(self, state: State) -> dict:
+        """One frame of the coarse mechanics; the own mesh takes its positions and velocities."""
+        cs = state.path
+        rel = self.R @ (state.particle_water / np.maximum(self.model.particle_water0, 1e-300))
+        np.multiply(np.clip(rel, 0.0, 1.0), self.coarse.particle_water0, out=cs.particle_water)
+        ms = self.sim.step(cs)
+        state.particle_q[:] = self.P @ cs.particle_q
+        state.particle_qd[:] = self.P @ cs.particle_qd
+        return ms

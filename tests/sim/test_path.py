@@ -1,0 +1,126 @@
+"""The drying path on a coarser mesh (``dynamics.path = draft``): the transfer matrices, the
+model it builds, the phases of a run, resume and a dried shape like the direct run's."""
+
+import json
+
+import numpy as np
+import pytest
+
+from leafsim.cli import main
+from leafsim.config.params import ParamSet
+from leafsim.config.species import get_species
+from leafsim.pipeline import build_leaf, leaf_shape
+from leafsim.sim.checkpoint import check_state
+from leafsim.base.errors import LeafsimError
+from leafsim.sim.metrics import Probe, field_errors
+from leafsim.sim.path import transfer_matrix
+from leafsim.sim.run import Run
+from leafsim.sim.simulator import Simulator
+
+# 3× the default evaporation: the own mesh still gets ≈ 150 frames after the hand-over
+FAST = {"osmosis.evaporation_top": 0.042, "osmosis.evaporation_bottom": 0.0315, "effects.colour": False}
+
+
+@pytest.fixture(scope="module")
+def maple():
+    sp = get_species("maple")
+    p = sp.params.with_overrides({**FAST, "dynamics.path": "draft"})
+    return sp, p, build_leaf(sp, p, 0).model
+
+
+@pytest.fixture(scope="module")
+def oak():
+    sp = get_species("oak")
+    p = sp.params.with_overrides({**FAST, "dynamics.path": "draft"})
+    return sp, p, build_leaf(sp, p, 0).model
+
+
+def test_transfer_is_exact_for_affine_fields(maple):
+    _, _, m = maple
+    P, R = transfer_matrix(m.path, m), transfer_matrix(m, m.path)
+    for T, src, dst in ((P, m.path, m), (R, m, m.path)):
+        assert np.allclose(np.asarray(T.sum(1)).ravel(), 1.0)
+        A = np.array([[0.9, -0.2, 0.1], [0.3, 1.1, 0.0], [0.05, 0.02, 0.8]])
+        b = np.array([0.01, -0.02, 0.03])
+        assert np.abs(T @ (src.particle_rest @ A.T + b) - (dst.particle_rest @ A.T + b)).max() < 1e-9
+
+
+def test_the_path_mesh_is_the_same_leaf_coarser(maple):
+    _, p, m = maple
+    assert m.path is not None and m.path.path is None
+    assert m.path.spacing > 1.3 * m.spacing and m.path.particle_count < 0.7 * m.particle_count
+    assert m.path.length == m.length
+    area = lambda mm: mm.particle_area[mm.particle_layer == 0].sum()
+    assert area(m.path) == pytest.approx(area(m), rel=0.01)
+    assert m.path.particle_water0.sum() == pytest.approx(m.particle_water0.sum(), rel=0.01)
+    sp = get_species("maple")
+    assert build_leaf(sp, sp.params, 0).model.path is None  # own: no path mesh
+    coarse = sp.params.with_overrides({"dynamics.path": "draft", "mesh.spacing": 0.04})
+    assert build_leaf(sp, coarse, 0).model.path is None     # not finer than the path: none
+
+
+def test_phases_of_a_run(maple):
+    _, p, m = maple
+    sim = Simulator(m, p)
+    st = sim.state()
+    w0 = m.particle_water0.sum()
+    P = transfer_matrix(m.path, m)
+    stages = []
+    while st.particle_water.sum() > 0.05 * w0:
+        ms = sim.step(st)
+        stages.append("path" if "path" in ms else "dynamics")
+        assert st.particle_water.min() >= 0 and np.isfinite(st.particle_q).all()
+        if stages[-1] == "path":  # the own mesh shows the coarse mechanics exactly
+            assert np.allclose(st.particle_q, P @ st.path.particle_q, atol=1e-15)
+    k = stages.index("dynamics")
+    assert k > 0 and set(stages[k:]) == {"dynamics"}  # one hand-over, never back
+    frac = lambda: st.particle_water.sum() / w0
+    assert frac() < 0.15
+
+
+def test_dried_shape_like_the_direct_run(oak):
+    sp, p, m = oak
+    probe = Probe(leaf_shape(sp, p))
+
+    def dry(params, model):
+        r = Run(model, params, seed=0)
+        w0 = model.particle_water0.sum()
+        n = 0
+        while r.state.particle_water.sum() > 0.02 * w0:
+            r.step()
+            n += 1
+        for _ in range(int(0.15 * n)):
+            r.step()
+        return probe.fields(model, r.state)
+
+    direct = dry(p.with_overrides({"dynamics.path": "own"}), build_leaf(sp, p.with_overrides({"dynamics.path": "own"}), 0).model)
+    path = dry(p, m)
+    e = field_errors(path, direct, probe.length)
+    deform = np.sqrt(((direct["q_own"] - probe.rest3) ** 2).sum(1).mean()) / probe.length
+    print(f"path against direct: position {e['position_rms'] / deform:.1%}, lift {e['r_margin_lift']:.1%}, "
+          f"top {e['r_area_top']:.1%}, 3D {e['r_area_3d']:.1%}")
+    assert e["position_rms"] < 0.1 * deform, (e, deform)
+    assert e["r_margin_lift"] < 0.1 and e["r_area_top"] < 0.03 and e["r_area_3d"] < 0.01
+
+
+def test_state_without_its_path_state_is_refused(maple):
+    _, _, m = maple
+    st = m.state()
+    from dataclasses import replace
+
+    with pytest.raises(LeafsimError, match="drying-path mesh's state is missing"):
+        check_state(replace(st, path=None), m, "x")
+
+
+def test_resume_in_the_path_phase_is_bit_identical(tmp_path, capsys):
+    base = ["run", "--species", "oak", "--set", "dynamics.path=draft", "--checkpoint-every", "7"]
+    ref = tmp_path / "ref"
+    assert main(base + ["--frames", "60", "--out", str(ref), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["water_fraction"] > 0.15  # still on the path mesh
+    out = tmp_path / "out"
+    assert main(base + ["--frames", "30", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(base + ["--frames", "60", "--out", str(out), "--resume", "--json"]) == 0
+    a, b = np.load(ref / "final.npz"), np.load(out / "final.npz")
+    for k in ("particle_q", "particle_qd", "particle_water"):
+        assert np.array_equal(a[k], b[k]), k
