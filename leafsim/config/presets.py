@@ -34,15 +34,19 @@ PRESETS = {"thesis": THESIS_PRESET}
 #: is the previous default, a √2 coarser mesh (20 substeps from the scaling), ≈ 3.5× cheaper at
 #: ≈ 18 % worst; "draft" takes a quarter of balanced's substeps with the inertia × 256 (the same
 #: n √M).  The measured error and cost of each are in configs/quality.json, written by
-#: tools/quality_table.py from one study (docs/accuracy/maple_default).
+#: tools/quality_table.py from one study (docs/accuracy/maple_default).  "fine" dries most of the
+#: water with its mechanics on the draft mesh (dynamics.path, leafsim.sim.path): as close to the
+#: reference as the direct run for 2.5–3.3× less CPU (docs/performance.md); that study measured
+#: the direct run.
 _QUALITY_CHANGES = {
-    "draft": {"mesh.spacing": 0.028, "dynamics.substeps": 10, "dynamics.mass_scaling": 256.0},
-    "balanced": {"mesh.spacing": 0.028},
+    "draft": {"mesh.spacing": 0.028, "dynamics.substeps": 10, "dynamics.mass_scaling": 256.0, "dynamics.path": "own"},
+    "balanced": {"mesh.spacing": 0.028, "dynamics.path": "own"},
     "fine": {},
-    "reference": {"mesh.spacing": 0.01413, "dynamics.substeps": 80, "dynamics.iterations": 3, "dynamics.tolerance": 1e-6},
+    "reference": {"mesh.spacing": 0.01413, "dynamics.substeps": 80, "dynamics.iterations": 3, "dynamics.tolerance": 1e-6,
+                  "dynamics.path": "own"},
 }
 #: the parameters a quality level sets (every level sets all of them)
-QUALITY_KEYS = ("mesh.spacing", "dynamics.substeps", "dynamics.iterations", "dynamics.tolerance", "dynamics.dt",
+QUALITY_KEYS = ("mesh.spacing", "dynamics.path", "dynamics.substeps", "dynamics.iterations", "dynamics.tolerance", "dynamics.dt",
                 "dynamics.mass_scaling", "osmosis.every")
 QUALITY_FILE = "quality.json"
 

@@ -128,7 +128,7 @@ def reference_setting(base: ParamSet, quick: bool = False) -> Setting:
     f = 0.8 if quick else 0.71
     sub = base["dynamics.substeps"] * 2
     return Setting("reference", "reference", {"mesh.spacing": round(s0 * f, 5), "dynamics.substeps": sub,
-                                             "dynamics.iterations": 3, "dynamics.tolerance": 1e-6},
+                                             "dynamics.iterations": 3, "dynamics.tolerance": 1e-6, "dynamics.path": "own"},
                    f"r = {s0 * f:.4g} L, {sub} substeps at r₀ (scaled) × ≤ 3 iterations")
 
 
