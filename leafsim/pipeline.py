@@ -34,6 +34,7 @@ from leafsim.config.species import Species
 from leafsim.outline.drawn import drawn_contour
 from leafsim.outline.trace import refuse_non_leaf, to_leaf_shape, trace_outline
 from leafsim.sim.model import Model
+from leafsim.sim.path import path_params
 from leafsim.veins.graph import VeinGraph
 from leafsim.veins.grow import grow_veins
 
@@ -215,7 +216,5 @@ def path_params_for(params: ParamSet) -> ParamSet | None:
     level = params["dynamics.path"]
     if level == "own":
         return None
-    from leafsim.sim.path import path_params
-
     p = path_params(params, level)
     return p if p["mesh.spacing"] > params["mesh.spacing"] * 1.001 else None

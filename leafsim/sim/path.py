@@ -34,12 +34,15 @@ import numpy as np
 import scipy.sparse as sps
 from scipy.spatial import cKDTree
 
+from leafsim.config.presets import QUALITY
 from leafsim.sim.model import Model, State
 
 #: neighbours of each MLS fit
 NEIGHBOURS = 12
 #: the quality level whose mesh and solver settings a ``draft`` path uses
 PATH_LEVELS = {"draft": "draft"}
+#: the effects the path mesh runs (when the leaf's simulator runs them)
+PATH_EFFECTS = ("shrink", "pbd", "gravity", "bending", "ground", "self_collision")
 
 
 def transfer_matrix(src: Model, dst: Model, k: int = NEIGHBOURS) -> sps.csr_matrix:
@@ -62,8 +65,6 @@ def transfer_matrix(src: Model, dst: Model, k: int = NEIGHBOURS) -> sps.csr_matr
 def path_params(params, level: str):
     """The parameters the path mesh runs with: the leaf's, with the mesh and solver settings of
     quality ``level``, no osmosis (its water comes from the own mesh) and no colour."""
-    from leafsim.config.presets import QUALITY
-
     return params.with_overrides({**QUALITY[PATH_LEVELS[level]], "effects.osmosis": False, "effects.colour": False})
 
 
@@ -72,25 +73,21 @@ class DryingPath:
 
     Parameters
     ----------
-    model : Model with ``path`` set; params : the leaf's ParamSet; effects : the enabled
-    effects of the leaf's simulator (the path runs shrink and dynamics with them).
+    model : Model with ``path`` set; params : the leaf's ParamSet; sim : a Simulator of
+    ``model.path`` with :func:`path_params` and the :data:`PATH_EFFECTS` the leaf runs.
     """
 
-    def __init__(self, model: Model, params, effects: dict, seed: int = 0):
-        from leafsim.sim.simulator import Simulator
-
+    def __init__(self, model: Model, params, sim):
         self.model, self.coarse = model, model.path
         self.P = transfer_matrix(self.coarse, model)        # coarse → own (positions, velocities)
         self.R = transfer_matrix(model, self.coarse)        # own → coarse (relative water)
-        self.level = params["dynamics.path"]
-        on = tuple(e for e in ("shrink", "pbd", "gravity", "bending", "ground", "self_collision") if effects.get(e))
-        self.sim = Simulator(self.coarse, path_params(params, self.level), effects=on, seed=seed)
+        self.sim = sim
         self.handover = float(params["dynamics.handover"])
         self._w0 = max(float(model.particle_water0.sum()), 1e-300)
 
-    def set_params(self, params) -> None:
+    def set_params(self, params, coarse_params) -> None:
         self.handover = float(params["dynamics.handover"])
-        self.sim.set_params(path_params(params, self.level))
+        self.sim.set_params(coarse_params)
 
     def active(self, state: State) -> bool:
         """The coarse mesh carries the mechanics: the leaf still holds more than the hand-over

@@ -19,6 +19,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.config.params import ParamSet
 from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
 from leafsim.sim.model import Model, State
+from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_params
 
 #: the watchdog measures energy and momentum every this many frames
 WATCH_EVERY = 5
@@ -76,12 +77,12 @@ class Simulator:
             self._dynamics.configure(params, e)
         if self.dynamic and self.model.path is not None:
             # the drying's mechanics on the model's coarser path mesh (leafsim.sim.path)
-            from leafsim.sim.path import DryingPath
-
+            coarse = path_params(params, params["dynamics.path"])
             if self._path is None:
-                self._path = DryingPath(self.model, params, e, seed=self.seed)
+                on = tuple(k for k in PATH_EFFECTS if e.get(k))
+                self._path = DryingPath(self.model, params, Simulator(self.model.path, coarse, on, seed=self.seed))
             else:
-                self._path.set_params(params)
+                self._path.set_params(params, coarse)
         else:
             self._path = None
         if self._colour is not None or e["colour"]:
@@ -108,9 +109,14 @@ class Simulator:
         return self._colour.init(self.model.state(), self.seed)
 
     @property
+    def on_path(self) -> bool:
+        """The last step's mechanics ran on the model's drying-path mesh (``dynamics.path``)."""
+        return self._path is not None and self._path_was_active
+
+    @property
     def iterations(self) -> int:
         """PBD iterations used in the last step (on the path mesh while it carries the mechanics)."""
-        if self._path is not None and self._path_was_active:
+        if self.on_path:
             return self._path.sim.iterations
         return self._dynamics.last_iterations if (self._dynamics and self.dynamic) else 0
 
@@ -138,7 +144,7 @@ class Simulator:
                 self._dynamics.apply(state)
             self._path_was_active = path
             t1 = time.perf_counter()
-            ms["path" if path else "dynamics"] = (t1 - t0) * 1e3
+            ms["dynamics"] = (t1 - t0) * 1e3
             t0 = t1
         state.scalars[0] += self.dt
         state.scalars[1] += 1

@@ -54,7 +54,9 @@ def test_the_path_mesh_is_the_same_leaf_coarser(maple):
     assert area(m.path) == pytest.approx(area(m), rel=0.01)
     assert m.path.particle_water0.sum() == pytest.approx(m.particle_water0.sum(), rel=0.01)
     sp = get_species("maple")
-    assert build_leaf(sp, sp.params, 0).model.path is None  # own: no path mesh
+    assert build_leaf(sp, sp.params, 0).model.path is not None  # the default
+    own = sp.params.with_overrides({"dynamics.path": "own"})
+    assert build_leaf(sp, own, 0).model.path is None  # own: no path mesh
     coarse = sp.params.with_overrides({"dynamics.path": "draft", "mesh.spacing": 0.04})
     assert build_leaf(sp, coarse, 0).model.path is None     # not finer than the path: none
 
@@ -67,8 +69,8 @@ def test_phases_of_a_run(maple):
     P = transfer_matrix(m.path, m)
     stages = []
     while st.particle_water.sum() > 0.05 * w0:
-        ms = sim.step(st)
-        stages.append("path" if "path" in ms else "dynamics")
+        sim.step(st)
+        stages.append("path" if sim.on_path else "dynamics")
         assert st.particle_water.min() >= 0 and np.isfinite(st.particle_q).all()
         if stages[-1] == "path":  # the own mesh shows the coarse mechanics exactly
             assert np.allclose(st.particle_q, P @ st.path.particle_q, atol=1e-15)
