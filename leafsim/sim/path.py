@@ -82,11 +82,17 @@ class DryingPath:
         self.P = transfer_matrix(self.coarse, model)        # coarse → own (positions, velocities)
         self.R = transfer_matrix(model, self.coarse)        # own → coarse (relative water)
         self.sim = sim
-        self.handover = float(params["dynamics.handover"])
         self._w0 = max(float(model.particle_water0.sum()), 1e-300)
+        self._configure(params)
+
+    def _configure(self, params) -> None:
+        self.handover = float(params["dynamics.handover"])
+        # hanging from the petiole: the own mesh's pinned particles stay exactly where they are
+        hanging = params["dynamics.scene"] == "hanging" and self.model.particle_pinned.any()
+        self.pinned = np.flatnonzero(self.model.particle_pinned) if hanging else None
 
     def set_params(self, params, coarse_params) -> None:
-        self.handover = float(params["dynamics.handover"])
+        self._configure(params)
         self.sim.set_params(coarse_params)
 
     def active(self, state: State) -> bool:
@@ -109,4 +115,7 @@ class DryingPath:
         ms = self.sim.step(cs)
         state.particle_q[:] = self.P @ cs.particle_q
         state.particle_qd[:] = self.P @ cs.particle_qd
+        if self.pinned is not None:
+            state.particle_q[self.pinned] = self.model.particle_rest[self.pinned]
+            state.particle_qd[self.pinned] = 0.0
         return ms
