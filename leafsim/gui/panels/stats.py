@@ -22,6 +22,8 @@ class StatsPanel:
         p90 = float(np.percentile(ft, 90)) if ft.size else 0.0
         imgui.text(f"{fps:5.1f} fps   frame p90 {p90:5.1f} ms")
         imgui.text(f"simulation {pb.sim_rate:6.3g} sim s / wall s")
+        if s.params["environment.drive"] == "weather":  # the weather clock runs time_warp × faster
+            imgui.text(f"weather    {pb.sim_rate * s.params['environment.time_warp'] / 3600:6.3g} h / wall s")
         if not s.ready:
             imgui.text("building the first leaf ...")
             return
