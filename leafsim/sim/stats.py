@@ -17,7 +17,8 @@ from leafsim.sim.model import LAYER_T, LAYER_V, Model, State
 
 
 def frame_stats(model: Model, state: State, ms: dict, sim=None) -> dict:
-    """Total water per layer, max residual |C|/l, kinetic energy [J], NaN flag, ms per stage."""
+    """Total water per layer, max residual |C|/l, kinetic energy [J], NaN flag, ms per stage
+    (with ``sim``: its iterations and whether the drying-path mesh carried the mechanics)."""
     w = state.particle_water
     lay = model.particle_layer
     q, qd = state.particle_q, state.particle_qd
@@ -35,6 +36,7 @@ def frame_stats(model: Model, state: State, ms: dict, sim=None) -> dict:
     }
     if sim is not None:
         out["iterations"] = sim.iterations
+        out["on_path"] = bool(getattr(sim, "on_path", False))  # the mechanics ran on the drying-path mesh
     return out
 
 
