@@ -61,8 +61,8 @@ def test_the_path_mesh_is_the_same_leaf_coarser(maple):
     assert build_leaf(sp, coarse, 0).model.path is None     # not finer than the path: none
 
 
-def test_phases_of_a_run(maple):
-    _, p, m = maple
+def test_phases_of_a_run(oak):
+    _, p, m = oak
     sim = Simulator(m, p)
     st = sim.state()
     w0 = m.particle_water0.sum()
