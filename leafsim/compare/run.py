@@ -277,7 +277,10 @@ def _grown_back(leaf: _Leaf, ref: C.Reference, best, note: str) -> Row:
             a = lf.model.particle_area[t]
             return (lf.state0.particle_q[t, :2] * a[:, None]).sum(0) / a.sum()
 
-        big.state0.particle_q[:, :2] += centroid(leaf) - centroid(big)
+        move = centroid(leaf) - centroid(big)
+        big.state0.particle_q[:, :2] += move
+        if big.state0.path is not None:  # the drying-path mesh moves with the leaf
+            big.state0.path.particle_q[:, :2] += move
         _, _, best2 = _dry_run(big, None, ref, last=first.frame + GROWN_BACK_MARGIN)
         shift = _register(big, best2[0], ref)
         picture, mask = big.picture(best2[0])

@@ -151,6 +151,7 @@ def run_setting(species, base: ParamSet, setting: Setting, t_end: float | None, 
         kick = np.random.default_rng(perturb[0]).uniform(-perturb[1], perturb[1], st.particle_q.shape)
         kick[:, 2] = np.abs(kick[:, 2])
         st.particle_q[:] += kick
+        run.sim.sync_path(st)  # the drying-path mesh starts from the kicked leaf too
     dt = p["dynamics.dt"]
     n = int(math.ceil((t_end if t_end is not None else t_max) / dt - 1e-9))
     wanted = sorted(water_times)

@@ -59,8 +59,9 @@ class LevelOfDetail:
         from leafsim.pipeline import build_leaf
         from leafsim.sim.simulator import Simulator
 
-        cp = params.with_overrides({"mesh.spacing": simulate})
-        fp = params.with_overrides({"mesh.spacing": show})
+        # each mesh is simulated on its own (the display mesh's reference run too): no drying path
+        cp = params.with_overrides({"mesh.spacing": simulate, "dynamics.path": "own"})
+        fp = params.with_overrides({"mesh.spacing": show, "dynamics.path": "own"})
         shape, _, coarse = built if built is not None else build_leaf(sp, cp, seed)
         _, _, fine = build_leaf(sp, fp, seed)
         emb = embed(coarse, fine.particle_rest[:, :2])

@@ -22,9 +22,11 @@ boundary layer in series (Campbell & Norman 1998, ch. 7 and 14; Nobel 2009):
   characteristic dimension d = 0.72 × the blade's mean width (Campbell & Norman eq. 7.33 and
   the width rule of their table 7.1); still air counts as u = 0.1 m/s (free convection).
 
-Time is real: the osmosis solve covers Δt × ``environment.time_warp`` physical seconds per
-frame, so a leaf that takes a day to dry in the weather dries in a few simulated seconds (its
-motion is still computed at the simulated clock: drying is quasi-static).
+Time is real for the evaporation: each frame loses Δt × ``environment.time_warp`` real seconds
+of it, so a leaf that takes a day to dry in the weather dries in a few simulated seconds.
+Everything else keeps the simulated clock it was calibrated on: the blade's motion (drying is
+quasi-static), diffusion within the blade (``osmosis.diffusion`` per simulated second, like the
+declared rates), the tissue's setting (``dynamics.plasticity``) and the colour's ageing.
 
 Example
 -------

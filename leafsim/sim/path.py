@@ -64,8 +64,24 @@ def transfer_matrix(src: Model, dst: Model, k: int = NEIGHBOURS) -> sps.csr_matr
 
 def path_params(params, level: str):
     """The parameters the path mesh runs with: the leaf's, with the mesh and solver settings of
-    quality ``level``, no osmosis (its water comes from the own mesh) and no colour."""
-    return params.with_overrides({**QUALITY[PATH_LEVELS[level]], "effects.osmosis": False, "effects.colour": False})
+    quality ``level`` but the leaf's own Δt (both meshes keep one clock), no osmosis (its water
+    comes from the own mesh) and no colour."""
+    return params.with_overrides({**QUALITY[PATH_LEVELS[level]], "dynamics.dt": params["dynamics.dt"],
+                                  "effects.osmosis": False, "effects.colour": False})
+
+
+#: the solver settings the drying path stands in for: with any other (a user asking for real
+#: inertia, more substeps or iterations) the leaf's own mesh carries the mechanics throughout
+PATH_SOLVER_KEYS = ("dynamics.substeps", "dynamics.iterations", "dynamics.tolerance", "dynamics.mass_scaling",
+                    "dynamics.substep_scaling")
+
+
+def path_allowed(params) -> bool:
+    """The drying path runs: ``dynamics.path`` is not ``own`` and the solver settings are the
+    default quality's (the path replaces exactly those)."""
+    from leafsim.config.params import PARAMS
+
+    return params["dynamics.path"] != "own" and all(params[k] == PARAMS[k].default for k in PATH_SOLVER_KEYS)
 
 
 class DryingPath:
@@ -74,11 +90,13 @@ class DryingPath:
     Parameters
     ----------
     model : Model with ``path`` set; params : the leaf's ParamSet; sim : a Simulator of
-    ``model.path`` with :func:`path_params` and the :data:`PATH_EFFECTS` the leaf runs.
+    ``model.path`` with :func:`path_params` and ``effects``, the :data:`PATH_EFFECTS` the leaf
+    runs (a live change of them makes a new one).
     """
 
-    def __init__(self, model: Model, params, sim):
+    def __init__(self, model: Model, params, sim, effects: tuple = ()):
         self.model, self.coarse = model, model.path
+        self.effects = tuple(effects)
         self.P = transfer_matrix(self.coarse, model)        # coarse → own (positions, velocities)
         self.R = transfer_matrix(model, self.coarse)        # own → coarse (relative water)
         self.sim = sim

@@ -19,7 +19,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.config.params import ParamSet
 from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
 from leafsim.sim.model import Model, State
-from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_params
+from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_allowed, path_params
 
 #: the watchdog measures energy and momentum every this many frames
 WATCH_EVERY = 5
@@ -75,12 +75,12 @@ class Simulator:
         if self.dynamic:
             self._dynamics = self._dynamics or Dynamics(self.model)
             self._dynamics.configure(params, e)
-        if self.dynamic and self.model.path is not None:
+        if self.dynamic and self.model.path is not None and path_allowed(params):
             # the drying's mechanics on the model's coarser path mesh (leafsim.sim.path)
             coarse = path_params(params, params["dynamics.path"])
-            if self._path is None:
-                on = tuple(k for k in PATH_EFFECTS if e.get(k))
-                self._path = DryingPath(self.model, params, Simulator(self.model.path, coarse, on, seed=self.seed))
+            on = tuple(k for k in PATH_EFFECTS if e.get(k))
+            if self._path is None or self._path.effects != on:
+                self._path = DryingPath(self.model, params, Simulator(self.model.path, coarse, on, seed=self.seed), on)
             else:
                 self._path.set_params(params, coarse)
         else:
@@ -107,6 +107,12 @@ class Simulator:
         self._colour = self._colour or Colour(self.model)
         self._colour.configure(self.params)
         return self._colour.init(self.model.state(), self.seed)
+
+    def sync_path(self, state: State) -> None:
+        """After a caller moved ``state``'s particles (a perturbed start, a shifted leaf): put the
+        drying-path mesh where the leaf now is, or the next step's mechanics would undo it."""
+        if self._path is not None and state.path is not None:
+            self._path.sync(state)
 
     @property
     def on_path(self) -> bool:

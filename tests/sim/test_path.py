@@ -138,3 +138,38 @@ def test_hanging_leaf_keeps_its_petiole_pinned(maple):
     pin = m.particle_pinned
     assert pin.any() and np.array_equal(st.particle_q[pin], m.particle_rest[pin])
     assert st.particle_q[:, 2].min() < -0.01 * m.length  # the rest of the blade sags
+
+
+def test_live_changes_reach_or_stop_the_path(maple):
+    _, p, m = maple
+    sim = Simulator(m, p)
+    st = sim.state()
+    sim.step(st)
+    assert sim.on_path
+    # the leaf's Δt is the path mesh's too (one clock)
+    sim.set_params(p.with_overrides({"dynamics.dt": 0.001}))
+    assert sim._path.sim.dt == 0.001
+    # an effect switched off live is off on the path mesh as well
+    sim.set_params(p.with_overrides({"effects.gravity": False}))
+    assert not sim._path.sim.effects["gravity"]
+    sim.step(st)
+    # asking for real inertia (or other solver settings) hands the mechanics to the own mesh
+    sim.set_params(p.with_overrides({"dynamics.mass_scaling": 1.0}))
+    sim.step(st)
+    assert not sim.on_path
+    # and 'own' on a model built with a path mesh is simply no path
+    sim.set_params(p.with_overrides({"dynamics.path": "own"}))
+    sim.step(st)
+    assert not sim.on_path and np.isfinite(st.particle_q).all()
+
+
+def test_a_moved_start_is_kept(oak):
+    _, p, m = oak
+    a, b = Simulator(m, p), Simulator(m, p)
+    sa, sb = a.state(), b.state()
+    sb.particle_q[:, 2] += 1e-3  # the whole leaf 1 mm higher
+    b.sync_path(sb)
+    for _ in range(3):
+        a.step(sa)
+        b.step(sb)
+    assert (sb.particle_q[:, 2] - sa.particle_q[:, 2]).mean() > 0.9e-3
