@@ -151,7 +151,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "sensitivity floor below which no error is resolved")
     ac.add_argument("--floor-reference", action="store_true", help="measure the floor on the reference too (slow)")
     ac.add_argument("--groups", default=None, metavar="G,G",
-                    help="only these sweeps (mesh, iterations, mass, tolerance, dt, relaxation, osmosis, precision, quality)")
+                    help="only these sweeps (mesh, iterations, mass, tolerance, dt, relaxation, osmosis, precision, quality; "
+                         "integrator, Sun's explicit integrator, runs only when named)")
     ac.add_argument("--json", action="store_true", help=JSON_HELP)
     _scene_export_parsers(sub)
     return ap

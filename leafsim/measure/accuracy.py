@@ -51,7 +51,10 @@ METRIC_NAMES = {"position": "position", "height": "height", "margin_lift": "marg
 
 
 #: the sweeps of the study (``leafsim accuracy --groups``)
-GROUPS = ("mesh", "iterations", "mass", "tolerance", "dt", "relaxation", "osmosis", "precision", "quality")
+GROUPS = ("mesh", "iterations", "mass", "tolerance", "dt", "relaxation", "osmosis", "precision", "quality", "integrator")
+#: sweeps run only when asked for by name (--groups): Sun's explicit integrator costs one to two
+#: orders of magnitude more CPU than the whole default study (docs/method.md)
+ON_REQUEST = ("integrator",)
 
 
 @dataclass
@@ -118,7 +121,12 @@ def default_sweeps(base: ParamSet, quick: bool = False, groups=None) -> list[Set
             changes = {k: v for k, v in values.items() if base[k] != v}
             if changes and level != "reference":
                 out.append(Setting(f"quality {level}", "quality", changes, f"--quality {level}"))
-    return [x for x in out if groups is None or x.group in groups or x.group == "default"]
+    if groups is not None and "integrator" in groups:
+        for c in ((1.5,) if quick else (1.5, 0.75)):
+            out.append(Setting(f"sun, Courant {c:g}", "integrator", {"dynamics.integrator": "sun", "dynamics.sun_courant": c},
+                               f"Sun's explicit midpoint, ω h ≤ {c:g}"))
+    return [x for x in out if (groups is None and x.group not in ON_REQUEST) or (groups is not None and x.group in groups)
+            or x.group == "default"]
 
 
 def reference_setting(base: ParamSet, quick: bool = False) -> Setting:

@@ -133,7 +133,8 @@ def frame_bench(model: Model, rounds: int = 20, params: ParamSet | None = None) 
            ("hinge, one at a time", "hinges ×10, one at a time", model.hinge_count),
            ("volume, one at a time", "volumes ×10, one at a time", model.vol_count))}
     d = dyn["frame"]
-    return {"ms": ms, "load": load, "ns_per": ns, "hinge_vs_spring": ns["hinge"] / ns["spring"],
+    sun = sun_bench(model, params, rounds=min(rounds, 5)) if model.particle_count < 50000 else None
+    return {"ms": ms, "load": load, "sun": sun, "ns_per": ns, "hinge_vs_spring": ns["hinge"] / ns["spring"],
             "volume_vs_spring": ns["volume"] / ns["spring"],
             "hinge_vs_spring_one_at_a_time": ns["hinge, one at a time"] / ns["spring"],
             "volume_vs_spring_one_at_a_time": ns["volume, one at a time"] / ns["spring"],
@@ -141,6 +142,18 @@ def frame_bench(model: Model, rounds: int = 20, params: ParamSet | None = None) 
             "contact_share_folded": max(0.0, 1.0 - med["frame folded, no self-collision"] / med["frame folded"]),
             "contact_searches": d.contact_searches, "substeps": d.substeps, "iterations": d.iters,
             "full_step_ms": med["osmosis"] + med["shrink"] + med["frame"]}
+
+
+def sun_bench(model: Model, params: ParamSet, rounds: int = 5) -> dict:
+    """Sun's explicit integrator (``dynamics.integrator = sun``) against the XPBD frame on the
+    fresh leaf, interleaved (few rounds: a Sun frame takes thousands of steps); returns both
+    frames' stats, the steps per frame, the largest ω h allowed and the cost ratio."""
+    sp = params.with_overrides({"dynamics.integrator": "sun"})
+    _, run_x, _ = _frame_job(model, params, EFFECTS, model.state)
+    reset, run_s, ds = _frame_job(model, sp, EFFECTS, model.state)
+    ms = {k: summary(v) for k, v in interleaved({"xpbd": (nothing, run_x), "sun": (reset, run_s)}, rounds).items()}
+    return {"ms": ms, "steps": ds.sun_steps, "courant": ds.sun_courant,
+            "ratio": ms["sun"]["median_ms"] / ms["xpbd"]["median_ms"]}
 
 
 def bench_colour(n: int = 5700, steps: int = 2000, params: ParamSet | None = None) -> float:
@@ -230,6 +243,12 @@ def format_bench(res: dict) -> str:
                      f"{f['volume_vs_spring']:.2f}× (one at a time: {f['ns_per']['hinge, one at a time']:.1f} / "
                      f"{f['ns_per']['volume, one at a time']:.1f} ns, {f['hinge_vs_spring_one_at_a_time']:.2f}× / "
                      f"{f['volume_vs_spring_one_at_a_time']:.2f}×)")
+        if f.get("sun"):
+            u = f["sun"]
+            lines.append(f"  Sun's explicit integrator (ω h ≤ {u['courant']:g}): {u['steps']} steps per frame, "
+                         f"{u['ms']['sun']['median_ms']:.1f} ms (p90 {u['ms']['sun']['p90_ms']:.1f}) against the XPBD "
+                         f"frame's {u['ms']['xpbd']['median_ms']:.2f} ms (p90 {u['ms']['xpbd']['p90_ms']:.2f}): "
+                         f"{u['ratio']:.0f}×")
         lines.append(f"  self-collision share of a frame: flat {100 * f['contact_share']:.1f} %, folded "
                      f"{100 * f['contact_share_folded']:.1f} %; full step (osmosis + shrink + frame) "
                      f"{f['full_step_ms']:.2f} ms")

@@ -73,7 +73,7 @@ def path_params(params, level: str):
 #: the solver settings the drying path stands in for: with any other (a user asking for real
 #: inertia, more substeps or iterations) the leaf's own mesh carries the mechanics throughout
 PATH_SOLVER_KEYS = ("dynamics.substeps", "dynamics.iterations", "dynamics.tolerance", "dynamics.mass_scaling",
-                    "dynamics.substep_scaling")
+                    "dynamics.substep_scaling", "dynamics.integrator")
 
 
 def path_allowed(params) -> bool:

@@ -47,7 +47,7 @@ GROWTH_WINDOWS = 6
 #: ignore growth while the internal kinetic energy is below this × (mass × (L / s)²)
 ENERGY_FLOOR = 1e-4
 #: parameters that drive the dynamics, in the order they are blamed
-SUSPECTS = ("dynamics.relaxation", "dynamics.dt", "dynamics.damping", "dynamics.substeps", "dynamics.iterations",
+SUSPECTS = ("dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_substeps", "dynamics.relaxation", "dynamics.dt", "dynamics.damping", "dynamics.substeps", "dynamics.iterations",
             "dynamics.mass_scaling",
             "material.modulus", "material.vein_modulus", "material.dry_stiffening", "dynamics.substep_scaling",
             "shrink.sigma_surface_top", "shrink.sigma_surface_bottom", "shrink.sigma_vein", "shrink.l_min",

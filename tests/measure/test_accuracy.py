@@ -91,3 +91,16 @@ def test_unperturbed_start_repeats_the_run_exactly():
     assert np.array_equal(a.end["q_own"], b.end["q_own"])
     assert not np.array_equal(a.end["q_own"], c.end["q_own"])
     assert np.isfinite(c.end["q_own"]).all()
+
+
+def test_sun_integrator_sweep_runs_only_when_named():
+    """Sun's explicit integrator costs two orders of magnitude more than the default study, so
+    ``--groups integrator`` asks for it and the default study leaves it out."""
+    from leafsim.config.params import ParamSet
+    from leafsim.measure.accuracy import default_sweeps
+
+    every = default_sweeps(ParamSet())
+    assert "integrator" not in {s.group for s in every} and len(every) > 10
+    named = default_sweeps(ParamSet(), groups=("integrator",))
+    assert [s.group for s in named] == ["default", "integrator", "integrator"]
+    assert all(s.overrides["dynamics.integrator"] == "sun" for s in named[1:])

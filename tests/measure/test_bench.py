@@ -47,13 +47,15 @@ def test_frame_and_memory_report(tiny):
     for k in ("hinge_vs_spring", "volume_vs_spring", "hinge_vs_spring_one_at_a_time", "volume_vs_spring_one_at_a_time"):
         assert f[k] > 0
     assert 0.0 <= f["contact_share"] <= 1.0 and 0.0 <= f["contact_share_folded"] <= 1.0
+    # Sun's explicit integrator beside the XPBD frame: many more steps than XPBD's substeps
+    assert f["sun"]["steps"] > f["substeps"] and f["sun"]["ms"]["sun"]["median_ms"] > 0 and f["sun"]["ratio"] > 0
     m = bench.memory(tiny)
     assert m["bytes_per_particle_total"] > 0 and m["peak_rss_mb"] > 0
     text = bench.format_bench({"tiny": {"particles": tiny.particle_count, "springs": tiny.spring_count,
                                         "hinges": tiny.hinge_count, "volumes": tiny.vol_count,
                                         "race": bench.spring_race(tiny, rounds=1, peers=False, parallel=False),
                                         "frame": f, "memory": m}})
-    assert "ceiling (f32, serial)" in text and "hinge" in text
+    assert "ceiling (f32, serial)" in text and "hinge" in text and "Sun's explicit integrator" in text
 
 
 def test_parallel_vs_serial_rows_under_load(tiny):

@@ -8,8 +8,10 @@ import math
 
 import numpy as np
 
+from leafsim.base.errors import LeafsimError
 from leafsim.sim.kernels import blocked as kb
 from leafsim.sim.kernels import pbd as kp
+from leafsim.sim.kernels import sun as ks
 from leafsim.sim.model import (
     LAYER_T,
     Model,
@@ -22,11 +24,13 @@ from leafsim.sim.model import (
 #: results do not depend on either skin (canonical pair order; tests/test_kernels.py).
 #: Measured on the bench's folded leaf: docs/performance.md.
 CONTACT_SKIN = 3.0
+#: the most explicit steps Sun's integrator takes in one frame (dynamics.integrator = sun)
+SUN_MAX_STEPS = 100_000
 #: the near list holds the searched pairs closer than (1.05 + this) × the contact radius
 CONTACT_NEAR_SKIN = 0.25
 
 
-def effective_substeps(params) -> int:
+def effective_substeps(params, key: str = "dynamics.substeps") -> int:
     """Substeps per frame: ``dynamics.substeps`` at the default mesh spacing r₀, scaled by
     (r₀ / r)² with ``dynamics.substep_scaling``.  A bending hinge's XPBD stiffness relative to
     its particles' inertia per substep, k h² / (m ℓ²), falls like h² / r⁴; Gauss–Seidel carries
@@ -34,10 +38,10 @@ def effective_substeps(params) -> int:
     so h ∝ r² keeps a refined mesh converging (measured in docs/accuracy.md)."""
     from leafsim.config.params import PARAMS
 
-    n = int(params["dynamics.substeps"])
+    n = int(params[key])
     if params["dynamics.substep_scaling"]:
         n = round(n * (PARAMS["mesh.spacing"].default / params["mesh.spacing"]) ** 2)
-    return int(min(max(n, 1), 1000))
+    return int(min(max(n, 1), 4000 if key == "dynamics.sun_substeps" else 1000))
 
 
 class Dynamics:
@@ -148,6 +152,41 @@ class Dynamics:
         self.bending = effects["bending"] and m.hinge_count > 0 and self.kbend > 0
         self.ground = effects["ground"] and self.scene == "ground"
         self.self_coll = effects["self_collision"]
+        self.sun = params["dynamics.integrator"] == "sun"
+        if self.sun:
+            self._configure_sun(params, k, E)
+
+    def _configure_sun(self, params, k, E) -> None:
+        """Sun's explicit integrator (:mod:`.kernels.sun`): its own step count (scaled with the
+        mesh like the XPBD substeps), the springs' stiffness k [N/m] in model order, the
+        thickness volumes' k_V = E / (2 C₀) from the current rest volumes (per frame), the
+        drag c ÷ √M (the scaled leaf moves like the real one in √M-stretched time; the Rayleigh
+        damping is set per frame from the stiffest mode), and the turgor force's per-spring contact area a = (h/2) × the face between the
+        two cells (membrane springs of either layer)."""
+        m = self.model
+        self.sun_min_steps = effective_substeps(params, "dynamics.sun_substeps")
+        self.sun_courant = params["dynamics.sun_courant"]
+        self.sun_steps = self.sun_min_steps
+        self.sk = np.ascontiguousarray(k, dtype=np.float64)
+        self.zeta = params["dynamics.sun_damping"]
+        self.beta = 0.0
+        self.drag = params["dynamics.damping"] / math.sqrt(self.mscale)
+        self.vmod = E
+        self.p_turgor = params["material.turgor_pressure"]
+        if not hasattr(self, "sF"):
+            n = m.particle_count
+            self.sF, self.sacc, self.sqm, self.svm = (np.zeros((n, 3)) for _ in range(4))
+            self.srow = np.zeros(n)
+            self.s_ij = m.spring_ij.astype(np.uint32)
+            self.s_hidx = m.hinge_idx.astype(np.uint32)
+            self.s_vidx = m.vol_idx.astype(np.uint32)
+            self.s_hgeom = 3.0 * m.hinge_edge_len ** 2 / np.maximum(m.hinge_area, 1e-30)
+            self.s_hk = np.zeros(m.hinge_count)
+            self.s_vk = np.zeros(m.vol_count)
+            self.s_tf = np.zeros(m.spring_count)
+            membrane = m.spring_layer != 2
+            self.s_area = np.where(membrane, 0.5 * m.thickness * m.spring_face, 0.0)
+        self.s_hrod = params["material.vein_modulus"] * m.hinge_rod
 
     def gather(self, state) -> tuple:
         """This frame's inverse masses and constraint records in projection order (springs:
@@ -173,6 +212,9 @@ class Dynamics:
 
     def apply(self, state: State):
         m = self.model
+        if self.sun:
+            self._apply_sun(state)
+            return
         cons = self.gather(state)
         # contacts and the un-inversion keep to the tissue's size: as it shrinks (in the plane and
         # through the thickness) so do the contact radius and the thickness (fixed values would
@@ -187,6 +229,77 @@ class Dynamics:
             if self.cstate[6]:
                 self._grow_contact_lists()
             out = self._frame(state, cons, radius, shrunk)
+            if not self.cstate[7]:
+                break
+            state.particle_q[:] = snap[0]
+            state.particle_qd[:] = snap[1]
+        self.last_iterations = int(out[0])
+        self.last_contacts = int(out[1])
+        self.last_uninverted = int(out[2])
+
+    def sun_elastic(self, state: State) -> tuple:
+        """This frame's elastic records for :func:`.kernels.sun.frame`, in model order: spring
+        stiffness and rest lengths, hinge stiffness (the XPBD hinge's, with drying, turgor and
+        veins) and rest angles, volume stiffness and rest volumes, and Sun's turgor force per
+        spring, a ΔP with ΔP = P (τ − 1) averaged over the spring's two cells, τ the share of
+        turgor left (linear in RWC down to the turgor-loss point)."""
+        m = self.model
+        np.divide(1.0 / self.mscale, m.particle_cytosol + state.particle_water, out=self.invm)
+        if self.scene == "hanging":
+            self.invm[m.particle_pinned] = 0.0
+        if self.pbd and self.bending:
+            kp.hinge_compliance(self.s_hidx, state.particle_water, m.particle_water0, self.kbend, self.kdry,
+                                self.s_hgeom, self.s_hrod, 1.0, self.s_hk, self.turgor, self.tlp, self.dry_power)
+            np.divide(1.0, self.s_hk, out=self.s_hk)
+            hinges = (self.s_hidx, self.s_hk)
+        else:
+            hinges = (self.s_hidx[:0], self.s_hk[:0])
+        np.divide(self.vmod * 0.5, np.maximum(np.abs(state.vol_rest), 1e-300), out=self.s_vk)
+        if self.p_turgor > 0.0:
+            rwc = state.particle_water / np.maximum(m.particle_water0, 1e-300)
+            tau = np.clip((rwc - self.tlp) / max(1.0 - self.tlp, 1e-9), 0.0, 1.0)
+            dp = self.p_turgor * (0.5 * (tau[m.spring_ij[:, 0]] + tau[m.spring_ij[:, 1]]) - 1.0)
+            np.multiply(self.s_area, dp, out=self.s_tf)
+        else:
+            self.s_tf[:] = 0.0
+        if not self.pbd:  # gravity alone: no internal forces
+            return (self.s_ij[:0], self.sk[:0], state.spring_rest[:0], self.s_tf[:0], self.s_hidx[:0], self.s_hk[:0],
+                    state.hinge_rest[:0], self.s_vidx[:0], self.s_vk[:0], state.vol_rest[:0])
+        return (self.s_ij, self.sk, state.spring_rest, self.s_tf) + hinges + (state.hinge_rest, self.s_vidx, self.s_vk,
+                                                                              state.vol_rest)
+
+    def _apply_sun(self, state: State) -> None:
+        """One frame of Sun's explicit midpoint integrator (float64 always)."""
+        m = self.model
+        elastic = self.sun_elastic(state)
+        # the step: the stiffest mode's ω h within the Courant limit (a Gershgorin bound on ω,
+        # this frame's stiffness and masses), and at least the floor dynamics.sun_substeps
+        ij, sk, _, _, hidx, hk, _, vidx, vk, _ = elastic
+        w2 = ks.stiffness_bound(state.particle_q, self.invm, ij, sk, hidx, hk, vidx, vk, self.srow)
+        need = math.ceil(self.dt * math.sqrt(max(w2, 0.0)) / self.sun_courant) if math.isfinite(w2) else SUN_MAX_STEPS
+        self.sun_steps = min(max(self.sun_min_steps, need), SUN_MAX_STEPS)
+        self.sun_h = self.dt / self.sun_steps
+        # Rayleigh damping β = 2ζ/ω: damping ratio ζ at the stiffest mode, less below it
+        self.beta = 2.0 * self.zeta / math.sqrt(w2) if w2 > 0.0 and math.isfinite(w2) else 0.0
+        shrunk = max(float(np.mean(state.spring_rest[self.T_springs] / m.spring_rest0[self.T_springs])), 0.1)
+        radius = self.radius * shrunk
+        contact = (m.particle_rest, self.T_idx, radius, CONTACT_SKIN * radius, CONTACT_NEAR_SKIN * radius, self.skip2,
+                   self.table, self.nxt, self.pairs, self.qc, self.near, self.qn, self.cstate)
+        snap = (state.particle_q.copy(), state.particle_qd.copy()) if self.pbd and self.self_coll else None
+        while True:
+            if self.cstate[6]:
+                self._grow_contact_lists()
+                contact = contact[:8] + (self.pairs, self.qc, self.near, self.qn, self.cstate)
+            out = self.out
+            out[:] = 0
+            self.last_energy = ks.frame(state.particle_q, state.particle_qd, self.q_old, self.invm, self.g, self.sun_h,
+                                        self.sun_steps, self.drag, self.beta, elastic, self.ground, self.pen, self.mu,
+                                        self.pbd and self.self_coll, contact, self.replace, self.hgt, m.thickness * shrunk,
+                                        self.sF, self.sacc, self.sqm, self.svm, self.qa, out)
+            if out[0] < 0:
+                raise LeafsimError(f"dynamics.integrator = sun blew up at {self.sun_steps} steps per frame "
+                                   f"(dynamics.sun_courant = {self.sun_courant:g}): expected a smaller Courant number "
+                                   f"or more dynamics.sun_substeps")
             if not self.cstate[7]:
                 break
             state.particle_q[:] = snap[0]
