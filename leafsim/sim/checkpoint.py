@@ -22,6 +22,7 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes
+from leafsim.config.params import PARAMS
 from leafsim.sim.model import Model, State
 from leafsim.sim.pigments import PigmentState
 
@@ -70,6 +71,8 @@ def check_meta(path, expect: dict) -> dict:
             raise LeafsimError(f"--resume: {path} was made with {key} {meta.get(key)!r}, this run has {expect[key]!r}")
     saved, now = meta.get("params", {}), expect.get("params", {})
     for k in sorted(set(saved) | set(now)):
+        if k not in saved and k in PARAMS and now.get(k) == PARAMS[k].default:
+            continue  # a parameter newer than the checkpoint, at the default that keeps the old behaviour
         if saved.get(k) != now.get(k):
             raise LeafsimError(f"--resume: {path} was made with parameter '{k}' = {saved.get(k)!r}, "
                                f"this run has {now.get(k)!r} (resume with the same --set values)")

@@ -47,7 +47,10 @@ GROWTH_WINDOWS = 6
 #: ignore growth while the internal kinetic energy is below this × (mass × (L / s)²)
 ENERGY_FLOOR = 1e-4
 #: parameters that drive the dynamics, in the order they are blamed
-SUSPECTS = ("dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_substeps", "dynamics.relaxation", "dynamics.dt", "dynamics.damping", "dynamics.substeps", "dynamics.iterations",
+#: suspects that only one integrator reads
+SUN_ONLY = ("dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_substeps", "material.turgor_pressure")
+XPBD_ONLY = ("dynamics.relaxation", "dynamics.substeps", "dynamics.iterations")
+SUSPECTS = ("material.turgor_pressure", "dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_substeps", "dynamics.relaxation", "dynamics.dt", "dynamics.damping", "dynamics.substeps", "dynamics.iterations",
             "dynamics.mass_scaling",
             "material.modulus", "material.vein_modulus", "material.dry_stiffening", "dynamics.substep_scaling",
             "shrink.sigma_surface_top", "shrink.sigma_surface_bottom", "shrink.sigma_vein", "shrink.l_min",
@@ -154,9 +157,19 @@ class Watchdog:
         # a quality level's own settings (draft: 10 substeps, ...) are its baseline, not a cause
         level = quality_of(self.params)
         base = {k: (QUALITY[level].get(k, PARAMS[k].default) if level else PARAMS[k].default) for k in SUSPECTS}
-        changed = [k for k in SUSPECTS if k in self.params and self.params[k] != base[k]]
+        # only the parameters of the integrator in use (and the integrator itself) are suspects
+        sun = self.params["dynamics.integrator"] == "sun"
+        skip = XPBD_ONLY if sun else SUN_ONLY
+        changed = [k for k in SUSPECTS if k not in skip and k in self.params and self.params[k] != base[k]]
+        if sun:
+            changed = ["dynamics.integrator"] + changed
+            base["dynamics.integrator"] = PARAMS["dynamics.integrator"].default
         what_base = f"{level} quality" if level else "default"
-        blame = (", ".join(f"{k} = {self.params[k]:g} ({what_base} {base[k]:g})" for k in changed[:3])
+        blame = (", ".join(f"{k} = {_show(self.params[k])} ({what_base} {_show(base[k])})" for k in changed[:3])
                  if changed else f"none of the dynamics parameters differ from the {what_base} settings")
         raise LeafsimError(f"simulation unstable at frame {state.frame} (t = {state.time:.3f} s): {what}; "
                            f"likely cause: {blame}")
+
+
+def _show(v) -> str:
+    return f"{v:g}" if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)

@@ -186,3 +186,26 @@ def test_weather_clock_survives_resume(tmp_path, capsys):
     assert main(BASE + weather + ["--frames", str(N), "--out", str(out), "--resume", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["weather_hours"] == pytest.approx(N * 0.002 * 50000 / 3600, abs=1e-4)  # reported to 4 decimals
+
+
+def test_resume_from_a_checkpoint_older_than_a_parameter(tmp_path, reference, capsys):
+    """A checkpoint written before a parameter existed resumes (bit-identically) when this run
+    keeps that parameter at its default, the behaviour the checkpoint ran with; any other value
+    is refused."""
+    import json as _json
+
+    out, stats = tmp_path / "out", tmp_path / "s.jsonl"
+    assert main(BASE + ["--frames", str(N // 2), "--out", str(out), "--stats", str(stats)]) == 0
+    ck = out / "checkpoint.npz"
+    data = dict(np.load(ck))
+    meta = _json.loads(str(data["meta"]))
+    for k in ("dynamics.integrator", "dynamics.sun_courant", "material.turgor_pressure"):
+        del meta["params"][k]
+    data["meta"] = np.array(_json.dumps(meta, sort_keys=True))
+    with open(ck, "wb") as f:
+        np.savez(f, **data)
+    capsys.readouterr()
+    assert main(BASE + ["--frames", "120", "--out", str(out), "--resume", "--set", "dynamics.integrator=sun"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "parameter 'dynamics.integrator' = None, this run has 'sun'" in err, err
+    _assert_same(_resume_to_n(out, stats, capsys), reference)

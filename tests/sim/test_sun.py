@@ -114,12 +114,40 @@ def test_a_hanging_leaf_swings_down_as_a_converged_xpbd_solve_moves_it():
     assert np.abs(paths["sun"] - paths["xpbd"]).max() < 0.004
 
 
-def test_past_the_stability_limit_it_stops_with_a_clear_error(model):
-    sim = Simulator(model, ParamSet({**BASE, "dynamics.sun_courant": 4.0}))
+def test_the_step_stays_inside_the_damped_midpoint_rules_stability_region(model):
+    """The midpoint rule with Rayleigh damping ζ at the bound is stable up to ω h = Y(ζ) (every
+    slower mode, less damped, included); the step count never asks for more, whatever
+    dynamics.sun_courant says, and a pinned particle stays put even if it was moving."""
+    from leafsim.sim.kernels.sun import stable_courant
+
+    assert stable_courant(0.0) == 0.0
+    assert stable_courant(0.3) == pytest.approx(1.645, abs=0.01)
+    assert stable_courant(0.5) == pytest.approx(2.0, abs=0.01)
+    for zeta in (0.1, 0.3):  # just inside Y: no mode grows; just outside: one does
+        Y = stable_courant(zeta)
+        for y_top, grows in ((Y, False), (Y + 0.03, True)):
+            y = np.linspace(1e-3, 1.0, 2000) * y_top
+            zy = zeta * y / y_top
+            z = y * (-zy + 1j * np.sqrt(1 - zy * zy))
+            assert (np.abs(1 + z + z * z / 2).max() > 1 + 1e-12) == grows
+    sim = Simulator(model, ParamSet({**BASE, "dynamics.sun_courant": 2.0, "dynamics.scene": "hanging"}))
     st = sim.state()
-    with pytest.raises(LeafsimError, match=r"dynamics\.sun_courant") as e:
-        for _ in range(40):
-            sim.step(st)
+    st.particle_qd[:] = 0.05  # a moving leaf, then pinned
+    pinned = model.particle_pinned
+    assert pinned.any()
+    sim.step(st)
+    d = sim._dynamics
+    assert d.sun_limit == pytest.approx(stable_courant(0.3))
+    assert np.array_equal(st.particle_q[pinned], model.particle_rest[pinned])
+    assert np.abs(st.particle_qd[pinned]).max() == 0.0
+
+
+def test_a_state_that_is_not_finite_gives_a_one_line_error(model):
+    sim = Simulator(model, ParamSet(BASE), watchdog=False)
+    st = sim.state()
+    st.particle_q[3, 2] = np.nan
+    with pytest.raises(LeafsimError, match=r"dynamics\.integrator = sun") as e:
+        sim.step(st)
     assert "\n" not in str(e.value)
 
 

@@ -167,8 +167,10 @@ class Dynamics:
         self.sun_min_steps = effective_substeps(params, "dynamics.sun_substeps")
         self.sun_courant = params["dynamics.sun_courant"]
         self.sun_steps = self.sun_min_steps
-        self.sk = np.ascontiguousarray(k, dtype=np.float64)
         self.zeta = params["dynamics.sun_damping"]
+        # the largest ω h the damped midpoint rule takes (every slower mode included)
+        self.sun_limit = min(self.sun_courant, ks.stable_courant(self.zeta))
+        self.sk = np.ascontiguousarray(k, dtype=np.float64)
         self.beta = 0.0
         self.drag = params["dynamics.damping"] / math.sqrt(self.mscale)
         self.vmod = E
@@ -276,11 +278,17 @@ class Dynamics:
         # this frame's stiffness and masses), and at least the floor dynamics.sun_substeps
         ij, sk, _, _, hidx, hk, _, vidx, vk, _ = elastic
         w2 = ks.stiffness_bound(state.particle_q, self.invm, ij, sk, hidx, hk, vidx, vk, self.srow)
-        need = math.ceil(self.dt * math.sqrt(max(w2, 0.0)) / self.sun_courant) if math.isfinite(w2) else SUN_MAX_STEPS
-        self.sun_steps = min(max(self.sun_min_steps, need), SUN_MAX_STEPS)
+        if not math.isfinite(w2):
+            raise LeafsimError(f"dynamics.integrator = sun: the stiffness is not finite at frame {state.frame} "
+                               f"(positions or material values): expected a finite state")
+        need = math.ceil(self.dt * math.sqrt(max(w2, 0.0)) / self.sun_limit)
+        if need > SUN_MAX_STEPS:
+            raise LeafsimError(f"dynamics.integrator = sun needs {need} steps per frame (more than {SUN_MAX_STEPS}): "
+                               f"expected a smaller dynamics.dt or the xpbd integrator for this stiffness")
+        self.sun_steps = max(self.sun_min_steps, need)
         self.sun_h = self.dt / self.sun_steps
-        # Rayleigh damping β = 2ζ/ω: damping ratio ζ at the stiffest mode, less below it
-        self.beta = 2.0 * self.zeta / math.sqrt(w2) if w2 > 0.0 and math.isfinite(w2) else 0.0
+        # Rayleigh damping β = 2ζ/ω: damping ratio ζ at the bound, less below it
+        self.beta = 2.0 * self.zeta / math.sqrt(w2) if w2 > 0.0 else 0.0
         shrunk = max(float(np.mean(state.spring_rest[self.T_springs] / m.spring_rest0[self.T_springs])), 0.1)
         radius = self.radius * shrunk
         contact = (m.particle_rest, self.T_idx, radius, CONTACT_SKIN * radius, CONTACT_NEAR_SKIN * radius, self.skip2,
@@ -295,11 +303,12 @@ class Dynamics:
             self.last_energy = ks.frame(state.particle_q, state.particle_qd, self.q_old, self.invm, self.g, self.sun_h,
                                         self.sun_steps, self.drag, self.beta, elastic, self.ground, self.pen, self.mu,
                                         self.pbd and self.self_coll, contact, self.replace, self.hgt, m.thickness * shrunk,
-                                        self.sF, self.sacc, self.sqm, self.svm, self.qa, out)
-            if out[0] < 0:
-                raise LeafsimError(f"dynamics.integrator = sun blew up at {self.sun_steps} steps per frame "
-                                   f"(dynamics.sun_courant = {self.sun_courant:g}): expected a smaller Courant number "
-                                   f"or more dynamics.sun_substeps")
+                                        self.sF, self.sacc, self.sqm, self.svm, self.qa, self.pbd, m.vol_idx, out)
+            # fastmath kernels cannot test for NaN: the positions are checked here
+            if not (np.isfinite(state.particle_q).all() and np.isfinite(state.particle_qd).all()):
+                raise LeafsimError(f"dynamics.integrator = sun blew up at frame {state.frame} with {self.sun_steps} steps "
+                                   f"(dynamics.sun_courant = {self.sun_courant:g}, dynamics.sun_damping = {self.zeta:g}): "
+                                   f"expected a smaller Courant number or more damping")
             if not self.cstate[7]:
                 break
             state.particle_q[:] = snap[0]

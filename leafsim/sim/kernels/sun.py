@@ -32,13 +32,35 @@ Everything runs on one thread (see :mod:`.pbd`).
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
+import numpy as np
 from numba import njit
 
 from leafsim.sim.kernels import FASTMATH
 from leafsim.sim.kernels.contacts import contact_velocities, project_contacts, update_contacts
 from leafsim.sim.kernels.pbd import clamp_ground, ground_clamp, ground_contact, uninvert, voronoi_heights, voronoi_replace
 from leafsim.sim.kernels.scalar import atan2_
+
+
+@lru_cache(maxsize=64)
+def stable_courant(zeta: float) -> float:
+    """The largest Y such that the explicit midpoint rule is stable for every mode with
+    ω h = y ≤ Y when the Rayleigh damping gives the mode at Y the damping ratio ``zeta`` (and a
+    slower mode ζ y / Y): max Y with |1 + z + z²/2| ≤ 1 for z = y(−ζ_y + i√(1 − ζ_y²)).
+    0.3 → 1.65, 0.1 → 1.05, 0.5 → 2.0; 0 for no damping (an undamped mode always grows)."""
+    zeta = min(max(float(zeta), 0.0), 1.0)
+    best = 0.0
+    frac = np.linspace(1e-3, 1.0, 1000)
+    for Y in np.arange(0.005, 2.5, 0.005):
+        y = frac * Y
+        zy = zeta * frac
+        z = y * (-zy + 1j * np.sqrt(1.0 - zy * zy))
+        if np.all(np.abs(1.0 + z + 0.5 * z * z) <= 1.0 + 1e-12):
+            best = float(Y)
+        else:
+            break
+    return best
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH, error_model="numpy")
@@ -190,18 +212,24 @@ def accelerate(F, v, invm, gz, c, out):
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH, error_model="numpy")
 def frame(q, qd, q_old, invm, gz, h, substeps, c, beta, elastic, ground, pen, mu, self_coll, contact, replace,
-          hgt, thick, F, acc, qm, vm, qa, out):
+          hgt, thick, F, acc, qm, vm, qa, layers, vol_idx, out):
     """All ``substeps`` explicit-midpoint steps of one frame.  ``elastic`` = (ij, sk, srest, tf,
-    hidx, hk, hrest, vidx, vk, vrest) (model order); ``contact`` as in :func:`.pbd.frame`.
-    Writes (substeps, contact hits, uninverted) to ``out`` and returns the elastic energy at
-    the frame's end."""
+    hidx, hk, hrest, vidx, vk, vrest) (model order); ``contact`` as in :func:`.pbd.frame`;
+    ``layers``: keep the V layer above its triangles (the constraints are on); ``vol_idx`` the
+    model's tetrahedra (for the un-inversion and the thesis re-placement).  Pinned particles
+    (1/m = 0) stay where they are.  Writes (substeps, contact hits, uninverted) to ``out`` and
+    returns the elastic energy at the frame's end.  Compiled with fastmath, this kernel cannot
+    see a NaN: the caller checks the positions after it."""
     ij, sk, srest, tf, hidx, hk, hrest, vidx, vk, vrest = elastic
+    for i in range(q.shape[0]):
+        if invm[i] <= 0.0:  # pinned: no velocity (it may have had one before it was pinned)
+            qd[i, 0] = 0.0; qd[i, 1] = 0.0; qd[i, 2] = 0.0
     qrest, T_idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn, cstate = contact
     n = q.shape[0]
     energy = 0.0
     for _ in range(substeps):
         if replace:
-            voronoi_heights(q, vidx, hgt)
+            voronoi_heights(q, vol_idx, hgt)
         # the midpoint rule
         forces(q, qd, ij, sk, srest, tf, hidx, hk, hrest, vidx, vk, vrest, beta, F)
         accelerate(F, qd, invm, gz, c, acc)
@@ -211,9 +239,6 @@ def frame(q, qd, q_old, invm, gz, h, substeps, c, beta, elastic, ground, pen, mu
                 qm[i, k] = q[i, k] + 0.5 * h * qd[i, k]
                 vm[i, k] = qd[i, k] + 0.5 * h * acc[i, k]
         energy = forces(qm, vm, ij, sk, srest, tf, hidx, hk, hrest, vidx, vk, vrest, beta, F)
-        if not math.isfinite(energy):  # blown up: the caller names the step count
-            out[0] = -1
-            return energy
         accelerate(F, vm, invm, gz, c, acc)
         for i in range(n):
             for k in range(3):
@@ -222,13 +247,15 @@ def frame(q, qd, q_old, invm, gz, h, substeps, c, beta, elastic, ground, pen, mu
                 qa[i, k] = q[i, k]
         # contacts: position corrections, as in the XPBD loop
         ncont = 0
+        out[1] = 0
         if self_coll:
             ncont = update_contacts(q, qrest, T_idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn, cstate)
             if ncont:
                 out[1] = project_contacts(q, invm, near, ncont, radius)
         if ground:
             ground_clamp(q, invm, pen)
-        out[2] += uninvert(q, invm, vidx, 0.25 * thick, False, ground, vm)  # vm: scratch by now
+        if layers:
+            out[2] += uninvert(q, invm, vol_idx, 0.25 * thick, False, ground, vm)  # vm: scratch by now
         if ground:
             ground_contact(q, q_old, invm, pen, mu)
         # a particle a correction moved takes the PBD velocity
@@ -240,7 +267,7 @@ def frame(q, qd, q_old, invm, gz, h, substeps, c, beta, elastic, ground, pen, mu
         if ncont:
             contact_velocities(q, qd, invm, near, ncont, radius)
         if replace:
-            voronoi_replace(q, vidx, hgt, 0.25 * thick)
+            voronoi_replace(q, vol_idx, hgt, 0.25 * thick)
             if ground:
                 clamp_ground(q)
     out[0] = substeps
