@@ -32,13 +32,16 @@ class LeafView:
     pigments0 : the young :class:`~leafsim.sim.pigments.PigmentState` (for the photo tint), or None.
     photo_tint : with a photo as albedo, tint it by the pigment change (True) or leave the tint
         at 1 (renderers that take the pigment colour with the photo's detail).
+    blade_only : leave the petiole out of the triangles and vein lines (the blade against its photo).
     photo_colour : the photo shows the young leaf: its colour is the young colour (see
         :meth:`colours`).  False for a photo of a senescent leaf (its outline and detail are
         used, the young colour is the palette's).
     """
 
-    def __init__(self, model: Model, photo_rgba=None, pigments0=None, photo_tint: bool = True, photo_colour: bool = False):
+    def __init__(self, model: Model, photo_rgba=None, pigments0=None, photo_tint: bool = True, photo_colour: bool = False,
+                 blade_only: bool = False):
         self.model = model
+        self.blade_only = blade_only  # draw the blade without its petiole (the photo comparison)
         self.photo_rgba = photo_rgba
         self.pigments0 = pigments0
         self.photo_tint = photo_tint
@@ -142,10 +145,12 @@ class LeafView:
         kind_map[SPRING_SURFACE], kind_map[SPRING_V] = SPRING_SURFACE_T, SPRING_SURFACE_V
         kind_map[SPRING_LINK], kind_map[SPRING_VEIN] = R_LINK, R_VEIN
         colours, tint = self.colours(state, params)
-        veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()]
+        stalk = ~m.blade_particles
+        veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()
+                 if not (self.blade_only and stalk[idx].any())]
         return RenderMesh(
             positions=state.particle_q[T].astype(np.float32),
-            triangles=remap[m.tri_T].astype(np.int32),
+            triangles=remap[m.blade_tri_T if self.blade_only else m.tri_T].astype(np.int32),
             texcoords=m.particle_texcoord[T].astype(np.float32),
             colours=colours,
             texture_rgba=self.photo_rgba if self.use_texture(params) else None,

@@ -26,6 +26,7 @@ from leafsim.blade.budget import check_mesh_budget
 from leafsim.blade.elements import Hinges, Springs, make_hinges, make_springs, t_edges
 from leafsim.blade.kernels import greedy_colour
 from leafsim.blade.masses import Masses, lump_masses
+from leafsim.blade.petiole import Petiole, add_petiole, petiole_hinge_rods
 from leafsim.blade.mesh import signed_areas, triangulate, vein_chains
 from leafsim.blade.sample import patch_field, sample_particles
 from leafsim.config.params import ParamSet
@@ -80,8 +81,10 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     holes = tuple(np.asarray(hh, float) for hh in shape.holes)
     P = sample_particles(contour, veins, params, r, np.random.default_rng(seed), extra_points, holes)
     tri, P, remap = triangulate(P, contour, r, holes)
-    nT, m = len(P.pts), len(tri)
     vp, vw, vo = vein_chains(P, remap)
+    base = int(np.argmin(np.linalg.norm(P.pts - np.asarray(shape.base, float), axis=1)))
+    P, tri, vp, vw, vo, pet = add_petiole(P, tri, remap, base, shape, params, r, vp, vw, vo)
+    nT, m = len(P.pts), len(tri)
     E = t_edges(P.pts, tri, vp, vo)
     rest = np.zeros((nT + m, 3))
     rest[:nT, :2] = P.pts
@@ -90,13 +93,77 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     tri_area = np.abs(signed_areas(P.pts, tri))
     S = make_springs(E, tri, rest, tri_area, nT, vp, vw)
     H = make_hinges(E, tri, rest, tri_area, S, vp, vw, vo)
+    on_stalk, stalk_rod = petiole_hinge_rods(H.idx, pet)
+    H = replace(H, rod=np.where(on_stalk, stalk_rod, H.rod), vein=H.vein | on_stalk)
     vol_idx = np.column_stack([np.arange(nT, nT + m), tri]).astype(np.int64)
     vol_rest0 = 2.0 * tri_area * h  # 6 × tetra volume = det = h × 2A
-    base = int(np.argmin(np.linalg.norm(P.pts - np.asarray(shape.base, float), axis=1)))
     M = lump_masses(P, tri, tri_area, S, E.n_T_springs, base, vp, vw, params)
     model = _finalize(shape, P, tri, rest, S, H, vol_idx, vol_rest0, E.tri_edge, M, base, vp, vw, vo, remap, L, h, r, E.share)
+    if pet is not None:
+        model = _with_petiole(model, pet, veins)
     return replace(model, particle_patch=patch_field(model.particle_rest[:, :2], model.particle_area,
                                                      model.particle_layer == LAYER_T, L, seed))
+
+
+def _with_petiole(model: Model, pet: Petiole, veins: VeinGraph) -> Model:
+    """Mark the stalk's particles (its T particles and the V particles over its triangles), pin
+    its tip instead of the base (hanging scene), give it the margin distance of a thin rod
+    (d/2: it is all margin to the air) and texture coordinates on the photo's midrib next to the
+    base (the stalk is vein tissue; the photo's own stalk is cut off or lies on the blade)."""
+    nT = int((model.particle_layer == LAYER_T).sum())
+    stalk = np.zeros(model.particle_count, bool)
+    stalk[pet.first:nT] = True
+    on = stalk[model.tri_T].any(1)
+    stalk[model.tri_V[on]] = True
+    pinned = np.zeros(model.particle_count, bool)
+    pinned[pet.tip] = True
+    margin = model.particle_margin_distance.copy()
+    margin[stalk] = 0.5 * pet.diameter
+    tex = model.particle_texcoord.copy()
+    xy = model.particle_rest[:, :2] - model.particle_rest[model.base_particle, :2]
+    along = np.clip(xy[stalk] @ pet.direction, 0.0, None)
+    across = xy[stalk] @ np.array([-pet.direction[1], pet.direction[0]])
+    mid = _midrib_from_base(model, veins)
+    if mid is not None:
+        # the stalk's length maps onto the first MIDRIB_SHARE of the midrib, its width onto the vein's
+        total = max(float(along.max()), 1e-300)
+        s_mid = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(mid, axis=0), axis=1))]
+        t = np.clip(along / total, 0.0, 1.0) * min(MIDRIB_SHARE * model.length, s_mid[-1])
+        px = np.interp(t, s_mid, mid[:, 0])
+        py = np.interp(t, s_mid, mid[:, 1])
+        k = np.clip(np.searchsorted(s_mid, t), 1, len(mid) - 1)
+        tang = mid[k] - mid[k - 1]
+        tang /= np.maximum(np.linalg.norm(tang, axis=1, keepdims=True), 1e-300)
+        sq = 0.25 * np.clip(across / max(0.5 * pet.diameter, 1e-300), -1.0, 1.0) * model.spacing
+        pts = np.column_stack([px - sq * tang[:, 1], py + sq * tang[:, 0]])
+        ref = model.particle_rest[:, :2]
+        # texcoords are affine in the rest position: fit the blade's map and apply it to the points
+        Tb = np.flatnonzero(~stalk & (model.particle_layer == LAYER_T))
+        X = np.column_stack([ref[Tb], np.ones(len(Tb))])
+        A, *_ = np.linalg.lstsq(X, model.particle_texcoord[Tb], rcond=None)
+        tex[stalk] = np.column_stack([pts, np.ones(len(pts))]) @ A
+    return replace(model, particle_petiole=stalk, particle_pinned=pinned, particle_margin_distance=margin,
+                   particle_texcoord=tex)
+
+
+#: share of the leaf length of the midrib, from the base, whose photo pixels texture the stalk
+MIDRIB_SHARE = 0.05
+
+
+def _midrib_from_base(model: Model, veins: VeinGraph):
+    """(k, 2) rest points of the order-0 vein that starts at the base (the midrib), or None."""
+    base = model.particle_rest[model.base_particle, :2]
+    best = None
+    for v in veins.veins:
+        if v.order != 0 or len(v.points) < 2:
+            continue
+        p = np.asarray(v.points, float)
+        if np.linalg.norm(p[-1] - base) < np.linalg.norm(p[0] - base):
+            p = p[::-1]
+        dist = float(np.linalg.norm(p[0] - base))
+        if best is None or dist < best[0]:
+            best = (dist, p)
+    return None if best is None else best[1]
 
 
 def _finalize(shape, P, tri, rest, S: Springs, H: Hinges, vol_idx, vol_rest0, tri_edge, M: Masses, base,

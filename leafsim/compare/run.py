@@ -27,7 +27,6 @@ from leafsim.compare import metrics as C
 from leafsim.outline.trace import refuse_non_leaf, to_leaf_shape
 from leafsim.pipeline import build_leaf, photo_veins, trace_photo
 from leafsim.render.topdown import TopDown
-from leafsim.sim.model import LAYER_T
 from leafsim.sim.run import Run
 from leafsim.sim.simulator import Simulator
 
@@ -67,7 +66,8 @@ class _Leaf:
         self.sim = Simulator(self.model, params, effects=effects, seed=seed)
         self.state0 = self.sim.state()
         photo = species_photo_rgba(sp, params) if sp.image is not None else None
-        self.view = LeafView(self.model, photo, self.state0.pigments.copy(), photo_tint=False, photo_colour=sp.photo_colour)
+        self.view = LeafView(self.model, photo, self.state0.pigments.copy(), photo_tint=False, photo_colour=sp.photo_colour,
+                              blade_only=True)
         self.albedo = "detail" if photo is not None else "colours"
         self.frame = C.frame_for(self.shape) if frame is None else frame
         self.td = TopDown(self.frame)
@@ -112,7 +112,7 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, la
     w0 = float(leaf.model.particle_water0.sum())
     at, best, tried = None, None, 0
     window: list[float] = []
-    area = leaf.model.particle_area * (leaf.model.particle_layer == 0)
+    area = leaf.model.particle_area * leaf.model.blade_T
     goal = target.colour if target is not None else None
     fp = C.colour_classes(target.rgb, goal) if target is not None else None
 
@@ -273,7 +273,7 @@ def _grown_back(leaf: _Leaf, ref: C.Reference, best, note: str) -> Row:
     big = _Leaf(replace(leaf.sp, length_m=leaf.sp.length_m * k), leaf.params, leaf.seed, leaf.effects, frame=leaf.frame)
     try:
         def centroid(lf):
-            t = lf.model.particle_layer == LAYER_T
+            t = lf.model.blade_T
             a = lf.model.particle_area[t]
             return (lf.state0.particle_q[t, :2] * a[:, None]).sum(0) / a.sum()
 

@@ -172,6 +172,11 @@ _f("mesh.contour_detail", 0.05, 0.0, 1.0, "× r", "Contour particles also sit on
 _f("mesh.thickness", 0.0004, 0.00005, 0.005, "m", "Blade thickness h: distance of layer V above layer T.", G, True, log=True)
 _c("mesh.veins_included", "sublateral", ("main", "lateral", "sublateral", "net"), "Highest vein order that gets vein particles.", G, True)
 
+# ---------------------------------------------------------------- petiole (rebuild)
+G = "Petiole"
+_f("petiole.length", 0.0, 0.0, 0.3, "m", "Length of the leaf stalk: a rod from the base, away from the apex, that bends, dries and is exported with the blade (its tip is what the hanging scene holds); 0 = no stalk (the blade is held at its base). Species set their own.", G, True)
+_f("petiole.diameter", 0.0015, 0.0003, 0.01, "m", "Diameter d of the leaf stalk: a rod of cross-section πd²/4 (mass, stretching) and bending stiffness E_vein·πd⁴/64, vein tissue (material.vein_modulus).", G, True, log=True)
+
 # ---------------------------------------------------------------- mass (rebuild)
 G = "Mass"
 _f("mass.weight_main", 1.0, 0.01, 1e4, "", "Dijkstra edge weight factor of main-vein springs.", G, True, log=True)

@@ -38,12 +38,27 @@ class FrameWriter:
         path = self.out / f"frame_{k:05d}.png"
         if self.renderer is None:
             self.renderer = OffscreenRenderer(960, 720)
-            self.camera = default_camera(_room_to_curl(self.view.mesh(self.rest, self.params).positions), aspect=960 / 720)
+            box = _room_to_curl(self.view.mesh(self.rest, self.params).positions)
+            if self.params["dynamics.scene"] == "hanging":
+                box = _room_to_hang(box, self.view.model)
+            self.camera = default_camera(box, aspect=960 / 720)
             self.renderer.render_png(self.view.mesh(state, self.params), path, camera=self.camera, options=opts)
         else:
             self.renderer.render_png(self.view.update(state, self.params), path, camera=self.camera, options=opts)
         self.written += 1
         return path
+
+
+def _room_to_hang(box: np.ndarray, model) -> np.ndarray:
+    """``box`` grown down to where a leaf hanging from its pinned particles can reach."""
+    pins = model.particle_rest[model.particle_pinned]
+    if not len(pins):
+        return box
+    c = pins.mean(0)
+    reach = float(np.linalg.norm(model.particle_rest - c, axis=1).max())
+    out = box.copy()
+    out[0, 2] = min(out[0, 2], c[2] - 1.05 * reach)
+    return out
 
 
 def _room_to_curl(points: np.ndarray) -> np.ndarray:

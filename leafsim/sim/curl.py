@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from leafsim.sim.model import LAYER_T, Model, State
+from leafsim.sim.model import Model, State
 from leafsim.sim.shape import leaf_frame
 
 #: the smooth part of the height field: Gaussian σ, × leaf length
@@ -44,7 +44,7 @@ def _normals(q: np.ndarray, tri: np.ndarray) -> np.ndarray:
 
 def margin_roll(model: Model, q: np.ndarray) -> dict:
     """Mean and 90th percentile of the margin particles' normal angle to the mean normal [deg]."""
-    tri = model.tri_T
+    tri = model.blade_tri_T
     nt = _normals(q, tri)
     mean = nt.sum(0)
     mean /= max(float(np.linalg.norm(mean)), 1e-300)
@@ -60,7 +60,7 @@ def margin_roll(model: Model, q: np.ndarray) -> dict:
 
 def midrib_fold(model: Model, q: np.ndarray) -> float:
     """Angle between the best-fit planes of the two halves of the blade [deg]."""
-    T = np.flatnonzero(model.particle_layer == LAYER_T)
+    T = np.flatnonzero(model.blade_T)
     x = model.particle_rest[T, 0]
     area = model.particle_area[T]
     normals = []
@@ -73,7 +73,7 @@ def midrib_fold(model: Model, q: np.ndarray) -> float:
         nrm = vt[2]
         normals.append(nrm)
     # orient both like the blade's mean normal (the plane normal's sign is arbitrary)
-    mean = _normals(q, model.tri_T).sum(0)
+    mean = _normals(q, model.blade_tri_T).sum(0)
     a, b = (n if n @ mean >= 0 else -n for n in normals)
     return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
 
@@ -83,7 +83,7 @@ def height_field(model: Model, q: np.ndarray, grid: int = GRID) -> tuple[np.ndar
     the blade's height in the leaf frame, linearly interpolated over the rest triangles."""
     from scipy.interpolate import LinearNDInterpolator
 
-    T = model.particle_layer == LAYER_T
+    T = model.blade_T
     rest = model.particle_rest[T, :2]
     L = float(np.ptp(model.particle_rest[:, 1])) or 1.0
     h = L / grid
@@ -99,7 +99,7 @@ def height_field(model: Model, q: np.ndarray, grid: int = GRID) -> tuple[np.ndar
     f = LinearNDInterpolator(tri, q[T, 2])
     Z = f(X, Y)
     # only inside the blade's own triangles (not the convex hull across sinuses)
-    inside = _inside_mesh(rest, remap[model.tri_T], X, Y)
+    inside = _inside_mesh(rest, remap[model.blade_tri_T], X, Y)
     Z[~inside] = np.nan
     return Z, inside, h
 

@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from leafsim.sim.model import LAYER_T, LAYER_V, Model
+from leafsim.sim.model import LAYER_V, Model
 
 #: molar mass of water [kg/mol] and standard air pressure [kPa]
 M_WATER = 0.018015
@@ -70,7 +70,7 @@ def boundary_conductance(wind: float, dimension: float) -> float:
 
 def leaf_dimension(model: Model) -> float:
     """Characteristic dimension d [m]: 0.72 × the blade's mean width (area / length)."""
-    area = float(model.particle_area[model.particle_layer == LAYER_T].sum())
+    area = float(model.particle_area[model.blade_T].sum())
     return WIDTH_FACTOR * area / max(model.length, 1e-9)
 
 

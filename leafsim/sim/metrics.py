@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from leafsim.base.geometry import LeafShape, distance_to_polygon, points_in_polygon, resample_closed
-from leafsim.sim.model import LAYER_T, Model, State
+from leafsim.sim.model import Model, State
 
 #: grid resolution of the interior probe points (across the leaf's bounding box)
 GRID = 40
@@ -51,7 +51,8 @@ def embed(model: Model, pts: np.ndarray) -> Embedding:
     the mesh (it approximates the outline by chords) take the nearest triangle with clamped,
     renormalised barycentric coordinates."""
     rest = model.particle_rest[:, :2]
-    tri = model.tri_T
+    blade = np.flatnonzero(model.blade_tris)  # never in the petiole
+    tri = model.tri_T[blade]
     cen = rest[tri].mean(1)
     kk = min(12, len(tri))
     _, cand = cKDTree(cen).query(pts, k=kk)
@@ -70,7 +71,7 @@ def embed(model: Model, pts: np.ndarray) -> Embedding:
     rows = np.arange(len(pts))
     w = np.clip(bary[rows, best], 0.0, None)
     w /= np.maximum(w.sum(1, keepdims=True), 1e-300)
-    return Embedding(cand[rows, best], w)
+    return Embedding(blade[cand[rows, best]], w)
 
 
 def own_frame(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
@@ -146,10 +147,10 @@ def shape_scalars(model: Model, state: State, probe: Probe, q_probe: np.ndarray 
     if q_probe is None:
         q_probe = probe.embedding(model).at(model, state.particle_q)
     q = state.particle_q
-    T = model.particle_layer == LAYER_T
+    T = model.blade_T
     zmin = q[T, 2].min()
     zm = q_probe[probe.n_interior:, 2]
-    tri = model.tri_T
+    tri = model.blade_tri_T
     a3 = lambda x: 0.5 * np.linalg.norm(np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]]), axis=1).sum()
     rest = model.particle_rest
     lo = np.minimum(q[T, :2].min(0), rest[T, :2].min(0))

@@ -15,7 +15,7 @@ import numpy as np
 
 # particle layers / kinds
 LAYER_T, LAYER_V = 0, 1
-KIND_SURFACE, KIND_CONTOUR, KIND_VEIN, KIND_VORONOI = 0, 1, 2, 3
+KIND_SURFACE, KIND_CONTOUR, KIND_VEIN, KIND_VORONOI, KIND_PETIOLE = 0, 1, 2, 3, 4
 # spring types
 SPRING_SURFACE, SPRING_VEIN, SPRING_V, SPRING_LINK = 0, 1, 2, 3
 
@@ -76,8 +76,10 @@ class Model:
     particle_water0 (n,) [kg], particle_tau (n,) Jeong's graph-distance weight,
     particle_vein_width (n,) [m] (0 off the veins), particle_margin_distance (n,) [m] rest
     distance to the outline, particle_texcoord (n,2),
-    particle_pinned (n,) bool (petiole, for the hanging scene).  Each layer carries half the
-    blade's areal mass; vein particles add their rod.
+    particle_pinned (n,) bool (the petiole's tip, or the blade at the base without one: the
+    hanging scene).  Each layer carries half the blade's areal mass; vein particles add their
+    rod.  particle_petiole (n,) bool the stalk's particles (:mod:`leafsim.blade.petiole`; both
+    layers, the base particle excluded), or None for a model without a petiole.
 
     Triangles (layer T) and Voronoi dual (layer V)
     ----------------------------------------------
@@ -170,6 +172,32 @@ class Model:
     vein_edge_share: float
     particle_patch: np.ndarray | None = None
     path: "Model | None" = None
+    particle_petiole: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ blade vs stalk
+    @property
+    def blade_particles(self) -> np.ndarray:
+        """(n,) bool: particles of the blade (everything but the petiole)."""
+        if self.particle_petiole is None:
+            return np.ones(self.particle_count, bool)
+        return ~self.particle_petiole
+
+    @property
+    def blade_T(self) -> np.ndarray:
+        """(n,) bool: layer-T particles of the blade (the petiole's left out)."""
+        return (self.particle_layer == LAYER_T) & self.blade_particles
+
+    @property
+    def blade_tri_T(self) -> np.ndarray:
+        """(m_b, 3) the blade's T triangles (the petiole's left out)."""
+        return self.tri_T if self.particle_petiole is None else self.tri_T[self.blade_tris]
+
+    @property
+    def blade_tris(self) -> np.ndarray:
+        """(m,) bool: T triangles of the blade (none of whose vertices is the petiole's)."""
+        if self.particle_petiole is None:
+            return np.ones(self.tri_count, bool)
+        return ~self.particle_petiole[self.tri_T].any(1)
 
     # ------------------------------------------------------------------ counts
     @property
@@ -219,6 +247,13 @@ class Model:
             path=None if self.path is None else self.path.state(),
         )
 
+    def blade_area(self) -> float:
+        """Rest area of the blade's triangles [m²] (the petiole's left out)."""
+        r = self.particle_rest
+        t = self.blade_tri_T
+        u, v = r[t[:, 1], :2] - r[t[:, 0], :2], r[t[:, 2], :2] - r[t[:, 0], :2]
+        return float(0.5 * np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]).sum())
+
     def to_report(self) -> dict:
         """Counts per layer and type plus vein_edge_share (the CLI ``build --json``)."""
         lay = self.particle_layer
@@ -244,7 +279,8 @@ class Model:
             "length_m": self.length,
             "thickness_m": self.thickness,
             "spacing_m": self.spacing,
-            "area_m2": float(self.particle_area[lay == LAYER_T].sum()),
+            "area_m2": self.blade_area(),
+            "petiole_particles": int((~self.blade_particles).sum()),
             "fresh_mass_kg": float(self.particle_mass0.sum()),
             "fresh_water_kg": float(self.particle_water0.sum()),
         }

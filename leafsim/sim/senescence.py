@@ -109,7 +109,7 @@ def senescence_field(model, params: Mapping[str, Any], seed: int) -> tuple[np.nd
         d = _vein_distance(model, xy)
         rate *= 1.0 - g["colour.vein_islands"] * np.exp(-((d / g["colour.island_width"]) ** 2))
     spot = np.zeros(n)
-    area = float(model.particle_area[model.particle_layer == 0].sum())
+    area = float(model.particle_area[model.blade_T].sum())
     if g["colour.spots"] > 0.0 and area > 0.0:
         rng = np.random.default_rng([int(seed), _SALT, 1])
         count = int(rng.poisson(g["colour.spots"] * area))

@@ -9,7 +9,7 @@ import io
 import numpy as np
 
 from leafsim.base.fileio import atomic_write_bytes
-from leafsim.sim.model import LAYER_T, Model, State
+from leafsim.sim.model import Model, State
 
 
 def save_npz(path, model: Model, state: State) -> None:
@@ -33,7 +33,7 @@ def _area3(q, tri):
 
 def leaf_frame(model: Model, state: State) -> np.ndarray:
     """Positions in the leaf's own frame: best rigid fit (Kabsch) of layer T onto its rest."""
-    T = model.particle_layer == LAYER_T
+    T = model.blade_T
     P = state.particle_q[T]
     Q = model.particle_rest[T]
     pc, qc = P.mean(0), Q.mean(0)
@@ -57,12 +57,13 @@ def shape_metrics(model: Model, state: State, own_frame: bool | None = None) -> 
     q = state.particle_q
     if own_frame:
         q = leaf_frame(model, state)
-    T = model.particle_layer == LAYER_T
+    T = model.blade_T
     L = model.length
     tri = model.tri_T
     a, b, c = q[tri[:, 0]], q[tri[:, 1]], q[tri[:, 2]]
     n = np.cross(b - a, c - a)
     hv = ((q[model.tri_V] - a) * n).sum(1)
+    tri = model.blade_tri_T
     zc = q[model.contour_particles, 2]
     zmin = q[T, 2].min()
     return {

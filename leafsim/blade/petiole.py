@@ -1,0 +1,163 @@
+"""Stage 3c′: the petiole — a short rod from the base, meshed into layer T as a three-row strip.
+
+The petiole is the leaf stalk: a rod of diameter ``petiole.diameter`` and length
+``petiole.length`` [m] that leaves the blade at the base, pointing away from the apex (turned
+by the least angle that keeps it off the blade when basal lobes lie in the way).  It is meshed
+as a strip of sections k = 0 … N: section 0 is the base particle and its two neighbours on the
+contour (so the strip's first triangles share the blade's margin edges, and hinges across
+them carry bending moments from stalk to blade), each later section a centre particle with
+one particle ±d/2 to either side.  The centre row is a vein of order 0 of width d: its springs
+are rods (cross-section πd²/4) and it adds the rod's mass like any vein.  The strip's hinges
+across the stalk (the two crosswise edges of every section) share the rod's bending stiffness
+I/ℓ = (πd⁴/64)/s; the hinges along the centre row keep the strip from folding along its axis
+with the same weight, and so do its diagonals (else the strip folds along them); none of them
+takes the blade's bilayer curl.  The V layer, the
+thickness volumes, osmosis and colour treat the strip as blade tissue of the petiole's
+projected area d × length.
+
+Everything that measures the *blade* (areas kept, the curl and wrinkle measures, the
+silhouette against the photo) leaves the petiole out: :attr:`Model.particle_petiole`."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from leafsim.base.geometry import LeafShape, points_in_region
+from leafsim.blade.sample import Points
+from leafsim.config.params import ParamSet
+from leafsim.sim.model import KIND_PETIOLE
+
+#: largest turn [deg] away from straight down the midrib axis tried to keep the stalk off the blade
+MAX_TURN = 80.0
+
+
+@dataclass
+class Petiole:
+    """The petiole's place in the T mesh (final particle numbering)."""
+
+    chain: np.ndarray        # (N+1,) centre particles from the tip to the base particle
+    sections: np.ndarray     # (N+1, 3) [left, centre, right] per section, section 0 at the base
+    cross_rod: float         # I/ℓ share [m³] of each crosswise / axial hinge
+    diameter: float          # [m]
+    direction: np.ndarray    # (2,) unit vector base → tip at rest
+    first: int               # index of the first petiole particle (they are the last ones)
+
+    @property
+    def tip(self) -> np.ndarray:
+        """The tip section's three particles (pinned in the hanging scene)."""
+        return self.sections[-1]
+
+
+def petiole_direction(shape: LeafShape, length: float, diameter: float) -> np.ndarray:
+    """Unit vector from the base along which the stalk lies at rest: away from the apex, turned
+    by the least angle (steps of 5°, up to ±MAX_TURN) for which it clears the blade; straight
+    down when no angle does (it then lies across the basal lobes, as a folded stalk does)."""
+    base = np.asarray(shape.base, float)
+    d0 = base - np.asarray(shape.apex, float)
+    d0 /= max(float(np.linalg.norm(d0)), 1e-300)
+    t = np.linspace(0.1, 1.0, 24)[:, None] * length
+    for turn in np.r_[0.0, np.repeat(np.arange(5.0, MAX_TURN + 1, 5.0), 2) * np.tile([1, -1], int(MAX_TURN // 5))]:
+        a = math.radians(turn)
+        d = np.array([d0[0] * math.cos(a) - d0[1] * math.sin(a), d0[0] * math.sin(a) + d0[1] * math.cos(a)])
+        nrm = np.array([-d[1], d[0]])
+        pts = np.vstack([base + t * d + s * 0.5 * diameter * nrm for s in (-1.0, 0.0, 1.0)])
+        if not points_in_region(pts, shape.contour, shape.holes).any():
+            return d
+    return d0
+
+
+def add_petiole(P: Points, tri: np.ndarray, remap: np.ndarray, base: int, shape: LeafShape,
+                params: ParamSet, r: float, vp: list, vw: list, vo: list):
+    """Append the petiole's particles and triangles to layer T (their indices follow the
+    blade's), and its centre row to the vein chains.  Returns (points, triangles, vein chains,
+    widths, orders, :class:`Petiole`), or the inputs and None when ``petiole.length`` is 0."""
+    length, diam = float(params["petiole.length"]), float(params["petiole.diameter"])
+    if length <= 0.0:
+        return P, tri, vp, vw, vo, None
+    d = petiole_direction(shape, length, diam)
+    nrm = np.array([-d[1], d[0]])  # left of the stalk
+    base_xy = P.pts[base]
+    n_sec = max(2, int(math.ceil(length / r)))
+    s = length / n_sec
+    first = len(P.pts)
+    new = []
+    sections = [_junction(P, remap, base, base_xy, d, nrm, s)]
+    for k in range(1, n_sec + 1):
+        c = base_xy + k * s * d
+        row = []
+        for side in (1.0, 0.0, -1.0):
+            row.append(first + len(new))
+            new.append(c + side * 0.5 * diam * nrm)
+        sections.append(row)
+    sections = np.array(sections, np.int64)
+    pts = np.vstack([P.pts, np.array(new)])
+    kinds = np.concatenate([P.kinds, np.full(len(new), KIND_PETIOLE, np.int8)])
+    vord = np.concatenate([P.vorders, np.full(len(new), -1, np.int8)])
+    vord[sections[1:, 1]] = 0
+    ptri = []
+    for (l0, c0, r0), (l1, c1, r1) in zip(sections[:-1], sections[1:]):
+        ptri += [(l0, c0, c1), (l0, c1, l1), (c0, r0, r1), (c0, r1, c1)]
+    ptri = np.array([t for t in ptri if len(set(t)) == 3], np.int64)
+    a, b, c = pts[ptri[:, 0]], pts[ptri[:, 1]], pts[ptri[:, 2]]
+    ar = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    ptri[ar < 0] = ptri[ar < 0][:, [0, 2, 1]]
+    chain = sections[::-1, 1].copy()
+    points = Points(pts, kinds, vord, P.vein_lists, P.vein_ord, P.vein_wid, P.n_contour)
+    info = Petiole(chain, sections, math.pi * diam ** 4 / 64.0 / s / 2.0, diam, d, first)
+    return (points, np.vstack([tri, ptri]), vp + [chain], vw + [np.full(len(chain), diam)], vo + [0], info)
+
+
+def _junction(P: Points, remap, base: int, base_xy, d, nrm, s: float) -> list:
+    """Section 0: [left, base, right] with the base's two neighbours on the contour when they lie
+    on either side of the stalk and short of its first section, else [base, base, base] (the
+    strip then starts in a point: its first triangles degenerate and are dropped)."""
+    ring = remap[:P.n_contour]
+    ring = ring[ring >= 0]
+    at = np.flatnonzero(ring == base)
+    if len(at):
+        k = int(at[0])
+        nb = [int(ring[k - 1]), int(ring[(k + 1) % len(ring)])]
+        side = [float(np.dot(P.pts[j] - base_xy, nrm)) for j in nb]
+        ahead = [float(np.dot(P.pts[j] - base_xy, d)) for j in nb]
+        if side[0] * side[1] < 0 and max(ahead) < 0.5 * s:
+            left, right = (nb[0], nb[1]) if side[0] > 0 else (nb[1], nb[0])
+            return [left, base, right]
+    return [base, base, base]
+
+
+def petiole_hinge_rods(hinge_idx: np.ndarray, info: Petiole | None) -> tuple[np.ndarray, np.ndarray]:
+    """(mask, rod) per hinge: the hinges whose shared edge is a crosswise edge of a section
+    (left–centre, centre–right), a centre-row edge or a diagonal of the strip carry
+    ``info.cross_rod`` = (πd⁴/64)/s/2 (two crosswise hinges per node: E I/s together), the
+    junction's crosswise pair twice that (it stands for half a segment)."""
+    mask = np.zeros(len(hinge_idx), bool)
+    rod = np.zeros(len(hinge_idx))
+    if info is None or len(hinge_idx) == 0:
+        return mask, rod
+    sec = info.sections
+    share: dict = {}
+    for k, (l_, c_, r_) in enumerate(sec[:-1]):
+        for e in ((l_, c_), (c_, r_)):
+            if e[0] != e[1]:
+                # node k stands for the rod from s/2 before it to s/2 after it; the junction
+                # (k = 0) only for the half on the stalk's side: I / (s/2)
+                share[(min(e), max(e))] = info.cross_rod * (2.0 if k == 0 else 1.0)
+    for c0, c1 in zip(sec[:-1, 1], sec[1:, 1]):
+        share[(min(c0, c1), max(c0, c1))] = info.cross_rod
+    # the diagonals too: under pure bending the strip's quads stay flat and these hinges stay
+    # at rest, but without them the strip folds along its diagonals (a soft twist-and-fold
+    # mode: a cantilevered stalk sagged 2x the beam theory's on a fine mesh, 1.13x with them)
+    for (l0, c0, r0), (l1, c1, r1) in zip(sec[:-1], sec[1:]):
+        for e in ((l0, c1), (c0, r1)):
+            if e[0] != e[1]:
+                share[(min(e), max(e))] = info.cross_rod
+    a, b = hinge_idx[:, 2], hinge_idx[:, 3]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    for e in range(len(hinge_idx)):
+        w = share.get((int(lo[e]), int(hi[e])))
+        if w is not None:
+            mask[e], rod[e] = True, w
+    return mask, rod
