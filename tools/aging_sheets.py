@@ -34,7 +34,7 @@ def stage(leaf, state, w0: float, length_px: float) -> tuple[dict, np.ndarray]:
     lab = C._lab(rgb)[inner]
     spread = C.colour_spread(rgb, inner, length_px)
     z = np.exp(1j * np.arctan2(lab[:, 2], lab[:, 1]))[np.hypot(lab[:, 1], lab[:, 2]) >= 8]
-    row = {"frame": state.frame, "water": round(float(state.particle_water.sum()) / w0, 3),
+    row = {"frame": state.frame, "water": round(leaf.model.water_fraction(state.particle_water), 3),
            "srgb_median": np.median(rgb[inner], axis=0).astype(int).tolist(),
            "hue_deg": round(float(np.degrees(np.angle(z.mean())) % 360.0), 1) if z.size else None,
            "L": round(float(lab[:, 0].mean()), 1), **spread,
@@ -62,7 +62,7 @@ def sheet(key: str, every: int, out: Path, seed: int) -> None:
             tiles.append(im)
 
         take()
-        for _ in run.frames(until=lambda st: float(st.particle_water.sum()) <= DRY_LEFT * w0):
+        for _ in run.frames(until=lambda st: leaf.model.water_fraction(st.particle_water) <= DRY_LEFT):
             if run.state.frame % every == 0:
                 take()
         if rows[-1]["frame"] != run.state.frame:

@@ -37,12 +37,11 @@ def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides:
     shape, _, model = build_leaf(sp, p, 0)
     run = Run(model, p, seed=0, name=key)
     st = run.state
-    w0 = model.particle_water0.sum()
     t0, t_dry = time.perf_counter(), None
 
     def settled(st) -> bool:
         nonlocal t_dry
-        if t_dry is None and st.particle_water.sum() < DRY * w0:
+        if t_dry is None and model.water_fraction(st.particle_water) < DRY:
             t_dry = st.time
         return t_dry is not None and st.time >= SETTLE * t_dry
 

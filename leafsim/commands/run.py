@@ -157,7 +157,7 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
     ``water_kg`` is the water left now, ``fresh_water_kg`` the fresh leaf's."""
     model, state = run.model, run.state
     ms = [sum(s["ms"].values()) for s in stats]
-    water = float(state.particle_water.sum() / max(model.particle_water0.sum(), 1e-300))
+    water = model.water_fraction(state.particle_water)
     rep = {
         "species": sp.key, "seed": args.seed, "frames": len(stats), "frame": state.frame, "resumed_from": start,
         "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),

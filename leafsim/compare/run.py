@@ -109,7 +109,6 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, la
     stage at which the leaf has visibly turned (less than ``WINDOW_CHLOROPHYLL`` of its
     chlorophyll left, area-weighted), through the dried one."""
     run = Run(leaf.model, simulator=leaf.sim, state=leaf.state0.copy(), name=leaf.sp.key)
-    w0 = float(leaf.model.particle_water0.sum())
     at, best, tried = None, None, 0
     window: list[float] = []
     area = leaf.model.particle_area * leaf.model.blade_T
@@ -130,7 +129,7 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, la
                 window.append(tv)
             if best is None or tv < best[1]:
                 best = (state.copy(), tv)
-        dry = float(state.particle_water.sum()) <= DRY_LEFT * w0
+        dry = leaf.model.water_fraction(state.particle_water) <= DRY_LEFT
         return (dry or state.frame >= min(last, MAX_FRAMES)) and (want_frame is None or state.frame >= want_frame)
 
     if not look(run.state):
@@ -168,7 +167,7 @@ def _vein_offset(leaf: _Leaf, state) -> dict | None:
 
 
 def _stage_info(leaf: _Leaf, state) -> dict:
-    w = float(state.particle_water.sum() / max(leaf.model.particle_water0.sum(), 1e-300))
+    w = leaf.model.water_fraction(state.particle_water)
     return {"frame": state.frame, "time_s": round(state.time, 4), "water": round(w, 4)}
 
 

@@ -394,7 +394,7 @@ class LeafApp:
             t = self.ctx.texture((rgba.shape[1], rgba.shape[0]), 4, np.ascontiguousarray(rgba).tobytes())
             t.repeat_x = t.repeat_y = False
             setattr(self, name, t)
-        T = s.model.particle_layer == 0
+        T = s.model.blade_T  # the petiole's texture coordinates sit on the midrib, off this map
         self.photo_affine = texcoord_affine(s.model.particle_rest[T][:, :2], s.model.particle_texcoord[T])
         self.photo_z = float(s.model.particle_rest[T][:, 2].mean())
 

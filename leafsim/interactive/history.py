@@ -30,7 +30,7 @@ def history_record(model, simulator, state, ms: dict) -> dict:
     mass = model.particle_cytosol + w
     qd = state.particle_qd
     rec = {"frame": state.frame, "time": state.time, "water_T": float(w[lay == LAYER_T].sum()),
-           "water_V": float(w[lay == LAYER_V].sum()), "water": float(w.sum() / max(model.particle_water0.sum(), 1e-300)),
+           "water_V": float(w[lay == LAYER_V].sum()), "water": model.water_fraction(w),
            "residual": float(residual(state.particle_q, model.spring_ij, state.spring_rest)) if finite else float("nan"),
            "kinetic": float(0.5 * (mass * (qd * qd).sum(1)).sum()) if finite else float("nan"),
            "iterations": simulator.iterations}

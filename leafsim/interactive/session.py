@@ -127,7 +127,7 @@ class Session:
         """Water now / water at the start (1 = fresh leaf)."""
         if self.model is None:
             return 1.0
-        return float(self.state.particle_water.sum() / max(self.model.particle_water0.sum(), 1e-300))
+        return self.model.water_fraction(self.state.particle_water)
 
     # ------------------------------------------------------------------ building
     @property

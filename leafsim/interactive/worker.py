@@ -102,7 +102,6 @@ class SimWorker:
         self.simulator = run.sim
         self._record = record
         self._render = render
-        self.water0 = float(run.model.particle_water0.sum())
         self._cond = threading.Condition()
         self._step_lock = threading.Lock()
         self._params = None        # pending live parameters (latest wins)
@@ -238,7 +237,7 @@ class SimWorker:
 
     def water_fraction(self, state=None) -> float:
         s = self.run.state if state is None else state
-        return float(s.particle_water.sum() / max(self.water0, 1e-300))
+        return self.run.model.water_fraction(s.particle_water)
 
     def sim_rate(self) -> float:
         """Simulated seconds per wall second over the last samples (0 when not running)."""

@@ -165,11 +165,10 @@ def run_setting(species, base: ParamSet, setting: Setting, t_end: float | None, 
     wanted = sorted(water_times)
     water, ms = [], []
     t_dry = float("nan")
-    w0 = float(model.particle_water0.sum())
 
     def settled(st) -> bool:
         nonlocal t_dry
-        if math.isnan(t_dry) and st.particle_water.sum() < DRY_WATER * w0:
+        if math.isnan(t_dry) and model.water_fraction(st.particle_water) < DRY_WATER:
             t_dry = st.time
         while wanted and st.time >= wanted[0] - 1e-12:
             water.append(probe.fields(model, st)["water_field"])

@@ -83,7 +83,7 @@ def is_done(job: LeafJob, out: Path) -> bool:
 # ------------------------------------------------------------------ simulation
 
 def _water_left(model: Model, state: State) -> float:
-    return float(state.particle_water.sum() / max(model.particle_water0.sum(), 1e-300))
+    return model.water_fraction(state.particle_water)
 
 
 def _season(state: State) -> float:

@@ -160,7 +160,7 @@ def shape_scalars(model: Model, state: State, probe: Probe, q_probe: np.ndarray 
         "margin_lift_mean": float((np.median(zm) - zmin) / L),
         "area_3d": float(a3(q) / a3(rest)),
         "area_top": float(_top_down_area(q, tri, lo, span) / _top_down_area(rest, tri, lo, span)),
-        "water": float(state.particle_water.sum() / max(model.particle_water0.sum(), 1e-300)),
+        "water": model.water_fraction(state.particle_water),
     }
 
 

@@ -247,6 +247,13 @@ class Model:
             path=None if self.path is None else self.path.state(),
         )
 
+    def water_fraction(self, water: np.ndarray) -> float:
+        """The blade's water now / fresh (``water`` the (n,) particle water [kg]).  "Dry"
+        (2 % left, the GUI's "Dry to end", ``--until dry``, the accuracy protocol) means the
+        blade: the petiole, a thick rod, holds its water far longer, as a real stalk does."""
+        b = self.blade_particles
+        return float(water[b].sum() / max(float(self.particle_water0[b].sum()), 1e-300))
+
     def blade_area(self) -> float:
         """Rest area of the blade's triangles [m²] (the petiole's left out)."""
         r = self.particle_rest

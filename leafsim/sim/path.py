@@ -100,7 +100,6 @@ class DryingPath:
         self.P = transfer_matrix(self.coarse, model)        # coarse → own (positions, velocities)
         self.R = transfer_matrix(model, self.coarse)        # own → coarse (relative water)
         self.sim = sim
-        self._w0 = max(float(model.particle_water0.sum()), 1e-300)
         self._configure(params)
 
     def _configure(self, params) -> None:
@@ -116,7 +115,7 @@ class DryingPath:
     def active(self, state: State) -> bool:
         """The coarse mesh carries the mechanics: the leaf still holds more than the hand-over
         share of its water."""
-        return state.path is not None and float(state.particle_water.sum()) > self.handover * self._w0
+        return state.path is not None and self.model.water_fraction(state.particle_water) > self.handover
 
     def sync(self, state: State) -> None:
         """Put the coarse mesh where the own mesh is (used when the path phase starts again,

@@ -110,13 +110,12 @@ class Run:
         self.state = simulator.state() if state is None else state
         self.last_ms: dict = {}
         self._prefix = f"{name}: " if name else ""
-        self._w0 = max(float(model.particle_water0.sum()), 1e-300)
 
     # ------------------------------------------------------------------ measures
     @property
     def water_left(self) -> float:
-        """Water now / water of the fresh leaf."""
-        return float(self.state.particle_water.sum() / self._w0)
+        """The blade's water now / fresh (:meth:`Model.water_fraction`)."""
+        return self.model.water_fraction(self.state.particle_water)
 
     @property
     def season(self) -> float:

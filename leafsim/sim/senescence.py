@@ -77,8 +77,9 @@ def _vein_distance(model, xy: np.ndarray, max_order: int = 1) -> np.ndarray:
     rest = model.particle_rest[:, :2]
     pts = []
     step = 0.25 * float(model.spacing)
+    stalk = ~model.blade_particles
     for idx, _, order in model.vein_polylines():
-        if order > max_order or len(idx) < 2:
+        if order > max_order or len(idx) < 2 or stalk[idx].any():  # the blade's veins, not the petiole
             continue
         p = rest[idx]
         seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
@@ -124,4 +125,9 @@ def senescence_field(model, params: Mapping[str, Any], seed: int) -> tuple[np.nd
                 np.maximum(spot, np.clip(0.5 - 2.0 * rel, 0.0, 1.0), out=spot)  # 1 inside, a soft edge of r/2
                 np.maximum(halo, np.where(rel > 0.0, np.exp(-(rel ** 2)), 1.0), out=halo)
             rate *= 1.0 + HALO_BOOST * halo
+    stalk = ~model.blade_particles
+    if stalk.any():  # the petiole turns with the blade: its mean rate, no spots, no islands of its own
+        b = model.blade_T
+        rate[stalk] = float(np.dot(rate[b], model.particle_area[b]) / max(float(model.particle_area[b].sum()), 1e-300))
+        spot[stalk] = 0.0
     return rate.astype(np.float32), spot.astype(np.float32)

@@ -73,5 +73,5 @@ def shape_metrics(model: Model, state: State, own_frame: bool | None = None) -> 
         "max_height": float((q[T, 2].max() - zmin) / L),
         "inverted": int((hv <= 0).sum()),
         "max_displacement": float(np.linalg.norm(state.particle_q - model.particle_rest, axis=1).max() / L),
-        "water_fraction_left": float(state.particle_water.sum() / model.particle_water0.sum()),
+        "water_fraction_left": model.water_fraction(state.particle_water),
     }

@@ -22,6 +22,9 @@ class Colour:
         self._field = None  # ((field parameter values, seed), (rate, spot, max rate, max spot))
         self.w_rel = np.zeros(model.particle_count, np.float32)
         self.inv_w0 = 1.0 / np.maximum(model.particle_water0, 1e-300)
+        # the petiole's pigments age with the blade: a stalk, thick with water, stays wet long
+        # after the blade has dried, but its tissue senesces with the lamina it serves
+        self.stalk = np.flatnonzero(~model.blade_particles) if model.particle_petiole is not None else None
 
     def configure(self, params):
         self.params = params
@@ -51,4 +54,7 @@ class Colour:
     def apply(self, state: State, dt: float) -> None:
         np.multiply(state.particle_water, self.inv_w0, out=self.w_rel, casting="unsafe")
         np.clip(self.w_rel, 0.0, 1.0, out=self.w_rel)
+        if self.stalk is not None and len(self.stalk):
+            blade = self.model.water_fraction(state.particle_water)
+            self.w_rel[self.stalk] = np.minimum(self.w_rel[self.stalk], np.float32(blade))
         step_pigments(state.pigments, self.w_rel, age_at(state.time, self.params), dt, self.params, self.field(state.pigments.seed))
