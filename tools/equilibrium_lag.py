@@ -60,7 +60,7 @@ def _line(tag: str, f: dict, ref: dict | None, L: float, extra: str = "") -> str
 
 def _dry(run: Run, w0: float) -> int:
     n = 0
-    while run.state.particle_water.sum() > DRY_WATER * w0:
+    while run.model.water_fraction(run.state.particle_water) > DRY_WATER:
         run.step()
         n += 1
     return n
@@ -147,7 +147,7 @@ def twogrid(species: str, level: str, handover: float = DRY_WATER, against=()) -
     rc = Run(mc, pc, seed=0)
     t0 = time.process_time()
     n = 0
-    while rf.state.particle_water.sum() > handover * w0:
+    while mf.water_fraction(rf.state.particle_water) > handover:
         rf.step()
         rc.step()
         n += 1
@@ -157,7 +157,7 @@ def twogrid(species: str, level: str, handover: float = DRY_WATER, against=()) -
     st.particle_qd[:] = P @ rc.state.particle_qd
     run = Run(mf, base, state=st, seed=0)
     t0 = time.process_time()
-    while st.particle_water.sum() > DRY_WATER * w0:
+    while mf.water_fraction(st.particle_water) > DRY_WATER:
         run.step()
     n_dry = st.frame
     at_dry, t_dry = probe.fields(mf, st), time.process_time() - t0

@@ -53,12 +53,12 @@ def run(species: str, tag: str) -> None:
     w0 = float(m.particle_water0.sum())
     t0 = time.process_time()
     steps, n = [], 0
-    while st.particle_water.sum() > DRY_WATER * w0:
+    while m.water_fraction(st.particle_water) > DRY_WATER:
         sim.step(st)
         n += 1
         steps.append(sim.iterations)
         if n % 250 == 0:
-            print(n, "water", round(st.particle_water.sum() / w0, 3), "steps", sim.iterations, "cpu",
+            print(n, "water", round(m.water_fraction(st.particle_water), 3), "steps", sim.iterations, "cpu",
                   round(time.process_time() - t0), flush=True)
     cpu_dry = time.process_time() - t0
     for _ in range(int(np.ceil(SETTLE * n)) - n):

@@ -40,16 +40,16 @@ snaps = [("fresh, settled", st.copy())]
 sim = Simulator(m, p)
 w0 = m.particle_water0.sum()
 low, lowst, tlp = 9, None, None
-while st.particle_water.sum() > 0.005 * w0:
+while m.water_fraction(st.particle_water) > 0.005:
     sim.step(st)
     z = st.particle_q[apex, 2] / L
-    if tlp is None and st.particle_water.sum() <= 0.85 * w0:
+    if tlp is None and m.water_fraction(st.particle_water) <= 0.85:
         tlp = st.copy()
     if z < low:
         low, lowst = z, st.copy()
 for _ in range(300):
     sim.step(st)
-snaps += [("RWC 0.85", tlp), (f"lowest (RWC {lowst.particle_water.sum()/w0:.2f})", lowst), ("dried", st.copy())]
+snaps += [("RWC 0.85", tlp), (f"lowest (RWC {m.water_fraction(lowst.particle_water):.2f})", lowst), ("dried", st.copy())]
 for t, s in snaps:
     print(t, round(s.particle_q[apex, 2] / L, 3))
 view = LeafView(m, None, snaps[0][1].pigments.copy())

@@ -182,8 +182,9 @@ def _photo_at_particles(model: Model, rgba: np.ndarray):
     lin = (rgba[..., :3].astype(np.float32) / 255.0) ** 2.2
     a = (rgba[..., 3] >= 128).astype(np.float32)
     uv = model.particle_texcoord
-    span = np.ptp(model.particle_rest[:, :2], axis=0).max()
-    px_per_m = float(np.ptp(uv[:, 1] * h) + np.ptp(uv[:, 0] * w)) / max(float(np.ptp(model.particle_rest[:, 1]) + np.ptp(model.particle_rest[:, 0])), 1e-12)
+    b = model.blade_T  # the petiole's texture coordinates sit on the midrib, off the blade's map
+    span = np.ptp(model.particle_rest[b, :2], axis=0).max()
+    px_per_m = float(np.ptp(uv[b, 1] * h) + np.ptp(uv[b, 0] * w)) / max(float(np.ptp(model.particle_rest[b, 1]) + np.ptp(model.particle_rest[b, 0])), 1e-12)
     sigma = max(0.5 * model.spacing * px_per_m, 0.7) if span > 0 else 1.0
     num = cv2.GaussianBlur(lin * a[..., None], (0, 0), sigma)
     den = cv2.GaussianBlur(a, (0, 0), sigma)

@@ -44,6 +44,7 @@ class Petiole:
     diameter: float          # [m]
     direction: np.ndarray    # (2,) unit vector base → tip at rest
     first: int               # index of the first petiole particle (they are the last ones)
+    lead: float = 0.0        # [m] the first segment's extra length (sections start past the junction)
 
     @property
     def tip(self) -> np.ndarray:
@@ -79,14 +80,15 @@ def add_petiole(P: Points, tri: np.ndarray, remap: np.ndarray, base: int, shape:
         return P, tri, vp, vw, vo, None
     d = petiole_direction(shape, length, diam)
     nrm = np.array([-d[1], d[0]])  # left of the stalk
-    base_xy = P.pts[base]
     n_sec = max(2, int(math.ceil(length / r)))
-    s = length / n_sec
+    junction, ahead = _junction(P, remap, base, d, nrm, r, length)
+    root_xy = P.pts[junction[1]]
+    s = (length - ahead) / n_sec  # the first section just past the junction's outline particles
     first = len(P.pts)
     new = []
-    sections = [_junction(P, remap, base, base_xy, d, nrm, s)]
+    sections = [junction]
     for k in range(1, n_sec + 1):
-        c = base_xy + k * s * d
+        c = root_xy + (ahead + k * s) * d
         row = []
         for side in (1.0, 0.0, -1.0):
             row.append(first + len(new))
@@ -106,26 +108,34 @@ def add_petiole(P: Points, tri: np.ndarray, remap: np.ndarray, base: int, shape:
     ptri[ar < 0] = ptri[ar < 0][:, [0, 2, 1]]
     chain = sections[::-1, 1].copy()
     points = Points(pts, kinds, vord, P.vein_lists, P.vein_ord, P.vein_wid, P.n_contour)
-    info = Petiole(chain, sections, math.pi * diam ** 4 / 64.0 / s / 2.0, diam, d, first)
+    info = Petiole(chain, sections, math.pi * diam ** 4 / 64.0 / s / 2.0, diam, d, first, ahead)
     return (points, np.vstack([tri, ptri]), vp + [chain], vw + [np.full(len(chain), diam)], vo + [0], info)
 
 
-def _junction(P: Points, remap, base: int, base_xy, d, nrm, s: float) -> list:
-    """Section 0: [left, base, right] with the base's two neighbours on the contour when they lie
-    on either side of the stalk and short of its first section, else [base, base, base] (the
-    strip then starts in a point: its first triangles degenerate and are dropped)."""
+def _junction(P: Points, remap, base: int, d, nrm, r: float, length: float) -> tuple[list, float]:
+    """Section 0 and how far ahead of its centre (along ``d``) the strip's sections start.
+
+    The centre is the base particle when it lies on the outline, else the outline particle
+    nearest to it (within 1.5 r: a base traced a little inside the blade); its two neighbours on
+    the outline are the sides when they lie on either side of the stalk, and the sections start
+    just past them (a base in a notch whose margin runs down beside the stalk, as maple's).  So
+    the strip's first triangles share the blade's margin edges and hinges across them carry the
+    stalk's moment.  Without such neighbours it is [base, base, base], a point the stalk can
+    swivel about (its first triangles degenerate and are dropped)."""
     ring = remap[:P.n_contour]
     ring = ring[ring >= 0]
-    at = np.flatnonzero(ring == base)
-    if len(at):
-        k = int(at[0])
-        nb = [int(ring[k - 1]), int(ring[(k + 1) % len(ring)])]
-        side = [float(np.dot(P.pts[j] - base_xy, nrm)) for j in nb]
-        ahead = [float(np.dot(P.pts[j] - base_xy, d)) for j in nb]
-        if side[0] * side[1] < 0 and max(ahead) < 0.5 * s:
-            left, right = (nb[0], nb[1]) if side[0] > 0 else (nb[1], nb[0])
-            return [left, base, right]
-    return [base, base, base]
+    if len(ring) >= 3:
+        dist = np.linalg.norm(P.pts[ring] - P.pts[base], axis=1)
+        k = int(np.argmin(dist))
+        if dist[k] <= 1.5 * r:
+            root = int(ring[k])
+            nb = [int(ring[k - 1]), int(ring[(k + 1) % len(ring)])]
+            side = [float(np.dot(P.pts[j] - P.pts[root], nrm)) for j in nb]
+            ahead = max(0.0, *(float(np.dot(P.pts[j] - P.pts[root], d)) for j in nb))
+            if side[0] * side[1] < 0 and ahead < 0.5 * length:
+                left, right = (nb[0], nb[1]) if side[0] > 0 else (nb[1], nb[0])
+                return [left, root, right], ahead + 0.1 * r
+    return [base, base, base], 0.0
 
 
 def petiole_hinge_rods(hinge_idx: np.ndarray, info: Petiole | None) -> tuple[np.ndarray, np.ndarray]:
@@ -139,12 +149,14 @@ def petiole_hinge_rods(hinge_idx: np.ndarray, info: Petiole | None) -> tuple[np.
         return mask, rod
     sec = info.sections
     share: dict = {}
+    s = math.pi * info.diameter ** 4 / 64.0 / info.cross_rod / 2.0  # the section spacing
+    junction = 2.0 * s / (s + info.lead)  # its half of a first segment that is lead + s long
     for k, (l_, c_, r_) in enumerate(sec[:-1]):
         for e in ((l_, c_), (c_, r_)):
             if e[0] != e[1]:
                 # node k stands for the rod from s/2 before it to s/2 after it; the junction
                 # (k = 0) only for the half on the stalk's side: I / (s/2)
-                share[(min(e), max(e))] = info.cross_rod * (2.0 if k == 0 else 1.0)
+                share[(min(e), max(e))] = info.cross_rod * (junction if k == 0 else 1.0)
     for c0, c1 in zip(sec[:-1, 1], sec[1:, 1]):
         share[(min(c0, c1), max(c0, c1))] = info.cross_rod
     # the diagonals too: under pure bending the strip's quads stay flat and these hinges stay

@@ -154,7 +154,8 @@ def cmd_run(args):
 
 def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames, check_nan: bool = True) -> dict:
     """The ``leafsim run`` report (LeafsimError when the run produced NaN and ``check_nan``).
-    ``water_kg`` is the water left now, ``fresh_water_kg`` the fresh leaf's."""
+    ``water_kg`` is the water left now, ``fresh_water_kg`` the fresh leaf's (blade and petiole);
+    ``water_fraction`` is the blade's (:meth:`Model.water_fraction`: the petiole dries last)."""
     model, state = run.model, run.state
     ms = [sum(s["ms"].values()) for s in stats]
     water = model.water_fraction(state.particle_water)
@@ -171,6 +172,9 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
         **({f"shape_{k}": v for k, v in dried_shape(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
         **model.to_report(),
         "water_kg": float(state.particle_water.sum()),
+        "petiole_water_fraction": (round(float(state.particle_water[~model.blade_particles].sum()
+                                               / max(float(model.particle_water0[~model.blade_particles].sum()), 1e-300)), 6)
+                                   if model.particle_petiole is not None else None),
     }
     if rep["nan"] and check_nan:
         raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {state.frame} (parameters: {params.changed()})")

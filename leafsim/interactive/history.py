@@ -29,8 +29,9 @@ def history_record(model, simulator, state, ms: dict) -> dict:
     finite = bool(np.isfinite(state.particle_q).all() and np.isfinite(w).all())
     mass = model.particle_cytosol + w
     qd = state.particle_qd
-    rec = {"frame": state.frame, "time": state.time, "water_T": float(w[lay == LAYER_T].sum()),
-           "water_V": float(w[lay == LAYER_V].sum()), "water": model.water_fraction(w),
+    b = model.blade_particles  # the blade's water: the petiole's dries last (Model.water_fraction)
+    rec = {"frame": state.frame, "time": state.time, "water_T": float(w[(lay == LAYER_T) & b].sum()),
+           "water_V": float(w[(lay == LAYER_V) & b].sum()), "water": model.water_fraction(w),
            "residual": float(residual(state.particle_q, model.spring_ij, state.spring_rest)) if finite else float("nan"),
            "kinetic": float(0.5 * (mass * (qd * qd).sum(1)).sum()) if finite else float("nan"),
            "iterations": simulator.iterations}

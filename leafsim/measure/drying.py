@@ -119,7 +119,9 @@ class CurveModel:
 
     def __init__(self, overrides: dict, species: str = "maple", seed: int = 0):
         self.sp = get_species(species)
-        self.base = self.sp.params.with_overrides({**overrides, "effects.colour": False})
+        # the blade alone: the measured leaves are kohlrabi's, not this species', so the model
+        # leaf takes their dry mass and water per area and none of the species' stalk
+        self.base = self.sp.params.with_overrides({**overrides, "effects.colour": False, "petiole.length": 0.0})
         self.model = build_leaf(self.sp, self.base, seed).model
 
     def __call__(self, hours, changes: dict | None = None) -> np.ndarray:

@@ -33,6 +33,23 @@ PIGMENT_FIELDS = ("chlorophyll", "carotenoid", "anthocyanin", "browning")
 
 
 @dataclass
+def _embed_fine(coarse, fine) -> Embedding:
+    """The fine particles in the coarse mesh: the blade's in the blade's triangles, the
+    petiole's in the petiole's (so the shown stalk follows the simulated one)."""
+    pts = fine.particle_rest[:, :2]
+    stalk_c = ~coarse.blade_tris
+    if fine.particle_petiole is None or not stalk_c.any():
+        return embed(coarse, pts)
+    on = fine.particle_petiole
+    tri = np.zeros(len(pts), np.int64)
+    bary = np.zeros((len(pts), 3))
+    for sel, tris in ((~on, None), (on, np.flatnonzero(stalk_c))):
+        if sel.any():
+            e = embed(coarse, pts[sel], tris)
+            tri[sel], bary[sel] = e.tri, e.bary
+    return Embedding(tri, bary)
+
+
 class LevelOfDetail:
     """A coarse simulation mesh and a fine display mesh of one leaf.
 
@@ -64,7 +81,7 @@ class LevelOfDetail:
         fp = params.with_overrides({"mesh.spacing": show, "dynamics.path": "own"})
         shape, _, coarse = built if built is not None else build_leaf(sp, cp, seed)
         _, _, fine = build_leaf(sp, fp, seed)
-        emb = embed(coarse, fine.particle_rest[:, :2])
+        emb = _embed_fine(coarse, fine)
         offset = fine.particle_rest[:, :2] - emb.at(coarse, coarse.particle_rest)[:, :2]
         rest = Simulator(fine, fp, effects=(), seed=seed).state()
         return cls(shape, coarse, fine, cp, fp, emb, offset, rest)

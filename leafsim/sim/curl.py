@@ -85,7 +85,7 @@ def height_field(model: Model, q: np.ndarray, grid: int = GRID) -> tuple[np.ndar
 
     T = model.blade_T
     rest = model.particle_rest[T, :2]
-    L = float(np.ptp(model.particle_rest[:, 1])) or 1.0
+    L = float(np.ptp(model.particle_rest[model.blade_T, 1])) or 1.0  # the blade's, not the stalk's
     h = L / grid
     lo, hi = rest.min(0), rest.max(0)
     xs = np.arange(lo[0], hi[0] + h, h)
@@ -147,7 +147,7 @@ def wrinkles(model: Model, q: np.ndarray, grid: int = GRID) -> dict:
 
     Z, inside, h = height_field(model, q, grid)
     inside = inside & np.isfinite(Z)
-    L = float(np.ptp(model.particle_rest[:, 1])) or 1.0
+    L = float(np.ptp(model.particle_rest[model.blade_T, 1])) or 1.0  # the blade's, not the stalk's
     z = np.where(inside, Z, 0.0).astype(np.float64)
     m = inside.astype(np.float64)
     s = SMOOTH * L / h

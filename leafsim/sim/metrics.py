@@ -46,12 +46,13 @@ class Embedding:
         return np.einsum("kj,kjd->kd", self.bary, q[idx])
 
 
-def embed(model: Model, pts: np.ndarray) -> Embedding:
-    """Locate 2D rest points ``pts`` (k, 2) in the model's rest layer T.  Points just outside
-    the mesh (it approximates the outline by chords) take the nearest triangle with clamped,
-    renormalised barycentric coordinates."""
+def embed(model: Model, pts: np.ndarray, tris: np.ndarray | None = None) -> Embedding:
+    """Locate 2D rest points ``pts`` (k, 2) in the model's rest layer T: in the triangles
+    ``tris`` (indices into tri_T; default the blade's, never the petiole's).  Points just
+    outside the mesh (it approximates the outline by chords) take the nearest triangle with
+    clamped, renormalised barycentric coordinates."""
     rest = model.particle_rest[:, :2]
-    blade = np.flatnonzero(model.blade_tris)  # never in the petiole
+    blade = np.flatnonzero(model.blade_tris) if tris is None else np.asarray(tris, np.int64)
     tri = model.tri_T[blade]
     cen = rest[tri].mean(1)
     kk = min(12, len(tri))

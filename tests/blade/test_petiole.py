@@ -147,3 +147,43 @@ def test_species_stalks_match_their_photos():
         px = float(np.linalg.norm(t.petiole_px[1] - t.petiole_px[0]))
         traced = px * sp.length_m / float(np.linalg.norm(np.asarray(t.base_px) - np.asarray(t.apex_px)))
         assert sp.params["petiole.length"] == pytest.approx(traced, rel=0.05), key
+
+
+def test_stalk_holds_water_longer_but_turns_with_the_blade():
+    """A drying leaf is dry when its blade is (Model.water_fraction): the stalk, a thick rod,
+    still holds several times the blade's share of its water then, yet its pigments have aged
+    with the blade (before, it stayed green on a brown leaf)."""
+    from leafsim.sim.run import Run
+
+    p = ParamSet({"mesh.spacing": 0.05, "petiole.length": 0.04, "petiole.diameter": 0.002})
+    s = ellipse_shape()
+    m = build_blade(s, synthetic_veins(s), p, seed=2)
+    run = Run(m, p)
+    for _ in run.frames(until=lambda st: m.water_fraction(st.particle_water) <= 0.05 or st.frame >= 20000):
+        pass
+    st = run.state
+    assert m.water_fraction(st.particle_water) <= 0.05
+    stalk, blade = m.particle_petiole & (m.particle_layer == LAYER_T), m.blade_T
+    rel = st.particle_water / m.particle_water0
+    assert rel[stalk].mean() > 5 * m.water_fraction(st.particle_water)
+    assert float(st.particle_water.sum() / m.particle_water0.sum()) > m.water_fraction(st.particle_water)
+    pg = st.pigments
+    assert pg.chlorophyll[stalk].mean() <= 2 * pg.chlorophyll[blade].mean() + 1e-3
+    assert pg.browning[stalk].mean() >= 0.9 * pg.browning[blade].mean()
+
+
+def test_every_species_stalk_is_joined_to_the_blade_by_hinges():
+    """The stalk's first section is the base and its neighbours on the outline, so hinges join
+    stalk and blade triangles and carry its moment (a stalk joined at one particle would swivel
+    freely; maple's base sits in a notch whose margin runs down beside the stalk, grapevine's
+    was traced just inside the blade)."""
+    from leafsim.config.presets import QUALITY
+    from leafsim.config.species import load_library
+    from leafsim.pipeline import build_leaf
+
+    for key, sp in load_library().items():
+        m = build_leaf(sp, sp.params.with_overrides(QUALITY["draft"]), 0).model
+        st, h = m.particle_petiole, m.hinge_idx
+        joined = st[h].any(1) & ((~st[h]) & (h != m.base_particle)).any(1)
+        assert joined.sum() >= 4, key
+        assert (m.hinge_rod[joined] > 0).any(), key

@@ -38,7 +38,7 @@ class StatsPanel:
         if app.timing:
             imgui.text_disabled("frame: " + "  ".join(f"{k} {v:.1f}" for k, v in app.timing.items()) + " ms")
         h = pb.history
-        imgui.text(f"water {1e3 * s.total_water():.4g} g ({100 * s.water_fraction():.1f} %)")  # kg in the model
+        imgui.text(f"water {1e3 * s.total_water():.4g} g, blade {100 * s.water_fraction():.1f} %")  # kg in the model
         if h["residual"]:
             imgui.text(f"residual {h['residual'][-1]:.3g}   kinetic {h['kinetic'][-1]:.3g} J")
         self.plots()
@@ -59,7 +59,7 @@ class StatsPanel:
             implot.setup_axis_limits(implot.ImAxis_.y1, 0.0, 1.05, imgui.Cond_.once)
             # below the plot, in a row: inside, it covered the curves and was cut at the edge
             implot.setup_legend(implot.Location_.south, implot.LegendFlags_.outside | implot.LegendFlags_.horizontal)
-            implot.plot_line("total", x, np.ascontiguousarray(np.asarray(h["water"], np.float64)[sl]))
+            implot.plot_line("blade", x, np.ascontiguousarray(np.asarray(h["water"], np.float64)[sl]))
             for key, label in (("water_T", "bottom T"), ("water_V", "top V")):
                 v = np.asarray(h[key], np.float64)
                 implot.plot_line(label, x, np.ascontiguousarray(v[sl] / max(v[0], 1e-300)))
