@@ -32,7 +32,6 @@ from leafsim.sim.model import LAYER_T, Model, State
 PIGMENT_FIELDS = ("chlorophyll", "carotenoid", "anthocyanin", "browning")
 
 
-@dataclass
 def _embed_fine(coarse, fine) -> Embedding:
     """The fine particles in the coarse mesh: the blade's in the blade's triangles, the
     petiole's in the petiole's (so the shown stalk follows the simulated one)."""
@@ -50,6 +49,7 @@ def _embed_fine(coarse, fine) -> Embedding:
     return Embedding(tri, bary)
 
 
+@dataclass
 class LevelOfDetail:
     """A coarse simulation mesh and a fine display mesh of one leaf.
 
