@@ -172,6 +172,7 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
         **({f"shape_{k}": v for k, v in dried_shape(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
         **model.to_report(),
         "water_kg": float(state.particle_water.sum()),
+        "blade_water_kg": float(state.particle_water[model.blade_particles].sum()),
         "petiole_water_fraction": (round(float(state.particle_water[~model.blade_particles].sum()
                                                / max(float(model.particle_water0[~model.blade_particles].sum()), 1e-300)), 6)
                                    if model.particle_petiole is not None else None),

@@ -290,4 +290,5 @@ class Model:
             "petiole_particles": int((~self.blade_particles).sum()),
             "fresh_mass_kg": float(self.particle_mass0.sum()),
             "fresh_water_kg": float(self.particle_water0.sum()),
+            "fresh_blade_water_kg": float(self.particle_water0[self.blade_particles].sum()),
         }

@@ -17,7 +17,7 @@ from leafsim.sim.model import LAYER_T, LAYER_V, Model, State
 
 
 def frame_stats(model: Model, state: State, ms: dict, sim=None) -> dict:
-    """Total water per layer, max residual |C|/l, kinetic energy [J], NaN flag, ms per stage
+    """The blade's water per layer (the petiole's left out, as in Model.water_fraction), max residual |C|/l, kinetic energy [J], NaN flag, ms per stage
     (with ``sim``: its iterations and whether the drying-path mesh carried the mechanics)."""
     w = state.particle_water
     lay = model.particle_layer
@@ -27,8 +27,8 @@ def frame_stats(model: Model, state: State, ms: dict, sim=None) -> dict:
     out = {
         "frame": state.frame,
         "time": state.time,
-        "water_T": float(w[lay == LAYER_T].sum()),
-        "water_V": float(w[lay == LAYER_V].sum()),
+        "water_T": float(w[(lay == LAYER_T) & model.blade_particles].sum()),
+        "water_V": float(w[(lay == LAYER_V) & model.blade_particles].sum()),
         "residual": float(residual(q, model.spring_ij, state.spring_rest)) if finite else float("nan"),
         "kinetic": float(0.5 * (m * (qd * qd).sum(1)).sum()) if finite else float("nan"),
         "nan": not finite,
