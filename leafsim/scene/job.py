@@ -123,6 +123,7 @@ def simulate(model: Model, params, job: LeafJob, stop: dict, keep_every: int = 0
 def state_arrays(model: Model, state: State) -> dict:
     """Topology + state arrays of one leaf (the ``state.npz`` members)."""
     out = {"particle_rest": model.particle_rest, "particle_layer": model.particle_layer, "tri_T": model.tri_T,
+           "particle_petiole": ~model.blade_particles,
            "tri_V": model.tri_V, "spring_ij": model.spring_ij, "particle_q": state.particle_q,
            "particle_qd": state.particle_qd, "particle_water": state.particle_water,
            "particle_water0": model.particle_water0, "spring_rest": state.spring_rest, "scalars": state.scalars}

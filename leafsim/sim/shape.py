@@ -17,6 +17,7 @@ def save_npz(path, model: Model, state: State) -> None:
     buf = io.BytesIO()
     np.savez_compressed(
         buf, particle_rest=model.particle_rest, particle_layer=model.particle_layer, tri_T=model.tri_T,
+        particle_petiole=~model.blade_particles,
         tri_V=model.tri_V, spring_ij=model.spring_ij, vein_particles=model.vein_particles,
         vein_start=model.vein_start, vein_order=model.vein_order, vein_width=model.vein_width,
         particle_texcoord=model.particle_texcoord, particle_q=state.particle_q,

@@ -148,6 +148,8 @@ def test_run_writes_stats_npz_and_frames(capsys, tmp_path):
     assert sorted(p.name for p in out.glob("frame_*.png")) == ["frame_00000.png", "frame_00003.png", "frame_00006.png"]
     d = np.load(out / "final.npz", allow_pickle=True)
     assert d["particle_q"].shape[1] == 3 and np.isfinite(d["particle_q"]).all()
+    # the petiole's particles are marked, so readers can measure the blade alone
+    assert d["particle_petiole"].shape == d["particle_layer"].shape and 0 < d["particle_petiole"].sum() < len(d["particle_layer"])
     assert not list(out.glob(".*tmp"))
 
 
