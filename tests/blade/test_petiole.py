@@ -104,15 +104,17 @@ def test_cantilevered_stalk_sags_as_beam_theory_says():
     """The blade held still, the stalk sticks out level and sags under its own weight: the tip
     drop of a cantilever under a uniform load, δ = q L⁴ / (8 E I), I = π d⁴ / 64, with q the
     stalk's weight per length.  The converged strip (many iterations, a static answer) sags
-    1.10× that at 9 segments (the strip's lumped, discrete rod); without its diagonal hinges
+    1.08× that at 14 segments (the strip's lumped, discrete rod); without its diagonal hinges
     it sagged 1.2–2× (a soft fold mode), and with the junction at a full segment's compliance
     1.3×."""
     Ev, L, d = 2e7, 0.04, 0.002
-    p = ParamSet({"mesh.spacing": 0.04, "petiole.length": L, "petiole.diameter": d, "material.vein_modulus": Ev,
+    # a small, coarse blade (held still anyway): the iterations go to the stalk (r = 3 mm, 14 segments)
+    p = ParamSet({"mesh.spacing": 0.1, "petiole.length": L, "petiole.diameter": d, "material.vein_modulus": Ev,
                   "effects.osmosis": False, "effects.shrink": False, "effects.colour": False,
                   "dynamics.scene": "hanging", "dynamics.iterations": 60, "dynamics.substeps": 80,
-                  "dynamics.tolerance": 1e-9, "dynamics.damping": 50.0, "dynamics.mass_scaling": 1.0})
-    s = ellipse_shape()
+                  "dynamics.tolerance": 1e-9, "dynamics.damping": 200.0, "dynamics.mass_scaling": 1.0,
+                  "dynamics.substep_scaling": False})
+    s = ellipse_shape(length=0.03, width=0.02)
     m = build_blade(s, synthetic_veins(s), p, seed=4)
     m = dataclasses.replace(m, particle_pinned=m.blade_particles.copy())  # the blade held still
     sim = Simulator(m, p)
@@ -124,13 +126,13 @@ def test_cantilevered_stalk_sags_as_beam_theory_says():
     prev = 0.0
     for frame in range(4000):  # until the sag settles (frames, not a clock)
         sim.step(st)
-        if frame % 100 == 99:
+        if frame % 50 == 49:
             z = -float(st.particle_q[tip, 2])
             if abs(z - prev) < 1e-3 * z:
                 break
             prev = z
     assert np.isfinite(st.particle_q).all()
-    print(f"stalk tip drop {z * 1e3:.4f} mm, beam theory {expect * 1e3:.4f} mm, ratio {z / expect:.3f}")
+    print(f"stalk tip drop {z * 1e3:.4f} mm, beam theory {expect * 1e3:.4f} mm, ratio {z / expect:.3f}, frames {frame + 1}")
     assert 0.95 * expect < z < 1.2 * expect
 
 
