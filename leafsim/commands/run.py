@@ -93,19 +93,24 @@ class _Outputs:
 def _simulate(run: Run, until: Stop, outputs: _Outputs, progress: Progress) -> tuple[list, int | None]:
     """Step until ``until`` holds (or NaN, or a signal); returns (statistics, signal or None)."""
     stats = []
+    stopping = False
     try:
         with DeferredSignals() as stop:
             for ms in run.frames(until):
                 st = run.stats(ms)
                 stats.append(st)
-                outputs.frame(st, stop.signum is not None)
+                # read the flag once: a signal arriving after this line is acted on after the
+                # next frame (checkpointed then), never by a break that skipped this frame's save
+                stopping = stop.signum is not None
+                outputs.frame(st, stopping)
                 progress.update()
-                if stop.signum is not None or st["nan"]:
+                if stopping or st["nan"]:
                     break
     finally:
         progress.close()
         outputs.close()
-    return stats, stop.signum
+    # a signal that came after the last frame's check lets the finished run end normally
+    return stats, stop.signum if stopping else None
 
 
 def cmd_run(args):
