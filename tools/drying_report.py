@@ -64,8 +64,20 @@ def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides:
     return out
 
 
+def _close_up_points(model, q: np.ndarray) -> np.ndarray:
+    """Where the close-up looks: the blade (layer T) within 0.3 L, in the rest shape, of its
+    widest margin point on the right (a lobe or the flank), at the current positions."""
+    T = model.blade_T
+    rest = model.particle_rest[:, :2]
+    L = float(np.ptp(model.particle_rest[T, 1]))
+    right = np.flatnonzero(T)[np.argmax(rest[T, 0])]
+    near = T & (np.linalg.norm(rest - rest[right], axis=1) < 0.3 * L)
+    return q[near]
+
+
 def _pictures(sp, p, model, st, path: Path) -> None:
-    """Top-down, side and front views side by side (the GUI's look: photo detail where there is one)."""
+    """Top-down, end-on and side views and an oblique close-up of the right flank's margin,
+    side by side (the GUI's look: photo detail where there is one)."""
     from leafsim.appearance.view import LeafView
     from leafsim.base.fileio import write_png_atomic
     from leafsim.render.offscreen import OffscreenRenderer, default_camera
@@ -78,6 +90,8 @@ def _pictures(sp, p, model, st, path: Path) -> None:
     mesh = view.mesh(st, p)
     imgs = [r.render_array(mesh, camera=default_camera(mesh.positions, pitch=pitch, yaw=yaw), options=opts)
             for pitch, yaw in ((89.0, -90.0), (8.0, -90.0), (8.0, 0.0))]
+    close = default_camera(_close_up_points(model, st.particle_q), pitch=30.0, yaw=-30.0, aspect=480 / 400)
+    imgs.append(r.render_array(mesh, camera=close, options=opts))
     r.release()
     write_png_atomic(path, np.hstack(imgs), rgb=True)
 
