@@ -82,7 +82,8 @@ class _Outputs:
             self.stream.write(st)
         if self.frames is not None and k % a.every == 0:
             self.frames.write(k, self.run.state)
-        if self.ck is not None and a.checkpoint_every and (stopping or k % a.checkpoint_every == 0):
+        # a frame that produced NaN never replaces the last good checkpoint (--resume needs it)
+        if self.ck is not None and a.checkpoint_every and (stopping or k % a.checkpoint_every == 0) and not st["nan"]:
             save_checkpoint(self.ck, self.run.model, self.run.state, self.meta)
 
     def close(self) -> None:
@@ -147,9 +148,10 @@ def cmd_run(args):
         goal = f" of {args.frames}" if args.until is None else f" (until {args.until})"
         raise Interrupted(signum, f"interrupted at frame {run.state.frame}{goal}"
                                   + (f", statistics in {args.stats}" if args.stats else "") + f"; {where}")
-    if ck is not None and args.checkpoint_every:
+    broken = bool(stats) and stats[-1]["nan"]  # run_report below says so; keep the good files
+    if ck is not None and args.checkpoint_every and not broken:
         save_checkpoint(ck, model, run.state, meta)  # the final state: --resume --frames M continues it
-    if out is not None:
+    if out is not None and not broken:
         save_npz(out / "final.npz", model, run.state)
     if outputs.frames is not None and run.state.frame % args.every:
         outputs.frames.write(run.state.frame, run.state)  # the last frame too (where --until stopped)

@@ -209,3 +209,26 @@ def test_resume_from_a_checkpoint_older_than_a_parameter(tmp_path, reference, ca
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "parameter 'dynamics.integrator' = None, this run has 'sun'" in err, err
     _assert_same(_resume_to_n(out, stats, capsys), reference)
+
+
+def test_a_nan_frame_keeps_the_last_good_checkpoint(tmp_path, monkeypatch, capsys):
+    """A frame that produces NaN ends the run with one line and leaves the last good
+    checkpoint (frame 6 of --checkpoint-every 3) for --resume: no NaN checkpoint, no final.npz."""
+    from leafsim.sim import run as run_mod
+
+    step = run_mod.Run.step
+
+    def poisoned(self):
+        out = step(self)
+        if self.state.frame == 8:
+            self.state.particle_q[5, 0] = np.nan
+        return out
+
+    monkeypatch.setattr(run_mod.Run, "step", poisoned)
+    out = tmp_path / "out"
+    assert main(BASE[:-2] + ["--checkpoint-every", "3", "--frames", "12", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "NaN at frame 8" in err
+    ck = np.load(out / "checkpoint.npz")
+    assert json.loads(str(ck["meta"]))["frame"] == 6 and np.isfinite(ck["state_particle_q"]).all()
+    assert not (out / "final.npz").exists()

@@ -93,19 +93,20 @@ def test_single_steps_while_paused(s):
 
 def test_speed_limits_simulated_time(s):
     dt = s.sim_params["dynamics.dt"]
-    s.playback.set_speed(10 * dt)  # 10 frames per wall second
+    s.playback.set_speed(5 * dt)  # 5 frames per wall second
     s.playback.play(True)
     t0 = time.time()
     time.sleep(1.0)
     s.playback.take_snapshot()
     frames = s.frame
     elapsed = time.time() - t0
-    assert 1 <= frames <= 10 * elapsed * 1.5 + 2, frames
-    s.playback.set_speed(None)  # as fast as possible: not limited to 10/s (oak at this size steps in ~1 ms)
-    f = s.frame
-    time.sleep(1.0)
-    s.playback.take_snapshot()
-    assert s.frame - f > 15
+    assert 1 <= frames <= 5 * elapsed * 1.5 + 2, frames
+    # as fast as possible: no longer held to 5 frames per wall second.  Waits for progress
+    # (oak at this size steps in ~1 ms), never for a clock: a busy machine only makes it late
+    s.playback.set_speed(None)
+    f, t1 = s.frame, time.time()
+    assert until(lambda: (s.playback.take_snapshot() or True)
+                 and s.frame - f > 5 * (time.time() - t1) * 1.5 + 30, 120), (s.frame - f, time.time() - t1)
 
 
 def test_dry_to_end(s):
