@@ -67,6 +67,10 @@ def without_test_time_limit(runner_params) -> None:
     runner_params.callbacks.register_tests = register
 
 
+#: frames per second the window draws while "Dry to end" runs (a progress bar and the leaf)
+DRY_UI_HZ = 3.0
+
+
 def _configure_threads() -> None:
     """llvmpipe's render threads compete with numba's on small machines: cap them, and make
     numba's OpenMP workers sleep instead of spinning between parallel regions (measured: spinning
@@ -246,6 +250,7 @@ class LeafApp:
         return opts
 
     def custom_background(self) -> None:
+        self._pace()
         now = time.perf_counter()
         if self._t_last is not None:
             self.frame_ms.append((now - self._t_last) * 1e3)
@@ -255,6 +260,14 @@ class LeafApp:
             self.t_first_frame = now
         self.gui_frames += 1
         self.guard(self._frame)
+
+    def _pace(self) -> None:
+        """While "Dry to end" runs, draw at most ``DRY_UI_HZ`` frames per second: with a CPU
+        rasteriser (llvmpipe) every frame drawn is CPU time the drying does not get."""
+        if self._t_last is not None and self.session.playback.drying:
+            wait = 1.0 / DRY_UI_HZ - (time.perf_counter() - self._t_last)
+            if wait > 0.0:
+                time.sleep(wait)
 
     # ------------------------------------------------------------------ panels (imgui)
     def show_gui(self) -> None:

@@ -39,6 +39,9 @@ from leafsim.sim.run import DRY_END_FRACTION, DRY_MAX_FRAMES, Run
 WORKER_NICE = 5
 #: the worker publishes at most this many snapshots per wall second while it runs freely
 PUBLISH_HZ = 60.0
+#: ... and this many during "dry to end", where each snapshot (a state copy and the renderer's
+#: arrays) is time the drying does not get
+DRY_PUBLISH_HZ = 5.0
 
 
 @dataclass
@@ -224,7 +227,8 @@ class SimWorker:
         done = self._dry and (self.water_fraction(s) <= DRY_END_FRACTION or self.error is not None
                               or s.frame >= self._dry_until)
         pause = self._pause_at is not None and s.frame >= self._pause_at
-        if done or pause or publish_now or self.error is not None or time.perf_counter() - self._t_pub >= 1.0 / PUBLISH_HZ:
+        hz = DRY_PUBLISH_HZ if self._dry else PUBLISH_HZ
+        if done or pause or publish_now or self.error is not None or time.perf_counter() - self._t_pub >= 1.0 / hz:
             self._publish(ms)  # before the flags change: whoever sees "done" sees its frame
         if pause:
             with self._cond:
