@@ -115,6 +115,7 @@ class LeafApp:
         self.rendered_gen = -1
         self.rendered_tex = None
         self.framed_species = None
+        self.followed = None  # the leaf's centre the camera last followed (free scene)
         self.photo_tex = self.photo_tex_masked = None
         self.photo_gen = -1
         self.photo_affine = None
@@ -373,6 +374,7 @@ class LeafApp:
             self.renderer.update(**s.render_update())
             self.dirty = False
             self.uploads += 1
+            self.follow_leaf()
         if self.photo_gen != s.generation:
             self._make_photo_texture()
 
@@ -384,6 +386,17 @@ class LeafApp:
         self.camera.yaw, self.camera.pitch = -90.0, 55.0
         pts = np.stack([r.lo, r.hi])
         self.camera.frame_bounds(pts, margin=1.05)
+        self.followed = r.center.copy()
+
+    def follow_leaf(self) -> None:
+        """In the free scene the leaf falls for ever (at about 1.6 m/s, dynamics.air_damping):
+        the camera moves with the leaf's centre, keeping the user's angle and zoom."""
+        r = self.renderer
+        if r is None or r.mesh is None:
+            return
+        if self.session.params["dynamics.scene"] == "free" and self.followed is not None:
+            self.camera.target = np.asarray(self.camera.target, dtype=np.float64) + (r.center - self.followed)
+        self.followed = r.center.copy()
 
     def _make_photo_texture(self) -> None:
         """The photo as two textures: whole (side panel) and leaf-masked (overlay); and the

@@ -16,7 +16,12 @@ blow-up that produce no NaN are caught:
   the current shape speed and the previous allowance decayed with time constant
   :data:`RING_DOWN_S` (measured: an ellipse shrinking at 16-35 m/s of shape speed rings down at
   up to 0.30 m/s RMS for 0.06 s after its rest shape freezes; a runaway holds 1.1 m/s RMS for
-  seconds at 0.07 m/s of shape speed);
+  seconds at 0.07 m/s of shape speed).  A leaf that moves at its real speed (selective mass
+  scaling: falling, swinging from its stalk, landing) flexes as it goes, with at most the
+  energy its fall released: the allowance also holds √(2 g Δz), Δz the drop of the centre of
+  mass from its highest point in the last :data:`FALL_WINDOW_S` (a maple released beside its
+  pin, undamped, swings with up to 0.61 m/s RMS of internal motion after a 0.1 m drop:
+  1.4 m/s allowed);
 * internal kinetic energy growing exponentially (doubling every ≤ :data:`DOUBLING_FRAMES`
   frames for :data:`GROWTH_WINDOWS` windows in a row) above a floor.
 
@@ -36,6 +41,9 @@ from leafsim.config.presets import QUALITY, quality_of
 MAX_RMS_SPEED = 0.25
 #: the shrinking moves the tissue at up to L × its relative rate; allowed on top of MAX_RMS_SPEED
 SHRINK_SPEED_FACTOR = 3.0
+#: the window [s] over which the centre of mass's drop counts (the energy of older falls is
+#: spent or has rung down)
+FALL_WINDOW_S = 1.0
 #: time constant [s] with which the allowance for a rest-shape change decays once it stops
 RING_DOWN_S = 0.1
 #: largest internal (non-rigid) speed of any one particle [m/s]
@@ -78,7 +86,7 @@ def momenta(mass: np.ndarray, q: np.ndarray, qd: np.ndarray) -> dict:
     ke = 0.5 * float((mass * (qd * qd).sum(1)).sum())
     s2 = (internal * internal).sum(1)
     ke_int = 0.5 * float((mass * s2).sum())
-    return {"kinetic": ke, "kinetic_internal": ke_int, "kinetic_rigid": ke - ke_int, "momentum": M * v,
+    return {"com_z": float(c[2]), "kinetic": ke, "kinetic_internal": ke_int, "kinetic_rigid": ke - ke_int, "momentum": M * v,
             "angular_momentum": Lang, "omega": w, "rms_internal_speed": float(np.sqrt(2.0 * ke_int / M)),
             "max_internal_speed": float(np.sqrt(s2.max()))}
 
@@ -101,6 +109,7 @@ class Watchdog:
         self._rest = self._hrest = None
         self._time = 0.0
         self._allowance = 0.0
+        self._heights: list[tuple[float, float]] = []  # (time, centre of mass height) in FALL_WINDOW_S
 
     def check(self, state) -> dict | None:
         """Measure ``state``; raise LeafsimError on a blow-up.  Returns the measures (or None
@@ -113,7 +122,7 @@ class Watchdog:
             self._fail(state, "positions or velocities became NaN/Inf")
         mom = momenta(m.particle_cytosol + state.particle_water, q, qd)
         self.last = mom
-        bound = MAX_RMS_SPEED + SHRINK_SPEED_FACTOR * self._shape_allowance(state)
+        bound = MAX_RMS_SPEED + self._allowance_for(state, self._fall_speed(state, mom["com_z"]))
         if mom["rms_internal_speed"] > bound or mom["max_internal_speed"] > MAX_INTERNAL_SPEED:
             self._fail(state, f"internal motion at {mom['rms_internal_speed']:.3g} m/s RMS, {mom['max_internal_speed']:.3g} m/s "
                               f"at most (bounds {bound:.3g} and {MAX_INTERNAL_SPEED:g} m/s: drying tissue moves at "
@@ -127,10 +136,18 @@ class Watchdog:
                                   "frames without a source")
         return mom
 
-    def _shape_allowance(self, state) -> float:
-        """The shape speed, or the earlier allowance decayed by exp(-Δt / RING_DOWN_S) if larger."""
+    def _fall_speed(self, state, z: float) -> float:
+        """√(2 g Δz): the speed the centre of mass's drop from its highest point in the last
+        FALL_WINDOW_S can give the tissue."""
+        self._heights = [(t, h) for t, h in self._heights if t > state.time - FALL_WINDOW_S] + [(state.time, z)]
+        drop = max(h for _, h in self._heights) - z
+        return float(np.sqrt(2.0 * float(self.params["dynamics.gravity"]) * max(drop, 0.0)))
+
+    def _allowance_for(self, state, fall_speed: float) -> float:
+        """SHRINK_SPEED_FACTOR × the shape speed + the fall speed, or the earlier allowance
+        decayed by exp(-Δt / RING_DOWN_S) if larger."""
         before = self._time
-        speed = self._shape_speed(state)
+        speed = SHRINK_SPEED_FACTOR * self._shape_speed(state) + fall_speed
         decayed = self._allowance * float(np.exp(-max(self._time - before, 0.0) / RING_DOWN_S))
         self._allowance = max(speed, decayed)
         return self._allowance

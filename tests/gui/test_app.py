@@ -408,6 +408,25 @@ def test_gui_frames_counts_simulation_frames(frames):
     assert app.exit_code == 0 and session.frame == frames and app.leaf_frames >= 1
 
 
+def test_the_camera_follows_a_leaf_falling_in_the_free_scene():
+    """The free scene's leaf falls at its real speed (selective mass scaling): the camera keeps
+    it in view, moving with its centre."""
+    from imgui_bundle import immapp
+
+    from leafsim.gui.app import LeafApp, _configure_threads
+    from leafsim.interactive.session import Session
+
+    _configure_threads()
+    session = Session("oak", overrides={"mesh.spacing": 0.06, "dynamics.scene": "free"}, build=False)
+    session.rebuild_async()
+    app = LeafApp(session, frames=100)
+    immapp.run(app.runner_params(), app.addons())
+    assert app.exit_code == 0 and session.frame == 100
+    centre = app.followed  # the leaf's centre as last drawn
+    assert centre[2] < -0.05  # 0.2 s of falling: over 5 cm, not the 2 mm of the scaled inertia
+    assert np.allclose(app.camera.target, centre, atol=1e-9)
+
+
 def test_gui_until_dry_ends_at_the_dry_frame():
     """``gui --until dry`` runs "Dry to end", draws the dry leaf and exits by itself."""
     from imgui_bundle import immapp

@@ -172,4 +172,8 @@ def test_a_moved_start_is_kept(oak):
     for _ in range(3):
         a.step(sa)
         b.step(sb)
-    assert (sb.particle_q[:, 2] - sa.particle_q[:, 2]).mean() > 0.9e-3
+    # kept: the raised leaf is in the air and falls from where it was put, at its real speed
+    # (selective mass scaling), ½ g t² in these 3 frames, while the other one lies still
+    fall = 1e-3 - (sb.particle_q[:, 2] - sa.particle_q[:, 2]).mean()
+    free = 0.5 * p["dynamics.gravity"] * (3 * p["dynamics.dt"]) ** 2
+    assert 0.8 * free < fall < 1.1 * free, (fall, free)

@@ -11,6 +11,7 @@ import numpy as np
 from leafsim.base.errors import LeafsimError
 from leafsim.sim.kernels import blocked as kb
 from leafsim.sim.kernels import pbd as kp
+from leafsim.sim.kernels import rigid as kr
 from leafsim.sim.kernels import sun as ks
 from leafsim.sim.model import (
     LAYER_T,
@@ -127,6 +128,13 @@ class Dynamics:
         # √M-stretched time (the same damping ratio); at the full rate the slowed modes were
         # overdamped ×√M more and a curled leaf took M times, not √M, longer to settle
         self.keep = math.exp(-params["dynamics.damping"] / math.sqrt(self.mscale) * self.h)
+        # selective mass scaling (kernels.rigid): the rigid modes at their real inertia, damped
+        # by the air in real time (also at M = 1: the rigid modes are damped by the air alone)
+        on = params["dynamics.rigid_inertia"]
+        self.rigid_mode = (2 if params["dynamics.scene"] == "hanging" and m.particle_pinned.any() else 1) if on else 0
+        self.rigid_gain = self.mscale - 1.0
+        self.rigid_kratio = kr.air_factor(params["dynamics.air_damping"],
+                                          params["dynamics.damping"] / math.sqrt(self.mscale), self.h)
         self.iters = params["dynamics.iterations"]
         self.omega = params["dynamics.relaxation"]
         self.tol = params["dynamics.tolerance"] * m.length
@@ -354,11 +362,21 @@ class Dynamics:
                  self.keep, self.iters, self.tol, cons, m.vol_idx,
                  self.pbd, self.ground, pen, self.mu, self.self_coll, contact,
                  self.replace, hgt, m.thickness * shrunk, self.scene != "hanging",
-                 qa, dint, self.omega, out)
+                 qa, dint, self.omega, self._rigid(state), out)
         if self.f32:
             state.particle_q[:] = q
             state.particle_qd[:] = qd
         return out
+
+    def _rigid(self, state: State) -> tuple:
+        """The ``rigid`` argument of :func:`~.kernels.pbd.frame`: the mode, the pin (the mean of
+        the pinned particles, which do not move), M − 1, the air's velocity factor and the
+        ground's reach (a quarter of the blade's thickness)."""
+        m = self.model
+        mode = self.rigid_mode if self.pbd or self.rigid_mode == 1 else 0
+        pin = state.particle_q[m.particle_pinned].mean(axis=0) if mode == 2 else (0.0, 0.0, 0.0)
+        return (mode, float(pin[0]), float(pin[1]), float(pin[2]), self.rigid_gain, self.rigid_kratio,
+                0.25 * m.thickness)
 
     def _f32_buffers(self) -> dict:
         """float32 twins of the frame's float arrays (made once): by name for the per-particle

@@ -23,6 +23,7 @@ from numba import njit
 from leafsim.sim.kernels import FASTMATH
 from leafsim.sim.kernels.blocked import hinges_blocked, volumes_blocked
 from leafsim.sim.kernels.contacts import contact_velocities, project_contacts, update_contacts
+from leafsim.sim.kernels.rigid import rigid_inertia
 from leafsim.sim.kernels.scalar import atan2_, hinge_pass, spring_pass, volume_pass  # noqa: F401  (the reference kernels, re-exported)
 
 
@@ -376,18 +377,21 @@ def settle(q, invm, vidx, thick, ground, dint, out):
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
 def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
-          pbd, ground, pen, mu, self_coll, contact, replace, hgt, thick, conserve, qa, dint, omega, out):
+          pbd, ground, pen, mu, self_coll, contact, replace, hgt, thick, conserve, qa, dint, omega, rigid, out):
     """All ``substeps`` of one dynamics frame in one call (no Python between substeps or
     iterations).  Per substep: predict; iterate (:func:`project`: ground clamp — external —
     then the internal constraints ``cons`` in projection order, self-contacts); un-invert
     layers (``vidx`` in model order); with ``conserve`` remove the rigid part of the internal
     displacement (:func:`remove_rigid`; not with pinned particles); ground contact + friction;
-    velocity update with damping, inelastic self-contacts.  ``contact`` = (qrest,
+    velocity update with damping, inelastic self-contacts; the rigid modes' real inertia
+    (:func:`.rigid.rigid_inertia`, ``rigid`` = (mode, pin x, y, z, M − 1, air factor, ground
+    reach); mode 0: off).  ``contact`` = (qrest,
     T_idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn, cstate) for
     :func:`update_contacts`.
     ``qa``/``dint`` (n, 3) scratch.  Writes (iterations, contact hits, uninverted) to ``out``
     (int64[3])."""
     qrest, T_idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn, cstate = contact
+    rmode, rpx, rpy, rpz, rgain, rkratio, reps = rigid
     its = 0
     for _ in range(substeps):
         predict(q, qd, q_old, qa, dint, invm, gz, h)
@@ -416,6 +420,8 @@ def frame(q, qd, q_old, invm, gz, h, substeps, keep, iters, tol, cons, vidx,
         update_velocity(q, q_old, qd, h, keep, ground and pbd)
         if pbd and ncont:
             contact_velocities(q, qd, invm, near, ncont, radius)
+        if rmode:
+            rigid_inertia(q, qd, invm, dint, h, gz, rmode, rpx, rpy, rpz, rgain, rkratio, ground, reps)
         if replace:
             voronoi_replace(q, vidx, hgt, 0.25 * thick)
             if ground:
