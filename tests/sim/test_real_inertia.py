@@ -129,3 +129,50 @@ def test_a_maple_swings_from_its_stalk_at_its_physical_period():
     assert scaled[1] - scaled[0] == pytest.approx(real[1] - real[0], rel=0.02)
     slow = _swing({"dynamics.rigid_inertia": False}, int(round(real[0] / 0.002 * 2)))
     assert not slow  # twice the real time to the first pass, and not there yet
+
+
+def test_a_dropped_leaf_lands_in_the_physical_time(model):
+    """Dropped flat from 10 cm onto the ground: it touches down after √(2 · 0.1 / g) (within
+    1 %) and comes to rest within a millimetre of where it landed (a dropped leaf used to bounce
+    and then float down in slow motion)."""
+    p = ParamSet({**REAL, "dynamics.scene": "ground"})
+    sim = Simulator(model, p)
+    st = sim.state()
+    st.particle_q[:, 2] += 0.1 - st.particle_q[:, 2].min()
+    prev = (0.0, 0.1)
+    while st.time < 1.0:
+        sim.step(st)
+        z = float(st.particle_q[:, 2].min())
+        if z <= 1e-4:
+            break
+        prev = (st.time, z)
+    else:
+        pytest.fail("the leaf never landed")
+    v = math.sqrt(2 * p["dynamics.gravity"] * (0.1 - prev[1]))  # its speed the frame before touching down
+    t = prev[0] + prev[1] / v
+    expect = math.sqrt(2 * 0.1 / p["dynamics.gravity"])
+    print(f"landed after {t:.4f} s against {expect:.4f} s")
+    assert t == pytest.approx(expect, rel=0.01)
+    for _ in range(100):
+        sim.step(st)
+        assert float(st.particle_q[:, 2].min()) < 1e-3
+
+
+def test_a_leaf_drying_on_the_ground_is_left_alone():
+    """While a drying leaf touches the ground its contacts hold its weight: every position of
+    every frame is the same with the rigid modes' real inertia on and off (oak's first 300
+    frames, curling on the ground before any hop)."""
+    from leafsim.config.species import load_library
+    from leafsim.pipeline import build_leaf
+
+    sp = load_library()["oak"]
+    base = sp.params.with_overrides({"mesh.spacing": 0.06, "osmosis.evaporation_top": 0.042,
+                                     "osmosis.evaporation_bottom": 0.0315, "effects.colour": False})
+    m = build_leaf(sp, base, seed=0).model
+    runs = [Simulator(m, base.with_overrides({"dynamics.rigid_inertia": on})) for on in (True, False)]
+    states = [r.state() for r in runs]
+    for _ in range(300):
+        for r, st in zip(runs, states):
+            r.step(st)
+        assert np.array_equal(states[0].particle_q, states[1].particle_q)
+    assert states[0].particle_q[:, 2].max() > 0.004 * m.length  # it is curling

@@ -25,13 +25,12 @@ from leafsim.sim.model import (
 #: results do not depend on either skin (canonical pair order; tests/test_kernels.py).
 #: Measured on the bench's folded leaf: docs/performance.md.
 CONTACT_SKIN = 3.0
-#: a free leaf with a particle this close to the ground (× L) rests on it and keeps the scaled
-#: inertia (kernels.rigid), so the drying on the ground runs exactly as measured in
-#: docs/accuracy.md: where a drying leaf's curl snaps through, the leaf hops clear of the
-#: ground (maple after its hand-over: up to 2 thicknesses; the quick oak study's reference, at
-#: 10 × the evaporation: 0.034 L).  A dropped leaf falls at its real speed to within this of the
-#: floor (from 10 cm it has 97 % of its landing speed there)
-GROUND_REACH = 0.05
+#: a free leaf with a particle this close to the ground (× the blade's thickness) touches it
+#: and keeps the scaled inertia (kernels.rigid): its contacts hold its weight.  Off the ground
+#: it falls at the real g, so the hops a drying leaf makes where its curl lifts its centre
+#: (under g / M M times higher than a real leaf's: maple after its hand-over up to 2
+#: thicknesses, oak drying 20 × faster 0.05 L) and a dropped leaf's bounce stay real-sized
+GROUND_REACH = 0.25
 #: the most explicit steps Sun's integrator takes in one frame (dynamics.integrator = sun)
 SUN_MAX_STEPS = 100_000
 #: the near list holds the searched pairs closer than (1.05 + this) × the contact radius
@@ -378,12 +377,12 @@ class Dynamics:
     def _rigid(self, state: State) -> tuple:
         """The ``rigid`` argument of :func:`~.kernels.pbd.frame`: the mode, the pin (the mean of
         the pinned particles, which do not move), M − 1, the air's velocity factor and the
-        ground's reach (:data:`GROUND_REACH` × L)."""
+        ground's reach (:data:`GROUND_REACH` × the thickness)."""
         m = self.model
         mode = self.rigid_mode if self.pbd or self.rigid_mode == 1 else 0
         pin = state.particle_q[m.particle_pinned].mean(axis=0) if mode == 2 else (0.0, 0.0, 0.0)
         return (mode, float(pin[0]), float(pin[1]), float(pin[2]), self.rigid_gain, self.rigid_kratio,
-                GROUND_REACH * m.length)
+                GROUND_REACH * m.thickness)
 
     def _f32_buffers(self) -> dict:
         """float32 twins of the frame's float arrays (made once): by name for the per-particle
