@@ -389,12 +389,13 @@ class LeafApp:
         self.followed = r.center.copy()
 
     def follow_leaf(self) -> None:
-        """In the free scene the leaf falls for ever (at about 1.6 m/s, dynamics.air_damping):
-        the camera moves with the leaf's centre, keeping the user's angle and zoom."""
+        """The free scene's leaf falls for ever (at about 1.6 m/s, dynamics.air_damping) and the
+        hanging scene's swings down below its stalk within a fraction of a second: there the
+        camera moves with the leaf's centre, keeping the user's angle and zoom."""
         r = self.renderer
         if r is None or r.mesh is None:
             return
-        if self.session.params["dynamics.scene"] == "free" and self.followed is not None:
+        if self.session.params["dynamics.scene"] in ("free", "hanging") and self.followed is not None:
             self.camera.target = np.asarray(self.camera.target, dtype=np.float64) + (r.center - self.followed)
         self.followed = r.center.copy()
 

@@ -19,9 +19,10 @@ blow-up that produce no NaN are caught:
   seconds at 0.07 m/s of shape speed).  A leaf that moves at its real speed (selective mass
   scaling: falling, swinging from its stalk, landing) flexes as it goes, with at most the
   energy its fall released: the allowance also holds √(2 g Δz), Δz the drop of the centre of
-  mass from its highest point in the last :data:`FALL_WINDOW_S` (a maple released beside its
-  pin, undamped, swings with up to 0.61 m/s RMS of internal motion after a 0.1 m drop:
-  1.4 m/s allowed);
+  mass from its highest point in the last :data:`FALL_WINDOW_S`, capped by the fastest rigid
+  RMS speed in that window (a maple released beside its pin, undamped, swings with up to
+  0.61 m/s RMS of internal motion after a 0.1 m drop; a leaf falling at its terminal speed
+  gets that speed, 1.6 m/s, not the drop's);
 * internal kinetic energy growing exponentially (doubling every ≤ :data:`DOUBLING_FRAMES`
   frames for :data:`GROWTH_WINDOWS` windows in a row) above a floor.
 
@@ -57,9 +58,9 @@ ENERGY_FLOOR = 1e-4
 #: parameters that drive the dynamics, in the order they are blamed
 #: suspects that only one integrator reads
 SUN_ONLY = ("dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_substeps", "material.turgor_pressure")
-XPBD_ONLY = ("dynamics.relaxation", "dynamics.substeps", "dynamics.iterations")
+XPBD_ONLY = ("dynamics.relaxation", "dynamics.substeps", "dynamics.iterations", "dynamics.rigid_inertia")
 SUSPECTS = ("material.turgor_pressure", "dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_substeps", "dynamics.relaxation", "dynamics.dt", "dynamics.damping", "dynamics.substeps", "dynamics.iterations",
-            "dynamics.mass_scaling",
+            "dynamics.mass_scaling", "dynamics.rigid_inertia", "dynamics.air_damping",
             "material.modulus", "material.vein_modulus", "material.dry_stiffening", "dynamics.substep_scaling",
             "shrink.sigma_surface_top", "shrink.sigma_surface_bottom", "shrink.sigma_vein", "shrink.l_min",
             "shrink.alpha", "dynamics.plasticity", "dynamics.gravity", "osmosis.evaporation_top",
@@ -86,7 +87,7 @@ def momenta(mass: np.ndarray, q: np.ndarray, qd: np.ndarray) -> dict:
     ke = 0.5 * float((mass * (qd * qd).sum(1)).sum())
     s2 = (internal * internal).sum(1)
     ke_int = 0.5 * float((mass * s2).sum())
-    return {"com_z": float(c[2]), "kinetic": ke, "kinetic_internal": ke_int, "kinetic_rigid": ke - ke_int, "momentum": M * v,
+    return {"mass": M, "com_z": float(c[2]), "kinetic": ke, "kinetic_internal": ke_int, "kinetic_rigid": ke - ke_int, "momentum": M * v,
             "angular_momentum": Lang, "omega": w, "rms_internal_speed": float(np.sqrt(2.0 * ke_int / M)),
             "max_internal_speed": float(np.sqrt(s2.max()))}
 
@@ -109,7 +110,7 @@ class Watchdog:
         self._rest = self._hrest = None
         self._time = 0.0
         self._allowance = 0.0
-        self._heights: list[tuple[float, float]] = []  # (time, centre of mass height) in FALL_WINDOW_S
+        self._heights: list[tuple[float, float, float]] = []  # (time, centre of mass height, rigid speed)
 
     def check(self, state) -> dict | None:
         """Measure ``state``; raise LeafsimError on a blow-up.  Returns the measures (or None
@@ -122,7 +123,8 @@ class Watchdog:
             self._fail(state, "positions or velocities became NaN/Inf")
         mom = momenta(m.particle_cytosol + state.particle_water, q, qd)
         self.last = mom
-        bound = MAX_RMS_SPEED + self._allowance_for(state, self._fall_speed(state, mom["com_z"]))
+        rigid = float(np.sqrt(2.0 * max(mom["kinetic_rigid"], 0.0) / max(mom["mass"], 1e-300)))
+        bound = MAX_RMS_SPEED + self._allowance_for(state, self._fall_speed(state, mom["com_z"], rigid))
         if mom["rms_internal_speed"] > bound or mom["max_internal_speed"] > MAX_INTERNAL_SPEED:
             self._fail(state, f"internal motion at {mom['rms_internal_speed']:.3g} m/s RMS, {mom['max_internal_speed']:.3g} m/s "
                               f"at most (bounds {bound:.3g} and {MAX_INTERNAL_SPEED:g} m/s: drying tissue moves at "
@@ -136,12 +138,16 @@ class Watchdog:
                                   "frames without a source")
         return mom
 
-    def _fall_speed(self, state, z: float) -> float:
-        """√(2 g Δz): the speed the centre of mass's drop from its highest point in the last
-        FALL_WINDOW_S can give the tissue."""
-        self._heights = [(t, h) for t, h in self._heights if t > state.time - FALL_WINDOW_S] + [(state.time, z)]
-        drop = max(h for _, h in self._heights) - z
-        return float(np.sqrt(2.0 * float(self.params["dynamics.gravity"]) * max(drop, 0.0)))
+    def _fall_speed(self, state, z: float, rigid: float) -> float:
+        """What a fall can give the tissue: √(2 g Δz), Δz the centre of mass's drop from its
+        highest point in the last FALL_WINDOW_S, but no more than the fastest rigid RMS speed
+        in that window (a leaf falling at its terminal speed hands the fall's energy to the air,
+        not to its tissue).  A run that went back in time (a reset) starts the window afresh."""
+        now = state.time
+        self._heights = [e for e in self._heights if now - FALL_WINDOW_S < e[0] <= now] + [(now, z, rigid)]
+        drop = max(e[1] for e in self._heights) - z
+        fastest = max(e[2] for e in self._heights)
+        return min(float(np.sqrt(2.0 * float(self.params["dynamics.gravity"]) * max(drop, 0.0))), fastest)
 
     def _allowance_for(self, state, fall_speed: float) -> float:
         """SHRINK_SPEED_FACTOR × the shape speed + the fall speed, or the earlier allowance

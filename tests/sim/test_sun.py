@@ -99,10 +99,8 @@ def test_a_hanging_leaf_swings_down_as_a_converged_xpbd_solve_moves_it():
     model = build_blade(s, synthetic_veins(s), ParamSet(common), seed=4)
     apex = int(np.argmax(model.particle_rest[:, 1]))
     paths = {}
-    # Sun's steps scale every mode's inertia alike: so does XPBD here (no selective scaling)
     for name, over in (("sun", {}), ("xpbd", {"dynamics.integrator": "xpbd", "dynamics.substeps": 200,
-                                               "dynamics.iterations": 20, "dynamics.tolerance": 1e-9,
-                                               "dynamics.rigid_inertia": False})):
+                                               "dynamics.iterations": 20, "dynamics.tolerance": 1e-9})):
         sim = Simulator(model, ParamSet({**common, **over}))
         st = sim.state()
         path = []

@@ -137,10 +137,15 @@ class Dynamics:
         # selective mass scaling (kernels.rigid): the rigid modes at their real inertia, damped
         # by the air in real time (also at M = 1: the rigid modes are damped by the air alone)
         on = params["dynamics.rigid_inertia"]
-        self.rigid_mode = (2 if params["dynamics.scene"] == "hanging" and m.particle_pinned.any() else 1) if on else 0
+        # pinned: only at a stalk's tip (or one particle), where the leaf can swing; a blade
+        # pinned over a patch at its base has no rigid mode (its moment about the patch is the
+        # patch's stiff reaction, which amplified × (M − 1) blew up at M ≈ 3000)
+        hanging = params["dynamics.scene"] == "hanging" and m.particle_pinned.any()
+        stalk = (m.particle_petiole is not None and bool(m.particle_petiole.any())) or int(m.particle_pinned.sum()) == 1
+        self.rigid_mode = 0 if not on else (1 if not hanging else (2 if stalk else 0))
         self.rigid_gain = self.mscale - 1.0
-        self.rigid_kratio = kr.air_factor(params["dynamics.air_damping"],
-                                          params["dynamics.damping"] / math.sqrt(self.mscale), self.h)
+        self.air = params["dynamics.air_damping"]
+        self.rigid_kratio = kr.air_factor(self.air, params["dynamics.damping"] / math.sqrt(self.mscale), self.h)
         self.iters = params["dynamics.iterations"]
         self.omega = params["dynamics.relaxation"]
         self.tol = params["dynamics.tolerance"] * m.length
@@ -317,7 +322,8 @@ class Dynamics:
             self.last_energy = ks.frame(state.particle_q, state.particle_qd, self.q_old, self.invm, self.g, self.sun_h,
                                         self.sun_steps, self.drag, self.beta, elastic, self.ground, self.pen, self.mu,
                                         self.pbd and self.self_coll, contact, self.replace, self.hgt, m.thickness * shrunk,
-                                        self.sF, self.sacc, self.sqm, self.svm, self.qa, self.pbd, m.vol_idx, out)
+                                        self.sF, self.sacc, self.sqm, self.svm, self.qa, self.pbd, m.vol_idx,
+                                        self._rigid(state, kr.air_factor(self.air, self.drag, self.sun_h)), out)
             # fastmath kernels cannot test for NaN: the positions are checked here
             if not (np.isfinite(state.particle_q).all() and np.isfinite(state.particle_qd).all()):
                 raise LeafsimError(f"dynamics.integrator = sun blew up at frame {state.frame} with {self.sun_steps} steps "
@@ -374,14 +380,15 @@ class Dynamics:
             state.particle_qd[:] = qd
         return out
 
-    def _rigid(self, state: State) -> tuple:
+    def _rigid(self, state: State, kratio: float | None = None) -> tuple:
         """The ``rigid`` argument of :func:`~.kernels.pbd.frame`: the mode, the pin (the mean of
         the pinned particles, which do not move), M − 1, the air's velocity factor and the
         ground's reach (:data:`GROUND_REACH` × the thickness)."""
         m = self.model
         mode = self.rigid_mode if self.pbd or self.rigid_mode == 1 else 0
         pin = state.particle_q[m.particle_pinned].mean(axis=0) if mode == 2 else (0.0, 0.0, 0.0)
-        return (mode, float(pin[0]), float(pin[1]), float(pin[2]), self.rigid_gain, self.rigid_kratio,
+        kratio = self.rigid_kratio if kratio is None else kratio
+        return (mode, float(pin[0]), float(pin[1]), float(pin[2]), self.rigid_gain, kratio,
                 GROUND_REACH * m.thickness)
 
     def _f32_buffers(self) -> dict:

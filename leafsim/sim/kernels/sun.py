@@ -40,6 +40,7 @@ from numba import njit
 from leafsim.sim.kernels import FASTMATH
 from leafsim.sim.kernels.contacts import contact_velocities, project_contacts, update_contacts
 from leafsim.sim.kernels.pbd import clamp_ground, ground_clamp, ground_contact, uninvert, voronoi_heights, voronoi_replace
+from leafsim.sim.kernels.rigid import rigid_inertia
 from leafsim.sim.kernels.scalar import atan2_
 
 
@@ -212,11 +213,13 @@ def accelerate(F, v, invm, gz, c, out):
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH, error_model="numpy")
 def frame(q, qd, q_old, invm, gz, h, substeps, c, beta, elastic, ground, pen, mu, self_coll, contact, replace,
-          hgt, thick, F, acc, qm, vm, qa, layers, vol_idx, out):
+          hgt, thick, F, acc, qm, vm, qa, layers, vol_idx, rigid, out):
     """All ``substeps`` explicit-midpoint steps of one frame.  ``elastic`` = (ij, sk, srest, tf,
     hidx, hk, hrest, vidx, vk, vrest) (model order); ``contact`` as in :func:`.pbd.frame`;
     ``layers``: keep the V layer above its triangles (the constraints are on); ``vol_idx`` the
-    model's tetrahedra (for the un-inversion and the thesis re-placement).  Pinned particles
+    model's tetrahedra (for the un-inversion and the thesis re-placement); ``rigid`` the rigid
+    modes' real inertia as in :func:`.pbd.frame` (the elastic forces' displacement h² F / m in
+    the place of the internal one).  Pinned particles
     (1/m = 0) stay where they are.  Writes (substeps, contact hits, uninverted) to ``out`` and
     returns the elastic energy at the frame's end.  Compiled with fastmath, this kernel cannot
     see a NaN: the caller checks the positions after it."""
@@ -225,6 +228,7 @@ def frame(q, qd, q_old, invm, gz, h, substeps, c, beta, elastic, ground, pen, mu
         if invm[i] <= 0.0:  # pinned: no velocity (it may have had one before it was pinned)
             qd[i, 0] = 0.0; qd[i, 1] = 0.0; qd[i, 2] = 0.0
     qrest, T_idx, radius, skin, skin2, skip2, table, nxt, pairs, qc, near, qn, cstate = contact
+    rmode, rpx, rpy, rpz, rgain, rkratio, reps = rigid
     n = q.shape[0]
     energy = 0.0
     for _ in range(substeps):
@@ -266,6 +270,11 @@ def frame(q, qd, q_old, invm, gz, h, substeps, c, beta, elastic, ground, pen, mu
                     qd[i, k] = (q[i, k] - q_old[i, k]) * inv
         if ncont:
             contact_velocities(q, qd, invm, near, ncont, radius)
+        if rmode:
+            for i in range(n):  # qm is scratch by now: the elastic forces' displacement
+                for k in range(3):
+                    qm[i, k] = h * h * F[i, k] * invm[i]
+            rigid_inertia(q, qd, invm, qm, h, gz, rmode, rpx, rpy, rpz, rgain, rkratio, ground, reps)
         if replace:
             voronoi_replace(q, vol_idx, hgt, 0.25 * thick)
             if ground:
