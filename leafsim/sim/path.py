@@ -17,8 +17,8 @@ During the path phase (the leaf's water fraction above the hand-over level) ever
 3. the own mesh's positions and velocities are the coarse ones prolonged by a fixed matrix.
 
 Both matrices are moving-least-squares affine fits over the 12 nearest particles of the other
-mesh in the rest state (both layers, so the fit spans the thickness): exact for any affine
-deformation, so a rigid motion or a uniform shrink carries over unchanged.  Water only falls,
+mesh in the rest state (both layers, so the fit spans the thickness) of the same part, stalk or
+blade: exact for any deformation affine on each part, so a rigid motion or a uniform shrink carries over unchanged.  Water only falls,
 so the phase is a function of the state: a resumed run picks up where it was.
 
 Example
