@@ -190,20 +190,6 @@ def command(name: str):
     return getattr(importlib.import_module(f"leafsim.commands.{module}"), func)
 
 
-#: the commands that run the simulation's kernels (the first run of a version compiles them)
-SIMULATING = ("gui", "run", "bench", "accuracy", "scene", "export", "compare")
-
-
-def say_when_compiling() -> None:
-    """One line on stderr when this version's kernels are not compiled yet, so the first run
-    does not sit silent for a minute (the GUI's status bar says it too)."""
-    from leafsim.base.cache import kernels_cached
-
-    if not kernels_cached():
-        print("leafsim: compiling the simulation kernels for this version (once; about a minute on 2 cores, "
-              "`bash scripts/setup.sh` does it ahead)", file=sys.stderr, flush=True)
-
-
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version"):
@@ -212,8 +198,6 @@ def main(argv: list[str] | None = None) -> int:
     old_term = signal.signal(signal.SIGTERM, raise_interrupted) if main_thread() else None
     try:
         args = build_parser().parse_args(argv)
-        if args.cmd in SIMULATING:
-            say_when_compiling()
         return command(args.cmd)(args) or 0
     except LeafsimError as e:
         print(f"leafsim: {one_line(str(e))}", file=sys.stderr)

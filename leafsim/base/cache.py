@@ -85,19 +85,6 @@ def configure_numba_cache() -> str | None:
     return _configured
 
 
-def kernels_cached() -> bool:
-    """The kernel cache in use already holds compiled kernels (an index file): False on the
-    first run of this version of the kernel sources, which compiles them (about a minute on
-    2 cores; ``scripts/setup.sh`` does it once) — or when numba's default cache is in use."""
-    folder = configure_numba_cache()
-    if not folder:
-        return False
-    try:
-        return any(Path(folder).rglob("*.nbi"))
-    except OSError:
-        return False
-
-
 def _prune(base: Path, keep: Path) -> None:
     try:
         now = time.time()

@@ -58,7 +58,7 @@ ENERGY_FLOOR = 1e-4
 #: parameters that drive the dynamics, in the order they are blamed
 #: suspects that only one integrator reads
 SUN_ONLY = ("dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_substeps", "material.turgor_pressure")
-XPBD_ONLY = ("dynamics.relaxation", "dynamics.substeps", "dynamics.iterations", "dynamics.rigid_inertia")
+XPBD_ONLY = ("dynamics.relaxation", "dynamics.substeps", "dynamics.iterations")
 SUSPECTS = ("material.turgor_pressure", "dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_substeps", "dynamics.relaxation", "dynamics.dt", "dynamics.damping", "dynamics.substeps", "dynamics.iterations",
             "dynamics.mass_scaling", "dynamics.rigid_inertia", "dynamics.air_damping",
             "material.modulus", "material.vein_modulus", "material.dry_stiffening", "dynamics.substep_scaling",

@@ -69,20 +69,3 @@ def test_no_home_or_unwritable_cache_falls_back_quietly(tmp_path):
 def test_a_chosen_cache_wins(tmp_path):
     assert _cache_dir(tmp_path, NUMBA_CACHE_DIR=str(tmp_path / "mine")) == str(tmp_path / "mine")
 
-
-def test_a_first_run_says_it_is_compiling(tmp_path, monkeypatch, capsys):
-    """An empty kernel cache (this version's first run) makes a simulating command say that it
-    compiles, once on stderr; a cache holding numba's index files does not."""
-    import leafsim.base.cache as cache
-    from leafsim.cli import say_when_compiling
-
-    monkeypatch.setattr(cache, "_configured", str(tmp_path))
-    assert not cache.kernels_cached()
-    say_when_compiling()
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "compiling the simulation kernels" in err
-    (tmp_path / "kernels_abc").mkdir()
-    (tmp_path / "kernels_abc" / "pbd.frame-378.py311.nbi").write_bytes(b"")
-    assert cache.kernels_cached()
-    say_when_compiling()
-    assert capsys.readouterr().err == ""
