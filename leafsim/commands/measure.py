@@ -21,6 +21,19 @@ def cmd_accuracy(args):
         check_output(out, "--out folder", folder=True)
     if args.floor < 0:
         raise LeafsimError(f"--floor {args.floor}: expected a count ≥ 0")
+    if args.limit:
+        from leafsim.measure.limit import limit_study, markdown_limit, write_limit_report
+
+        if args.cache is not None:
+            check_output(Path(args.cache), "--cache folder", folder=True)
+        report = limit_study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json,
+                             cache=None if args.cache is None else Path(args.cache))
+        if out is not None:
+            report["files"] = write_limit_report(report, out)
+        emit(args, report, markdown_limit(report))
+        return
+    if args.cache is not None:
+        raise LeafsimError("--cache: only with --limit")
     groups = None if args.groups is None else [g.strip() for g in args.groups.split(",") if g.strip()]
     if groups is not None and (not groups or set(groups) - set(GROUPS)):
         raise LeafsimError(f"--groups {args.groups}: expected a comma list of {', '.join(sorted(GROUPS))}")

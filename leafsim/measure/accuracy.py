@@ -82,6 +82,8 @@ class SettingResult:
     end: dict
     water: list = field(default_factory=list)
     failed: str | None = None
+    cpu: float = float("nan")  # CPU seconds of the run's frames (process time)
+    solver: dict | None = None  # dynamics.integrator = static: the equilibrium solves' statistics
 
 
 def default_sweeps(base: ParamSet, quick: bool = False, groups=None) -> list[Setting]:
@@ -176,12 +178,29 @@ def run_setting(species, base: ParamSet, setting: Setting, t_end: float | None, 
         return t_end is None and not math.isnan(t_dry) and st.time >= SETTLE * t_dry - 1e-12
 
     t0 = time.perf_counter()
+    c0 = time.process_time()
     for stages in run.frames(Stop(frames=n), until=settled):
         ms.append(sum(stages.values()))
+    cpu = time.process_time() - c0
     secs = time.perf_counter() - t0
     med = float(np.median(ms))
     return SettingResult(setting, model.particle_count, len(ms), secs, med, float(np.percentile(ms, 90)), med / dt, t_dry,
-                         probe.fields(model, st), water)
+                         probe.fields(model, st), water, cpu=cpu, solver=solver_stats(run.sim))
+
+
+def solver_stats(sim) -> dict | None:
+    """With ``dynamics.integrator = static``: the equilibrium solves of a run (count, Newton
+    iterations median / p90 / largest, factorisations, seconds per solve, largest residual
+    left); None for the other integrators."""
+    dyn = getattr(sim, "_dynamics", None)
+    eq = getattr(dyn, "equilibrium", None) if dyn is not None and getattr(dyn, "static", False) else None
+    if eq is None or not eq.log:
+        return None
+    a = np.array(eq.log, float)
+    return {"solves": len(a), "newton_median": float(np.median(a[:, 0])), "newton_p90": float(np.percentile(a[:, 0], 90)),
+            "newton_max": int(a[:, 0].max()), "newton_total": int(a[:, 0].sum()), "factorisations": int(a[:, 1].sum()),
+            "ms_per_solve": float(1e3 * np.median(a[:, 2])), "residual_max": float(a[:, 3].max()),
+            "unconverged": int((a[:, 3] > eq.tol).sum())}
 
 
 def errors(run: SettingResult, ref: SettingResult, probe) -> dict:

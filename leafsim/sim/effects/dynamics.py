@@ -172,8 +172,21 @@ class Dynamics:
         self.ground = effects["ground"] and self.scene == "ground"
         self.self_coll = effects["self_collision"]
         self.sun = params["dynamics.integrator"] == "sun"
-        if self.sun:
+        self.static = params["dynamics.integrator"] == "static"
+        if self.sun or self.static:
             self._configure_sun(params, k, E)
+        if self.static:
+            from leafsim.sim.equilibrium import Equilibrium
+
+            if self.scene == "free" and effects["gravity"]:
+                raise LeafsimError("dynamics.integrator = static: a free leaf under gravity has no equilibrium "
+                                   "(it falls): expected dynamics.scene ground or hanging, or the xpbd integrator")
+
+            self.static_every = int(params["dynamics.static_every"])
+
+            if getattr(self, "equilibrium", None) is None:
+                self.equilibrium = Equilibrium(m, self)
+            self.equilibrium.configure(params)
 
     def _configure_sun(self, params, k, E) -> None:
         """Sun's explicit integrator (:mod:`.kernels.sun`): its own step count (scaled with the
@@ -236,6 +249,19 @@ class Dynamics:
         if self.sun:
             self._apply_sun(state)
             return
+        if self.static:
+            if state.frame % self.static_every:
+                return
+            info = self.equilibrium.solve(state)
+            self.last_iterations = info.iterations
+            self.last_contacts = info.contacts
+            self.last_uninverted = 0
+            return
+        self._xpbd(state)
+
+    def _xpbd(self, state: State) -> None:
+        """One XPBD frame (:func:`~.kernels.pbd.frame`) on ``state``."""
+        m = self.model
         cons = self.gather(state)
         # contacts and the un-inversion keep to the tissue's size: as it shrinks (in the plane and
         # through the thickness) so do the contact radius and the thickness (fixed values would
