@@ -63,15 +63,25 @@ SCALARS = ("margin_lift", "margin_lift_mean", "area_3d", "area_top")
 
 def richardson(values: list, ratio: float = RATIO) -> tuple:
     """Extrapolate the last three of ``values`` (scalars or arrays on meshes each ``ratio``
-    finer) to zero spacing: (limit, observed order p (clamped), the order as observed (nan
-    when the differences do not shrink), GCI: 1.25 |f₃ − f₂| / (ρ^p − 1), RMS for arrays)."""
+    finer) to zero spacing: (limit, order used, order observed, GCI).
+
+    In the asymptotic range (an observed order in [``P_MIN``, ``P_MAX``]; above it clamped) the
+    limit is f₃ + (f₃ − f₂)/(ρ^p − 1) and GCI = 1.25 |f₃ − f₂| / (ρ^p − 1).  Outside it (the
+    differences do not shrink, or shrink too slowly to trust) nothing is extrapolated: the
+    finest value stands for the limit, the order used is nan and GCI = 3 |f₃ − f₂| / (ρ − 1)
+    (Roache's safety factor 3 with a first-order guess).  Arrays take one order from their RMS
+    differences; their GCI is an RMS."""
     if len(values) < 3:
         raise LeafsimError(f"Richardson extrapolation needs three meshes, got {len(values)}")
     f1, f2, f3 = (np.asarray(v, float) for v in values[-3:])
     d1 = float(np.sqrt(np.mean((f1 - f2) ** 2)))
     d2 = float(np.sqrt(np.mean((f2 - f3) ** 2)))
-    raw = math.log(d1 / d2) / math.log(ratio) if d1 > 0.0 and d2 > 0.0 else float("nan")
-    p = P_MAX if d2 == 0.0 else (min(max(raw, P_MIN), P_MAX) if math.isfinite(raw) else P_MIN)
+    if d2 == 0.0:
+        return (float(f3) if f3.ndim == 0 else f3), P_MAX, float("nan"), 0.0
+    raw = math.log(d1 / d2) / math.log(ratio) if d1 > 0.0 else float("nan")
+    if not math.isfinite(raw) or raw < P_MIN:
+        return (float(f3) if f3.ndim == 0 else f3), float("nan"), raw, 3.0 * d2 / (ratio - 1.0)
+    p = min(raw, P_MAX)
     c = 1.0 / (ratio ** p - 1.0)
     limit = f3 + (f3 - f2) * c
     return (float(limit) if limit.ndim == 0 else limit), p, raw, 1.25 * d2 * c
@@ -236,12 +246,12 @@ def markdown_limit(report: dict) -> str:
     L = report["length_m"]
     lim, o = report["limit"], report["orders"]
     lines = [f"Limit (Richardson over {len([r for r in report['rows'] if r['group'] == 'limit'])} meshes, ratio √2): "
-             f"margin lift {lim['margin_lift']:.4f} L (order {o['margin_lift']['order']:.2g}, GCI {o['margin_lift']['gci']:.2g}), "
-             f"3D area {lim['area_3d']:.4f} (order {o['area_3d']['order']:.2g}, GCI {o['area_3d']['gci']:.2g}), "
-             f"top-down area {lim['area_top']:.4f} (order {o['area_top']['order']:.2g}, GCI {o['area_top']['gci']:.2g}), "
-             f"time to dry {lim['time_to_dry']:.4g} s; positions: order {o['q_own']['order']:.2g}, GCI "
-             f"{o['q_own']['gci'] / L:.2g} L.  Orders observed outside [{P_MIN:g}, {P_MAX:g}] are clamped "
-             f"(observed: " + ", ".join(f"{k} {v['observed']}" for k, v in o.items() if k in ('q_own', 'margin_lift', 'area_3d', 'area_top', 'time_to_dry')) + ").",
+             + "; ".join(f"{name} {_lim(lim, k)} (observed order {_num(o[k]['observed'])}, "
+                         f"{'extrapolated' if o[k]['order'] is not None else 'not asymptotic: the finest mesh'}, "
+                         f"GCI {_num(o[k]['gci'] / (L if k == 'q_own' else 1.0))}{' L' if k == 'q_own' else ''})"
+                         for k, name in (("margin_lift", "margin lift"), ("area_3d", "3D area"), ("area_top", "top-down area"),
+                                         ("time_to_dry", "time to dry"), ("q_own", "positions"), ("water_field", "water field")))
+             + ".",
              "", "| setting | particles | CPU s per dried leaf | " + " | ".join(METRIC_NAMES[m] for m in METRICS) + " | worst |",
              "|---|---|---|" + "---|" * (len(METRICS) + 1)]
     for r in report["rows"]:
@@ -262,6 +272,16 @@ def markdown_limit(report: dict) -> str:
         lines.append(f"| {n['name']} | {n['particles']} | {n['solves']} | {n['newton_median']:.3g} | {n['newton_p90']:.3g} | "
                      f"{n['newton_max']} | {n['factorisations']} | {n['ms_per_solve']:.4g} | {n['unconverged']} |")
     return "\n".join(lines)
+
+
+def _num(v) -> str:
+    return "–" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.2g}"
+
+
+def _lim(lim: dict, key: str) -> str:
+    if key not in lim:
+        return ""
+    return f"{lim[key]:.4g} s" if key == "time_to_dry" else f"{lim[key]:.4f}" + (" L" if key == "margin_lift" else "")
 
 
 def write_limit_report(report: dict, out) -> dict:

@@ -114,6 +114,7 @@ class Equilibrium:
         self.normal = np.zeros(n)  # the ground's normal force on each particle at the last equilibrium [N]
         self.last = None
         self.lu = None
+        self.reuse = False
         self.factorisations = 0
         self.damped = 0  # Levenberg–Marquardt raises of the damping (the Hessian was indefinite)
         self.history = []  # the last two equilibria: (time, positions)
@@ -297,12 +298,13 @@ class Equilibrium:
         converges in ``REUSE_CG`` iterations (the Hessian changes little between Newton steps
         and frames), else a fresh factorisation.  Returns (Δ, whether A is known positive
         definite: a fresh factorisation's pivots all positive, or CG converged)."""
-        if getattr(self, "lu", None) is not None and self.factored == A.shape:
+        if getattr(self, "lu", None) is not None and self.factored == A.shape and self.reuse:
             M = spla.LinearOperator(A.shape, self.lu.solve)
             x, info = spla.cg(A, b, rtol=REUSE_RTOL, maxiter=REUSE_CG, M=M)
             if info == 0 and float(x @ b) > 0.0:
                 return x, True
         self._factor(A)
+        self.reuse = True
         # symmetric permutation, diagonal pivots: A = P L U Pᵀ with U = D Lᵀ, so the signs
         # of U's diagonal are A's inertia (Sylvester)
         definite = bool((self.lu.U.diagonal() > 0.0).all())
@@ -334,6 +336,9 @@ class Equilibrium:
         A = None
         res0 = res = math.inf
         it = 0
+        # a solve's first step factorises afresh (the rest state moved since the last solve and
+        # the old factorisation preconditions it poorly: measured, most such CG attempts failed)
+        self.reuse = False
         self._predict(state, rec, mass, radius, kc)
         pairs = self._contacts(q, radius)
         self.trace = []
