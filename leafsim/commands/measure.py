@@ -24,6 +24,9 @@ def cmd_accuracy(args):
     if args.limit:
         from leafsim.measure.limit import limit_study, markdown_limit, write_limit_report
 
+        if args.groups is not None or args.floor or args.floor_reference:
+            raise LeafsimError("--limit: measures its own settings against the limit; --groups, --floor and "
+                               "--floor-reference are for the reference study (drop them or --limit)")
         if args.cache is not None:
             check_output(Path(args.cache), "--cache folder", folder=True)
         report = limit_study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json,

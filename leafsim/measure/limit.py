@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import json
 import math
-import pickle
 from pathlib import Path
 
 import numpy as np
@@ -55,35 +54,43 @@ LIMIT_MESHES = (1.0, 1.0 / RATIO, 0.5)
 #: equilibrium solves every this many frames, and their force tolerance (× a particle's weight)
 LIMIT_EVERY = 32
 LIMIT_TOLERANCE = 1e-2
-#: observed orders are clamped to this range (outside it the meshes are not asymptotic)
-P_MIN, P_MAX = 0.5, 4.0
+#: a measure is extrapolated only with an observed order in this range (clamped above): below
+#: first order the meshes are pre-asymptotic for it (the water field the shape rides on diverges
+#: there: docs/accuracy.md)
+P_MIN, P_MAX = 1.0, 4.0
 #: the scalar measures extrapolated (the fields are extrapolated point by point)
 SCALARS = ("margin_lift", "margin_lift_mean", "area_3d", "area_top")
 
 
 def richardson(values: list, ratio: float = RATIO) -> tuple:
     """Extrapolate the last three of ``values`` (scalars or arrays on meshes each ``ratio``
-    finer) to zero spacing: (limit, order used, order observed, GCI).
+    finer) to zero spacing: (limit, order used (nan: not extrapolated), order observed (nan:
+    not observable), GCI).
 
-    In the asymptotic range (an observed order in [``P_MIN``, ``P_MAX``]; above it clamped) the
-    limit is f₃ + (f₃ − f₂)/(ρ^p − 1) and GCI = 1.25 |f₃ − f₂| / (ρ^p − 1).  Outside it (the
-    differences do not shrink, or shrink too slowly to trust) nothing is extrapolated: the
-    finest value stands for the limit, the order used is nan and GCI = 3 |f₃ − f₂| / (ρ − 1)
-    (Roache's safety factor 3 with a first-order guess).  Arrays take one order from their RMS
-    differences; their GCI is an RMS."""
+    Converging monotonically (the two differences of one sign, for arrays a positive inner
+    product) with an observed order p = ln(|f₁ − f₂| / |f₂ − f₃|) / ln ρ of at least ``P_MIN``
+    (above ``P_MAX`` clamped): the limit is f₃ + (f₃ − f₂)/(ρ^p − 1) and GCI = 1.25 |f₃ − f₂| /
+    (ρ^p − 1).  Otherwise (oscillating, or the differences do not shrink fast enough to trust)
+    nothing is extrapolated: the finest value stands for the limit and GCI = 3 |f₃ − f₂| /
+    (ρ − 1) (Roache's safety factor 3 with a first-order guess; with f₃ = f₂ the first
+    difference stands in).  Arrays take one order from their RMS differences; their GCI is an
+    RMS."""
     if len(values) < 3:
         raise LeafsimError(f"Richardson extrapolation needs three meshes, got {len(values)}")
     f1, f2, f3 = (np.asarray(v, float) for v in values[-3:])
-    d1 = float(np.sqrt(np.mean((f1 - f2) ** 2)))
-    d2 = float(np.sqrt(np.mean((f2 - f3) ** 2)))
-    if d2 == 0.0:
-        return (float(f3) if f3.ndim == 0 else f3), P_MAX, float("nan"), 0.0
-    raw = math.log(d1 / d2) / math.log(ratio) if d1 > 0.0 else float("nan")
-    if not math.isfinite(raw) or raw < P_MIN:
-        return (float(f3) if f3.ndim == 0 else f3), float("nan"), raw, 3.0 * d2 / (ratio - 1.0)
+    e1, e2 = f1 - f2, f2 - f3
+    d1 = float(np.sqrt(np.mean(e1 ** 2)))
+    d2 = float(np.sqrt(np.mean(e2 ** 2)))
+    finest = float(f3) if f3.ndim == 0 else f3
+    if d2 == 0.0 or d1 == 0.0:
+        return finest, float("nan"), float("nan"), 3.0 * max(d1, d2) / (ratio - 1.0)
+    raw = math.log(d1 / d2) / math.log(ratio)
+    monotone = float(np.sum(e1 * e2)) > 0.0
+    if not monotone or raw < P_MIN - 1e-9:
+        return finest, float("nan"), (raw if monotone else float("nan")), 3.0 * d2 / (ratio - 1.0)
     p = min(raw, P_MAX)
     c = 1.0 / (ratio ** p - 1.0)
-    limit = f3 + (f3 - f2) * c
+    limit = f3 + e2 * -c
     return (float(limit) if limit.ndim == 0 else limit), p, raw, 1.25 * d2 * c
 
 
@@ -154,9 +161,9 @@ def candidate_settings(base, quick: bool = False) -> list[Setting]:
 def limit_study(species: str = "oak", quick: bool = False, seed: int = 0, config=None, progress: bool = True,
                 cache: Path | None = None, candidates: list[Setting] | None = None) -> dict:
     """Dry ``species`` on the limit meshes, extrapolate, and measure every candidate against
-    the limit (see the module doc).  ``cache``: a folder where every run is kept and from
-    which a run of the same settings is taken instead of run again (a study of hours
-    resumes)."""
+    the limit (see the module doc).  ``cache``: a folder where every run is kept (plain
+    ``.npz``, :func:`save_run`) and from which a run of the same settings, protocol and solver
+    source is taken instead of run again (a study of hours resumes)."""
     sp = get_species(species, config)
     base = sp.params
     if quick:
@@ -173,21 +180,14 @@ def limit_study(species: str = "oak", quick: bool = False, seed: int = 0, config
     def run(s: Setting, t_end):
         key = None
         if cache is not None:
-            tag = json.dumps([species, seed, quick, s.overrides, t_end], sort_keys=True, default=str)
-            key = Path(cache) / f"{abs(hash_text(tag)):016x}.pkl"
-            if key.is_file():
-                try:
-                    with open(key, "rb") as fh:
-                        got = pickle.load(fh)
-                except Exception:  # a damaged cache entry is run again (and replaced)
-                    got = None
-                if got is not None and getattr(got, "setting", None) is not None and got.setting.overrides == s.overrides:
-                    bar.update(1)
-                    return got
+            key = Path(cache) / f"{cache_key(species, seed, quick, base, s, t_end, times, 4.0 * t_nom)}.npz"
+            got = load_run(key, s)
+            if got is not None:
+                bar.update(1)
+                return got
         r = run_setting(sp, base, s, t_end, probe, times, seed, builds, t_max=4.0 * t_nom)
         if key is not None:
-            key.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_bytes(key, pickle.dumps(r), "run")
+            save_run(key, r)
         bar.update(1)
         return r
 
@@ -214,11 +214,68 @@ def limit_study(species: str = "oak", quick: bool = False, seed: int = 0, config
             "newton": [dict(name=s.name, particles=r.particles, **(r.solver or {})) for s, r in zip(refs, ref_runs)]}
 
 
-def hash_text(text: str) -> int:
-    """A stable 64-bit hash of ``text`` (Python's own is salted per process)."""
+#: bump when a cached run's meaning changes in a way the source digest below does not see
+CACHE_VERSION = 1
+#: the modules whose source decides what a run produces (their digest is part of the cache key)
+CACHE_SOURCES = ("leafsim/sim/equilibrium.py", "leafsim/sim/kernels/static.py", "leafsim/sim/effects/dynamics.py",
+                 "leafsim/sim/kernels/pbd.py", "leafsim/sim/kernels/osmosis.py", "leafsim/sim/kernels/shrink.py",
+                 "leafsim/measure/accuracy.py")
+
+
+def cache_key(species, seed, quick, base, s: Setting, t_end, times, t_max) -> str:
+    """The cache name of one run: a digest of everything that decides it (the species'
+    parameters, the setting, the protocol's times and the solver's source)."""
     import hashlib
 
-    return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little") >> 1
+    root = Path(__file__).resolve().parents[2]
+    h = hashlib.blake2b(digest_size=12)
+    h.update(json.dumps([CACHE_VERSION, species, seed, quick, sorted((k, repr(v)) for k, v in base.items()),
+                         sorted((k, repr(v)) for k, v in s.overrides.items()), t_end, list(times), t_max],
+                        default=repr).encode())
+    for rel in CACHE_SOURCES:
+        f = root / rel
+        h.update(f.read_bytes() if f.is_file() else rel.encode())
+    return h.hexdigest()
+
+
+def save_run(path: Path, r) -> None:
+    """One run as an ``.npz`` of plain arrays (its scalars as JSON text), written atomically."""
+    import io
+
+    meta = {"setting": {"name": r.setting.name, "group": r.setting.group, "overrides": r.setting.overrides,
+                        "label": r.setting.label},
+            **{k: getattr(r, k) for k in ("particles", "frames", "seconds", "ms_frame", "ms_frame_p90", "ms_per_sim_s",
+                                          "time_to_dry", "failed", "cpu", "solver")},
+            "scalars": {k: float(v) for k, v in r.end.items() if np.ndim(v) == 0}, "water": len(r.water)}
+    arrays = {f"end_{k}": np.asarray(v, float) for k, v in r.end.items() if np.ndim(v) > 0}
+    arrays.update({f"water_{i}": np.asarray(w, float) for i, w in enumerate(r.water)})
+    buf = io.BytesIO()
+    np.savez(buf, meta=np.frombuffer(json.dumps(meta).encode(), np.uint8), **arrays)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, buf.getvalue(), "run")
+
+
+def load_run(path: Path, s: Setting):
+    """The run cached at ``path`` for setting ``s``, or None (missing, damaged or another
+    setting's).  Plain arrays only (no pickle): a cache folder cannot run code."""
+    from leafsim.measure.accuracy import SettingResult
+
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(bytes(z["meta"]).decode())
+            end = {k[4:]: np.array(z[k]) for k in z.files if k.startswith("end_")}
+            water = [np.array(z[f"water_{i}"]) for i in range(int(meta["water"]))]
+        end.update(meta["scalars"])
+        st = meta["setting"]
+        if st["overrides"] != json.loads(json.dumps(s.overrides)):
+            return None
+        return SettingResult(s, meta["particles"], meta["frames"], meta["seconds"], meta["ms_frame"],
+                             meta["ms_frame_p90"], meta["ms_per_sim_s"], meta["time_to_dry"], end, water,
+                             failed=meta["failed"], cpu=meta["cpu"], solver=meta["solver"])
+    except (OSError, ValueError, KeyError, TypeError):  # damaged: run again (and replace it)
+        return None
 
 
 def _round(d):
@@ -284,9 +341,42 @@ def _lim(lim: dict, key: str) -> str:
     return f"{lim[key]:.4g} s" if key == "time_to_dry" else f"{lim[key]:.4f}" + (" L" if key == "margin_lift" else "")
 
 
+def plot_limit(report: dict, path) -> Path:
+    """Worst relative error against the limit over CPU seconds per dried leaf, one point per
+    setting (the defaults starred), as a PNG."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [r for r in report["rows"] if "worst_rel" in r]
+    fig, ax = plt.subplots(figsize=(7.5, 5), dpi=110)
+    for g, c in zip(sorted({r["group"] for r in rows}), plt.cm.tab10.colors):
+        rs = [r for r in rows if r["group"] == g]
+        ax.scatter([r["cpu_s"] for r in rs], [100 * r["worst_rel"] for r in rs], color=c, label=g, s=28, zorder=3)
+        for r in rs:
+            ax.annotate(r["name"], (r["cpu_s"], 100 * r["worst_rel"]), fontsize=6, xytext=(3, 3), textcoords="offset points")
+    d = next((r for r in rows if r["name"] == "default"), None)
+    if d:
+        ax.scatter([d["cpu_s"]], [100 * d["worst_rel"]], marker="*", s=220, color="crimson", label="today's defaults", zorder=4)
+    ax.set_xscale("log")
+    ax.set_xlabel("CPU seconds per dried leaf")
+    ax.set_ylabel("worst relative error against the limit [%]")
+    ax.set_title(f"{report['species']}: error against the mesh-converged limit")
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return atomic_write_bytes(path, buf.getvalue(), "plot")
+
+
 def write_limit_report(report: dict, out) -> dict:
-    """limit.json and limit.md into ``out``; returns the paths."""
+    """limit.json, limit.md and limit_front.png into ``out``; returns the paths."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     return {"json": str(atomic_write_bytes(out / "limit.json", (json.dumps(report, indent=1) + "\n").encode(), "report")),
-            "markdown": str(atomic_write_bytes(out / "limit.md", (markdown_limit(report) + "\n").encode(), "report"))}
+            "markdown": str(atomic_write_bytes(out / "limit.md", (markdown_limit(report) + "\n").encode(), "report")),
+            "plot": str(plot_limit(report, out / "limit_front.png"))}

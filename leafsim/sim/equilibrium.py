@@ -17,13 +17,16 @@ moment of the drying the blade rests where its energy is least, starting from wh
   the ground with force N at the last equilibrium resists sliding from where it was with the
   smoothed work μ N f(|u|), f(u) = u² / 2ε below ε, u − ε/2 above (ε = ``STICK`` × the mesh
   spacing), i.e. it sticks until the tangential force reaches μ N and then slides;
-* self-contact: layer-T particles closer than the contact radius that are not sheet
-  neighbours repel with ½ k_c (r − d)².
+* self-contact: layer-T particles closer than the contact radius r that are not sheet
+  neighbours repel with the ground's C² penalty on the overlap r − d.
 
-Each Newton step solves H Δ = −∇E with H the positive semi-definite Hessian (exact for
-springs, Gauss–Newton for hinges and volumes, exact for ground, friction and contact) by a
-sparse LU factorisation, plus a small Levenberg term that fixes the rigid in-plane motion
-nothing else holds; a backtracking line search on E makes every step descend.  The solve
+Each Newton step solves H Δ = −∇E with H the exact Hessian (springs analytically, the
+hinges' and volumes' residual terms by differences of their exact gradients; ground and friction
+exact; self-contact Gauss–Newton) by a sparse symmetric LU factorisation, plus a tiny Levenberg
+term that fixes the rigid in-plane motion nothing else holds.  Where H is indefinite
+(the factorisation's pivots say so) a Levenberg–Marquardt term grows until it is not; a line
+search on E (along an arc for the step's rigid part, :meth:`Equilibrium._path`) makes every
+step descend.  The solve
 stops when the largest force left on any particle is below ``tolerance`` × that particle's
 weight.  Pinned particles (the hanging scene) do not move.
 """
@@ -46,6 +49,8 @@ from leafsim.sim.model import LAYER_T, Model, State
 #: the ground's penalty: the whole leaf's weight on one particle sinks it 1.5 × this share of the
 #: blade's thickness (a curled leaf rests on a few particles)
 PENETRATION = 0.01
+#: self-contact pairs are searched this much (× the radius) beyond the contact radius
+CONTACT_SKIN = 1.0
 #: self-contact's penalty is cubic over this share of the contact radius (C², as the ground's)
 CONTACT_SMOOTH = 0.1
 #: friction's stick zone ε, × the mesh spacing
@@ -54,8 +59,10 @@ STICK = 1e-3
 LEVENBERG = 1e-9
 #: Armijo constant of the line search
 ARMIJO = 1e-4
-#: the smallest Levenberg–Marquardt damping, × the Hessian's diagonal (below it: none)
+#: the smallest Levenberg–Marquardt damping, × the Hessian's diagonal (below it: none), and the
+#: largest (beyond it the state has no descent direction: an error)
 LAM_MIN = 1e-4
+LAM_MAX = 1e12
 #: the longest multiple of a Newton step the line search tries when the energy keeps falling
 EXPAND = 64.0
 #: relative rounding of the energy below which the line search takes the full step
@@ -122,6 +129,14 @@ class Equilibrium:
         self.predictor = True
         self.log = []  # per solve: (Newton iterations, factorisations, seconds, residual)
 
+    def reset(self) -> None:
+        """Forget the friction anchors, normal forces and the predictor's history (another leaf,
+        a reset, a rewind, a change of scene or integrator)."""
+        self.history = []
+        self.normal = np.zeros(self.n)
+        self.anchor = self.model.particle_rest[:, :2].copy()
+        self._fric = None
+
     def configure(self, params) -> None:
         m = self.model
         self.g = float(params["dynamics.gravity"]) if self.dyn.g != 0.0 else 0.0
@@ -140,15 +155,17 @@ class Equilibrium:
         ij, sk, srest, tf, hidx, hk, hrest, vidx, vk, vrest = self.dyn.sun_elastic(state)
         if len(tf) and np.any(tf):
             # Sun's turgor force f along a spring is the gradient of −f |d|: a rest length ℓ + f/k
-            srest = srest + tf / np.maximum(sk, 1e-300)
+            srest = srest + np.where(sk > 0.0, tf / np.where(sk > 0.0, sk, 1.0), 0.0)
         return ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest
 
     def _contacts(self, q: np.ndarray, radius: float) -> np.ndarray:
-        """Layer-T pairs closer than ``radius`` that are not sheet neighbours at rest."""
+        """Layer-T pairs closer than (1 + ``CONTACT_SKIN``) × ``radius`` that are not sheet
+        neighbours at rest (the penalty acts on those closer than ``radius``)."""
         if not self.self_coll or radius <= 0.0:
             return np.zeros((0, 2), np.int64)
         T = self.T
-        pairs = cKDTree(q[T]).query_pairs(radius, output_type="ndarray")
+        # with a skin: the line search (and its longer steps) sees the pairs it may close
+        pairs = cKDTree(q[T]).query_pairs((1.0 + CONTACT_SKIN) * radius, output_type="ndarray")
         if not len(pairs):
             return np.zeros((0, 2), np.int64)
         a, b = T[pairs[:, 0]], T[pairs[:, 1]]
@@ -159,6 +176,8 @@ class Equilibrium:
     def _external(self, q, mass, want_h):
         """Gravity, ground, friction: energy, gradient (n, 3) and the Hessian's diagonal (3n,)."""
         n = self.n
+        if want_h:
+            self._fric = None
         grad = np.zeros((n, 3))
         diag = np.zeros((n, 3))
         w = mass * self.g
@@ -234,8 +253,8 @@ class Equilibrium:
     # ------------------------------------------------------------------ the solve
     def _factor(self, A):
         try:
-            # symmetric mode: the pivots stay on the diagonal (H is symmetric positive definite
-            # with the Levenberg term), 4× less fill than the unsymmetric default
+            # symmetric mode: the pivots stay on the diagonal (H is symmetric; their signs are its
+            # inertia), 4× less fill than the unsymmetric default
             self.lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                                 options=dict(SymmetricMode=True))
         except RuntimeError as exc:  # singular: nothing holds some motion
@@ -294,20 +313,21 @@ class Equilibrium:
             self.predicted += 1
 
     def _linear_solve(self, A, b):
-        """A Δ = b: conjugate gradients preconditioned by the last factorisation while it
-        converges in ``REUSE_CG`` iterations (the Hessian changes little between Newton steps
-        and frames), else a fresh factorisation.  Returns (Δ, whether A is known positive
-        definite: a fresh factorisation's pivots all positive, or CG converged)."""
+        """A Δ = b: within one solve, conjugate gradients preconditioned by the solve's last
+        factorisation when that was definite (the Hessian changes little between Newton steps)
+        while they converge in ``REUSE_CG`` iterations, else a fresh factorisation.  Returns
+        (Δ, whether A is taken as positive definite: a fresh factorisation's pivots all
+        positive, or CG converged on a definite preconditioner with the same damping)."""
         if getattr(self, "lu", None) is not None and self.factored == A.shape and self.reuse:
             M = spla.LinearOperator(A.shape, self.lu.solve)
             x, info = spla.cg(A, b, rtol=REUSE_RTOL, maxiter=REUSE_CG, M=M)
             if info == 0 and float(x @ b) > 0.0:
                 return x, True
         self._factor(A)
-        self.reuse = True
         # symmetric permutation, diagonal pivots: A = P L U Pᵀ with U = D Lᵀ, so the signs
         # of U's diagonal are A's inertia (Sylvester)
         definite = bool((self.lu.U.diagonal() > 0.0).all())
+        self.reuse = definite  # only a definite factorisation preconditions the next steps
         return self.lu.solve(b), definite
 
     def solve(self, state: State) -> SolveInfo:
@@ -319,8 +339,7 @@ class Equilibrium:
         q = state.particle_q
         if self.history and (state.time <= self.history[-1][0] or self.history[-1][1].shape != q.shape):
             # another leaf, a reset or a rewind: friction and the predictor start afresh
-            self.history = []
-            self.normal[:] = 0.0
+            self.reset()
             self.anchor[:] = q[:, :2]
         rec = self._records(state)
         mass = m.particle_cytosol + state.particle_water
@@ -351,6 +370,9 @@ class Equilibrium:
             E = Ee + Ex + Ec
             gf = np.where(self.free[:, None], grad, 0.0)
             res = float((np.sqrt((gf * gf).sum(1)) / weight).max())
+            if not math.isfinite(res):
+                raise LeafsimError(f"dynamics.integrator = static: the forces are not finite at frame {state.frame} "
+                                   "(positions or material values): expected a finite state")
             if it == 0:
                 res0 = res
             if res <= self.tol or it >= self.max_iter:
@@ -374,9 +396,14 @@ class Equilibrium:
                 if definite and slope < 0.0:
                     break
                 # indefinite (the leaf is past a buckling point or tipping over): Levenberg–
-                # Marquardt, more of the diagonal until the step descends
+                # Marquardt, more of the diagonal until the factorisation is definite and the
+                # step descends
                 lam = max(10.0 * lam, LAM_MIN)
+                self.reuse = False
                 self.damped += 1
+                if lam > LAM_MAX:
+                    raise LeafsimError(f"dynamics.integrator = static: no descent direction at frame {state.frame} "
+                                       f"(the energy or its derivatives are not finite?): expected a finite state")
             alpha = 1.0
             x0 = q.copy()
             along = self._path(x0, step, mass)

@@ -158,6 +158,32 @@ def test_drying_on_the_ground_keeps_every_invariant_and_converges_in_the_increme
 
 
 def test_a_free_leaf_is_refused_with_a_one_line_error(model):
-    with pytest.raises(LeafsimError, match="free leaf under gravity has no equilibrium") as e:
+    with pytest.raises(LeafsimError, match="nothing holds up has no equilibrium") as e:
         Simulator(model, ParamSet({**BASE, "dynamics.scene": "free"}))
     assert "\n" not in str(e.value)
+
+
+def test_ground_and_friction_gradients_and_hessian_are_exact(model):
+    """The external terms (gravity, the C² ground, lagged friction in stick and in slip) against
+    differences of their energy and gradient."""
+    sim, st, eq, rec = _dried(model)
+    rng = np.random.default_rng(7)
+    q = st.particle_q.copy()
+    q[:, 2] = rng.uniform(-2.0, 1.0, len(q)) * eq.dyn.model.thickness * 0.02  # some in the ground, some not
+    mass = model.particle_cytosol + st.particle_water
+    eq.delta = 0.01 * model.thickness
+    eq.kg = np.full(len(q), float((mass * 9.81).sum()) / eq.delta)
+    eq.normal = np.where(rng.random(len(q)) < 0.5, rng.uniform(0.0, 1e-4, len(q)), 0.0)
+    eq.anchor = q[:, :2] + rng.normal(0.0, 2.0 * eq.eps, (len(q), 2))  # both stick and slip
+    E0, g, diag = eq._external(q, mass, True)
+    H = eq._hessian_extra(diag, np.zeros((0, 2), np.int64), q, 0.0).toarray()
+    for _ in range(3):
+        d = rng.normal(0.0, 1.0, q.shape)
+        h = 1e-3 * eq.eps
+        ep = eq._external(q + h * d, mass, False)[0]
+        em = eq._external(q - h * d, mass, False)[0]
+        assert (g * d).sum() == pytest.approx((ep - em) / (2 * h), rel=1e-5)
+        gp = eq._external(q + h * d, mass, False)[1]
+        gm = eq._external(q - h * d, mass, False)[1]
+        fd = ((gp - gm) / (2 * h)).reshape(-1)
+        assert np.linalg.norm(H @ d.reshape(-1) - fd) <= 1e-4 * np.linalg.norm(fd)

@@ -178,15 +178,23 @@ class Dynamics:
         if self.static:
             from leafsim.sim.equilibrium import Equilibrium
 
-            if self.scene == "free" and effects["gravity"]:
-                raise LeafsimError("dynamics.integrator = static: a free leaf under gravity has no equilibrium "
-                                   "(it falls): expected dynamics.scene ground or hanging, or the xpbd integrator")
+            held = self.ground or (self.scene == "hanging" and bool(m.particle_pinned.any()) and effects["pbd"])
+            if effects["gravity"] and not held:
+                raise LeafsimError("dynamics.integrator = static: a leaf that nothing holds up has no equilibrium "
+                                   "(it falls): expected dynamics.scene ground with effects.ground, or hanging with "
+                                   "effects.pbd, or the xpbd integrator")
+            was = getattr(self, "static_scene", None)
+            self.static_scene = self.scene
 
             self.static_every = int(params["dynamics.static_every"])
 
             if getattr(self, "equilibrium", None) is None:
                 self.equilibrium = Equilibrium(m, self)
+            elif was != self.scene:
+                self.equilibrium.reset()  # another scene (or back from another integrator)
             self.equilibrium.configure(params)
+        else:
+            self.static_scene = None
 
     def _configure_sun(self, params, k, E) -> None:
         """Sun's explicit integrator (:mod:`.kernels.sun`): its own step count (scaled with the
