@@ -303,7 +303,7 @@ def markdown_limit(report: dict) -> str:
     L = report["length_m"]
     lim, o = report["limit"], report["orders"]
     lines = [f"Limit (Richardson over {len([r for r in report['rows'] if r['group'] == 'limit'])} meshes, ratio √2): "
-             + "; ".join(f"{name} {_lim(lim, k)} (observed order {_num(o[k]['observed'])}, "
+             + "; ".join(f"{name}{' ' + _lim(lim, k) if k in lim else ''} (observed order {_num(o[k]['observed'])}, "
                          f"{'extrapolated' if o[k]['order'] is not None else 'not asymptotic: the finest mesh'}, "
                          f"GCI {_num(o[k]['gci'] / (L if k == 'q_own' else 1.0))}{' L' if k == 'q_own' else ''})"
                          for k, name in (("margin_lift", "margin lift"), ("area_3d", "3D area"), ("area_top", "top-down area"),
