@@ -457,6 +457,21 @@ def markdown(report: dict) -> str:
     return "\n".join(lines)
 
 
+def scatter_settings(ax, rows: list[dict], xkey: str) -> None:
+    """One point per setting (worst relative error in % over ``xkey``), coloured by sweep and
+    named, today's defaults starred."""
+    import matplotlib.pyplot as plt
+
+    for g, c in zip(sorted({r["group"] for r in rows}), plt.cm.tab10.colors):
+        rs = [r for r in rows if r["group"] == g]
+        ax.scatter([r[xkey] for r in rs], [100 * r["worst_rel"] for r in rs], color=c, label=g, s=28, zorder=3)
+        for r in rs:
+            ax.annotate(r["name"], (r[xkey], 100 * r["worst_rel"]), fontsize=6, xytext=(3, 3), textcoords="offset points")
+    d = next((r for r in rows if r["name"] == "default"), None)
+    if d:
+        ax.scatter([d[xkey]], [100 * d["worst_rel"]], marker="*", s=220, color="crimson", label="today's defaults", zorder=4)
+
+
 def plot(report: dict, path) -> Path:
     """The Pareto plot (worst relative error against ms per simulated second) as a PNG."""
     import io
@@ -470,17 +485,9 @@ def plot(report: dict, path) -> Path:
     rows = [r for r in report["rows"] if "worst_rel" in r]
     front = set(report["front"])
     fig, ax = plt.subplots(figsize=(7.5, 5), dpi=110)
-    groups = sorted({r["group"] for r in rows})
-    for g, c in zip(groups, plt.cm.tab10.colors):
-        rs = [r for r in rows if r["group"] == g]
-        ax.scatter([r["ms_per_sim_s"] for r in rs], [100 * r["worst_rel"] for r in rs], color=c, label=g, s=28, zorder=3)
-        for r in rs:
-            ax.annotate(r["name"], (r["ms_per_sim_s"], 100 * r["worst_rel"]), fontsize=6, xytext=(3, 3), textcoords="offset points")
+    scatter_settings(ax, rows, "ms_per_sim_s")
     fr = sorted((r for r in rows if r["name"] in front), key=lambda r: r["ms_per_sim_s"])
     ax.plot([r["ms_per_sim_s"] for r in fr], [100 * r["worst_rel"] for r in fr], "k--", lw=1, label="Pareto front", zorder=2)
-    d = next((r for r in rows if r["name"] == "default"), None)
-    if d:
-        ax.scatter([d["ms_per_sim_s"]], [100 * d["worst_rel"]], marker="*", s=220, color="crimson", label="today's defaults", zorder=4)
     ax.axhline(10, color="grey", lw=0.8, ls=":")
     ax.set_xscale("log")
     ax.set_yscale("log")

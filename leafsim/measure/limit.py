@@ -351,16 +351,11 @@ def plot_limit(report: dict, path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from leafsim.measure.accuracy import scatter_settings
+
     rows = [r for r in report["rows"] if "worst_rel" in r]
     fig, ax = plt.subplots(figsize=(7.5, 5), dpi=110)
-    for g, c in zip(sorted({r["group"] for r in rows}), plt.cm.tab10.colors):
-        rs = [r for r in rows if r["group"] == g]
-        ax.scatter([r["cpu_s"] for r in rs], [100 * r["worst_rel"] for r in rs], color=c, label=g, s=28, zorder=3)
-        for r in rs:
-            ax.annotate(r["name"], (r["cpu_s"], 100 * r["worst_rel"]), fontsize=6, xytext=(3, 3), textcoords="offset points")
-    d = next((r for r in rows if r["name"] == "default"), None)
-    if d:
-        ax.scatter([d["cpu_s"]], [100 * d["worst_rel"]], marker="*", s=220, color="crimson", label="today's defaults", zorder=4)
+    scatter_settings(ax, rows, "cpu_s")
     ax.set_xscale("log")
     ax.set_xlabel("CPU seconds per dried leaf")
     ax.set_ylabel("worst relative error against the limit [%]")

@@ -88,6 +88,16 @@ def _hinge_grad(x, u):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _wrap(C):
+    """An angle difference into (−π, π]."""
+    if C > math.pi:
+        return C - 2 * math.pi
+    if C < -math.pi:
+        return C + 2 * math.pi
+    return C
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _vol_grad(x, u):
     """∇C of C = 6 × the signed volume of the tetrahedron ``x`` (4, 3) = (v, a, b, c) into
     ``u`` (4, 3); returns C."""
@@ -147,11 +157,7 @@ def elastic(q, ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest, smap, hmap, vmap
         theta = _hinge_grad(x, u)
         if math.isnan(theta):
             continue
-        C = theta - hrest[e]
-        if C > math.pi:
-            C -= 2 * math.pi
-        elif C < -math.pi:
-            C += 2 * math.pi
+        C = _wrap(theta - hrest[e])
         k = hk[e]
         energy += 0.5 * k * C * C
         f = k * C
@@ -222,30 +228,21 @@ def elastic_energy(q, ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest):
             continue
         C = d - srest[s]
         energy += 0.5 * sk[s] * C * C
+    x = np.empty((4, 3))
+    u = np.empty((4, 3))
     for e in range(hidx.shape[0]):
-        i1 = hidx[e, 0]; i2 = hidx[e, 1]; i3 = hidx[e, 2]; i4 = hidx[e, 3]
-        ex = q[i4, 0] - q[i3, 0]; ey = q[i4, 1] - q[i3, 1]; ez = q[i4, 2] - q[i3, 2]
-        ax = q[i1, 0] - q[i3, 0]; ay = q[i1, 1] - q[i3, 1]; az = q[i1, 2] - q[i3, 2]
-        cx = q[i2, 0] - q[i4, 0]; cy = q[i2, 1] - q[i4, 1]; cz = q[i2, 2] - q[i4, 2]
-        n1x = ey * az - ez * ay; n1y = ez * ax - ex * az; n1z = ex * ay - ey * ax
-        n2x = cy * ez - cz * ey; n2y = cz * ex - cx * ez; n2z = cx * ey - cy * ex
-        el2 = ex * ex + ey * ey + ez * ez
-        l1 = n1x * n1x + n1y * n1y + n1z * n1z
-        l2 = n2x * n2x + n2y * n2y + n2z * n2z
-        if el2 < 1e-24 or l1 < 1e-30 or l2 < 1e-30:
+        for p in range(4):
+            for c in range(3):
+                x[p, c] = q[hidx[e, p], c]
+        theta = _hinge_grad(x, u)
+        if math.isnan(theta):
             continue
-        el = math.sqrt(el2)
-        C = atan2_(el * (n2x * ax + n2y * ay + n2z * az), n1x * n2x + n1y * n2y + n1z * n2z) - hrest[e]
-        if C > math.pi:
-            C -= 2 * math.pi
-        elif C < -math.pi:
-            C += 2 * math.pi
+        C = _wrap(theta - hrest[e])
         energy += 0.5 * hk[e] * C * C
     for t in range(vidx.shape[0]):
-        iv = vidx[t, 0]; ia = vidx[t, 1]; ib = vidx[t, 2]; ic = vidx[t, 3]
-        bx = q[ib, 0] - q[ia, 0]; by = q[ib, 1] - q[ia, 1]; bz = q[ib, 2] - q[ia, 2]
-        cx = q[ic, 0] - q[ia, 0]; cy = q[ic, 1] - q[ia, 1]; cz = q[ic, 2] - q[ia, 2]
-        vx = q[iv, 0] - q[ia, 0]; vy = q[iv, 1] - q[ia, 1]; vz = q[iv, 2] - q[ia, 2]
-        C = vx * (by * cz - bz * cy) + vy * (bz * cx - bx * cz) + vz * (bx * cy - by * cx) - vrest[t]
+        for p in range(4):
+            for c in range(3):
+                x[p, c] = q[vidx[t, p], c]
+        C = _vol_grad(x, u) - vrest[t]
         energy += 0.5 * vk[t] * C * C
     return energy
