@@ -18,7 +18,10 @@ The senescence exposure of a step is the season's and the drought's::
     H = stress·ΔG + drought·σ·(1 − d)·dt
 
 (a detached, drying leaf runs its senescence program while its cells still live; Munné-Bosch
-& Alegre 2004, Funct. Plant Biol. 31:203).  Death comes with dryness: ``E = dry_rate·d⁴·dt``.
+& Alegre 2004, Funct. Plant Biol. 31:203).  Death comes with dryness: ``E = dry_rate·d⁴·a·dt``,
+where ``a = min(w / colour.reaction_water, 1)`` (1 when that is 0): the dead tissue's reactions
+run on the water it still holds, so tissue that dries fast keeps the green it died with
+(herbarium green) and a bone-dry particle never changes.
 
 * chlorophyll  ``C ← C·exp(−chlorophyll_decay·H)``, then a share ``1 − exp(−E)`` of what is
   left turns necrotic — programmed breakdown in living cells (unmasking the carotenoids),
@@ -363,7 +366,7 @@ def _expneg(x, mode):  # pragma: no cover - numba; mode is a literal at every ca
 
 
 @njit(inline="always", fastmath=FASTMATH_FLAGS)
-def _particle(c, k, a, b, nn, wi, ri, si, h, e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, mode):  # pragma: no cover
+def _particle(c, k, a, b, nn, wi, ri, si, h, e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, inv_rw, rw_off, mode):  # pragma: no cover
     """One (sub-)step of one particle: ΔG = h season units, dry exposure e = dry_rate·dt,
     drought exposure dr = drought·dt (season units at full water stress); ri the particle's
     senescence rate and si its spot share (:mod:`leafsim.sim.senescence`)."""
@@ -376,7 +379,8 @@ def _particle(c, k, a, b, nn, wi, ri, si, h, e, dr, kc, ws, kk, kaf, kb, inv_dry
     hs = ri * (stress * h + dr * sig * (ONE32 - d))  # senescence exposure: season and drought, living cells
     esen = kc * hs                          # programmed chlorophyll breakdown
     d2 = d * d
-    enec = e * d2 * d2 + SPOT_KILL32 * si * hs  # death (dry tissue, or spot tissue as it senesces): what chlorophyll is left turns necrotic
+    aw = min(wi * inv_rw + rw_off, ONE32)  # the water the dead tissue's reactions still have
+    enec = e * d2 * d2 * aw + SPOT_KILL32 * si * hs  # death (dry tissue, or spot tissue as it senesces): what chlorophyll is left turns necrotic
     fc = _expneg(esen, mode)
     # phi = (1 − e^−x)/x: the breakdown per unit exposure, without 0/0
     phi = ONE32 - esen * (half - esen * (np.float32(1.0 / 6.0) - esen * (
@@ -402,22 +406,23 @@ def _particle(c, k, a, b, nn, wi, ri, si, h, e, dr, kc, ws, kk, kaf, kb, inv_dry
 @njit(cache=True, fastmath=FASTMATH_FLAGS, nogil=True, error_model="numpy")
 def _kernel_tiny(C, K, A, B, N, w, R, S, h, e, dr, co):  # pragma: no cover - numba
     """One step of all particles when every exponent is ≤ 0.01 (ordinary physics steps);
-    ``co`` = (kc, ws, kk, kaf, kb, inv_dry, w_s) as float32."""
+    ``co`` = (kc, ws, kk, kaf, kb, inv_dry, w_s, inv_rw, rw_off) as float32 (the last two: the
+    reaction-water factor min(w·inv_rw + rw_off, 1))."""
     h, e, dr = np.float32(h), np.float32(e), np.float32(dr)
-    kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
+    kc, ws, kk, kaf, kb, inv_dry, w_s, inv_rw, rw_off = co[0], co[1], co[2], co[3], co[4], co[5], co[6], co[7], co[8]
     for i in range(C.shape[0]):
         C[i], K[i], A[i], B[i], N[i] = _particle(C[i], K[i], A[i], B[i], N[i], w[i], R[i], S[i], h, e, dr, kc, ws, kk, kaf, kb,
-                                                 inv_dry, w_s, 0)
+                                                 inv_dry, w_s, inv_rw, rw_off, 0)
 
 
 @njit(cache=True, fastmath=FASTMATH_FLAGS, nogil=True, error_model="numpy")
 def _kernel_small(C, K, A, B, N, w, R, S, h, e, dr, co):  # pragma: no cover - numba
     """One step of all particles when every exponent is ≤ 0.1."""
     h, e, dr = np.float32(h), np.float32(e), np.float32(dr)
-    kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
+    kc, ws, kk, kaf, kb, inv_dry, w_s, inv_rw, rw_off = co[0], co[1], co[2], co[3], co[4], co[5], co[6], co[7], co[8]
     for i in range(C.shape[0]):
         C[i], K[i], A[i], B[i], N[i] = _particle(C[i], K[i], A[i], B[i], N[i], w[i], R[i], S[i], h, e, dr, kc, ws, kk, kaf, kb,
-                                                 inv_dry, w_s, 1)
+                                                 inv_dry, w_s, inv_rw, rw_off, 1)
 
 
 @njit(cache=True, fastmath=FASTMATH_FLAGS, nogil=True, error_model="numpy")
@@ -425,11 +430,11 @@ def _kernel_substeps(C, K, A, B, N, w, R, S, hs, e, dr, co):  # pragma: no cover
     """Large steps: sub-steps with season exposures hs[j] (follows the onset), dry exposure e
     and drought exposure dr per sub-step."""
     e, dr = np.float32(e), np.float32(dr)
-    kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
+    kc, ws, kk, kaf, kb, inv_dry, w_s, inv_rw, rw_off = co[0], co[1], co[2], co[3], co[4], co[5], co[6], co[7], co[8]
     for i in range(C.shape[0]):
         c, k, a, b, nn, wi, ri, si = C[i], K[i], A[i], B[i], N[i], w[i], R[i], S[i]
         for j in range(hs.shape[0]):
-            c, k, a, b, nn = _particle(c, k, a, b, nn, wi, ri, si, hs[j], e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, 2)
+            c, k, a, b, nn = _particle(c, k, a, b, nn, wi, ri, si, hs[j], e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, inv_rw, rw_off, 2)
         C[i], K[i], A[i], B[i], N[i] = c, k, a, b, nn
 
 
@@ -438,23 +443,23 @@ def _kernel_small_idx(C, K, A, B, N, w, R, S, idx, h, e, dr, co):  # pragma: no 
     """:func:`_kernel_small` on the particles ``idx`` only (the slowly turning ones of a patterned
     blade while the fast ones are sub-stepped)."""
     h, e, dr = np.float32(h), np.float32(e), np.float32(dr)
-    kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
+    kc, ws, kk, kaf, kb, inv_dry, w_s, inv_rw, rw_off = co[0], co[1], co[2], co[3], co[4], co[5], co[6], co[7], co[8]
     for ii in range(idx.shape[0]):
         i = idx[ii]
         C[i], K[i], A[i], B[i], N[i] = _particle(C[i], K[i], A[i], B[i], N[i], w[i], R[i], S[i], h, e, dr, kc, ws, kk, kaf, kb,
-                                                 inv_dry, w_s, 1)
+                                                 inv_dry, w_s, inv_rw, rw_off, 1)
 
 
 @njit(cache=True, fastmath=FASTMATH_FLAGS, nogil=True, error_model="numpy")
 def _kernel_substeps_idx(C, K, A, B, N, w, R, S, idx, hs, e, dr, co):  # pragma: no cover - numba
     """:func:`_kernel_substeps` on the particles ``idx`` only."""
     e, dr = np.float32(e), np.float32(dr)
-    kc, ws, kk, kaf, kb, inv_dry, w_s = co[0], co[1], co[2], co[3], co[4], co[5], co[6]
+    kc, ws, kk, kaf, kb, inv_dry, w_s, inv_rw, rw_off = co[0], co[1], co[2], co[3], co[4], co[5], co[6], co[7], co[8]
     for ii in range(idx.shape[0]):
         i = idx[ii]
         c, k, a, b, nn, wi, ri, si = C[i], K[i], A[i], B[i], N[i], w[i], R[i], S[i]
         for j in range(hs.shape[0]):
-            c, k, a, b, nn = _particle(c, k, a, b, nn, wi, ri, si, hs[j], e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, 2)
+            c, k, a, b, nn = _particle(c, k, a, b, nn, wi, ri, si, hs[j], e, dr, kc, ws, kk, kaf, kb, inv_dry, w_s, inv_rw, rw_off, 2)
         C[i], K[i], A[i], B[i], N[i] = c, k, a, b, nn
 
 
@@ -470,6 +475,8 @@ def _coefficients(pig: PigmentState, params: Mapping[str, Any]) -> tuple:
         float(params["colour.browning"]) * float(leaf[3]),
         1.0 / (1.0 - float(params["colour.dry_threshold"])),
         float(params["colour.stress_water"]),
+        1.0 / rw if (rw := float(params["colour.reaction_water"])) > 0.0 else 0.0,
+        0.0 if rw > 0.0 else 1.0,
     ], np.float32)
     co = (params, float(params["colour.onset"]) + float(leaf[5]), float(params["colour.dry_rate"]),
           float(params["colour.drought"]) * rate, args)
@@ -599,7 +606,7 @@ def precompile() -> None:
     (``scripts/setup.sh`` calls this)."""
     one = np.ones(1, np.float32)
     arrays = [one.copy() for _ in range(5)] + [one.copy(), one.copy(), np.zeros(1, np.float32)]
-    co = np.zeros(7, np.float32)
+    co = np.zeros(9, np.float32)
     idx = np.zeros(1, np.int64)
     _kernel_tiny(*arrays, 0.0, 0.0, 0.0, co)
     _kernel_small(*arrays, 0.0, 0.0, 0.0, co)

@@ -258,3 +258,39 @@ def test_bad_and_edge_inputs():
 def test_bench_is_cheap():
     us = bench_colour(n=5700, steps=200)
     assert 0 < us < 500  # a physics step costs milliseconds; measured ~15 µs
+
+
+def _dry_through(p: ParamSet, seconds: float, steps: int = 400, hold: float = 5.0):
+    """One particle that dies green (no senescence: age stays 0) as its water falls linearly
+    from 1 to 0 over ``seconds``, then stays dry for ``hold`` seconds."""
+    pig = init_pigments(1, p, seed=0)
+    w = np.ones(1, np.float32)
+    for s in range(1, steps + 1):
+        w[0] = 1.0 - s / steps
+        step_pigments(pig, w, 0.0, seconds / steps, p)
+    for _ in range(50):
+        step_pigments(pig, w, 0.0, hold / 50, p)
+    return pig
+
+
+def test_reaction_water_keeps_fast_dried_tissue_green():
+    """Herbarium green: the reactions of dead tissue run on its water, so tissue that passes the
+    dying range fast keeps chlorophyll it had; a dry particle never changes; 0 = the old model."""
+    base = dict(onset=1.5, drought=0.0, dry_rate=2.0)
+    limited = _params(reaction_water=0.35, **base)
+    fast, slow = _dry_through(limited, 0.5), _dry_through(limited, 8.0)
+    assert fast.chlorophyll[0] > 0.3 and slow.chlorophyll[0] < 0.05, (fast.chlorophyll, slow.chlorophyll)
+    assert fast.necrosis[0] < slow.necrosis[0]
+    # chlorophyll + necrosis is conserved (dying converts one into the other)
+    for pig in (fast, slow):
+        assert pig.chlorophyll[0] + pig.necrosis[0] == pytest.approx(1.0, abs=1e-5)
+    # without the limit the dead tissue converts everything, however fast it dried
+    unlimited = _dry_through(_params(reaction_water=0.0, **base), 0.5)
+    assert unlimited.chlorophyll[0] < 1e-3
+    # bone-dry tissue does not change at all, however long it waits
+    pig = init_pigments(1, limited, seed=0)
+    before = (pig.chlorophyll.copy(), pig.browning.copy(), pig.necrosis.copy())
+    for _ in range(20):
+        step_pigments(pig, np.zeros(1, np.float32), 0.0, 10.0, limited)
+    assert np.array_equal(pig.chlorophyll, before[0]) and np.array_equal(pig.necrosis, before[2])
+    assert np.array_equal(pig.browning, before[1])
