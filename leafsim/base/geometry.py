@@ -100,20 +100,12 @@ def resample_polyline(line: np.ndarray, spacing: float) -> np.ndarray:
 
 def points_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Boolean (n,) mask of points strictly inside a closed polygon (even-odd rule)."""
-    pts = np.asarray(pts, float).reshape(-1, 2)
-    poly = np.asarray(poly, float)
-    x0, y0 = poly[:, 0], poly[:, 1]
-    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    pts = np.ascontiguousarray(np.asarray(pts, float).reshape(-1, 2))
+    poly = np.ascontiguousarray(np.asarray(poly, float).reshape(-1, 2))
     out = np.zeros(len(pts), bool)
-    # chunks of points keep the (points × edges) temporaries at a few MB (a dense mesh tests
-    # millions of candidate points against the outline)
-    step = max(1, 262144 // max(len(poly), 1))
-    for k in range(0, len(pts), step):
-        x, y = pts[k : k + step, 0:1], pts[k : k + step, 1:2]
-        cond = (y0 > y) != (y1 > y)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xi = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
-        out[k : k + step] = (np.count_nonzero(cond & (x < xi), axis=1) % 2) == 1
+    from leafsim.base.polykernels import inside_even_odd  # numba only when a kernel is needed
+
+    inside_even_odd(pts, poly, out)
     return out
 
 
@@ -182,17 +174,12 @@ def ray_polygon_hit(origin: np.ndarray, direction: np.ndarray, poly: np.ndarray,
 
 def distance_to_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Distance (n,) from each point to the nearest polygon edge."""
-    P = poly
-    Q = np.roll(poly, -1, axis=0)
-    d = Q - P
-    L2 = np.maximum((d * d).sum(1), 1e-30)
-    pts = np.asarray(pts, float)
-    out = np.full(len(pts), np.inf)
-    for k in range(0, len(pts), 2048):
-        x = pts[k : k + 2048, None, :]
-        t = np.clip(((x - P) * d).sum(-1) / L2, 0, 1)
-        proj = P + t[..., None] * d
-        out[k : k + 2048] = np.sqrt(((x - proj) ** 2).sum(-1)).min(1)
+    pts = np.ascontiguousarray(np.asarray(pts, float).reshape(-1, 2))
+    poly = np.ascontiguousarray(np.asarray(poly, float).reshape(-1, 2))
+    out = np.empty(len(pts))
+    from leafsim.base.polykernels import distance_to_edges  # numba only when a kernel is needed
+
+    distance_to_edges(pts, poly, out)
     return out
 
 
