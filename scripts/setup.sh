@@ -42,8 +42,7 @@ if [ ! -f .tools/node_modules/gltf-validator/package.json ]; then
   npm install --prefix .tools --no-audit --no-fund --silent "$GLTF_VALIDATOR" >/dev/null
 fi
 # compile the numba kernels now (cached per source version under ~/.cache/leafsim), so the
-# first window does not sit at frame 0 for a minute; seconds when they are cached already
-echo "setup: compiling the simulation kernels (once per leafsim version; about a minute)"
-.venv/bin/python -m leafsim run --species oak --quality draft --frames 2 --json >/dev/null
-.venv/bin/python -c "from leafsim.sim.pigments import precompile; precompile()"
+# first window or command does not spend a minute on it (they would, announced:
+# leafsim/interactive/warmup.py); nothing to do when this version's are cached already
+.venv/bin/python -c "from leafsim.interactive.warmup import warm_up_cli; warm_up_cli()"
 echo "setup: ready (.venv/bin/leafsim)"

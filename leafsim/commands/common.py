@@ -46,6 +46,14 @@ def effects_overrides(spec: str | None) -> dict:
     return {f"effects.{e}": e in wanted for e in known}
 
 
+def ready_kernels() -> None:
+    """Before a command's first build or step: compile the kernels now, announced, when this
+    leafsim version has not compiled them yet (:mod:`leafsim.interactive.warmup`); at once otherwise."""
+    from leafsim.interactive.warmup import warm_up_cli
+
+    warm_up_cli()
+
+
 def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
     """The species of ``--species`` (default maple) and its parameters with ``--quality``,
     ``--set`` and (``effects``) ``--effects`` applied."""

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import write_png_atomic
-from leafsim.commands.common import Progress, emit, png_output, species_params
+from leafsim.commands.common import Progress, emit, png_output, ready_kernels, species_params
 from leafsim.compare.metrics import montage
 from leafsim.compare.run import DRY_LEFT, run_compare
 from leafsim.sim.run import Stop
@@ -31,6 +31,7 @@ def cmd_compare(args):
         raise LeafsimError(f"--photo {args.photo}: file not found")
     png_output("--out", args.out)
     sp, params = species_params(args, effects=True)
+    ready_kernels()
     bar: list = []
 
     def progress(run):  # a bar toward "dry" on a terminal (none with --json)

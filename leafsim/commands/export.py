@@ -9,7 +9,7 @@ from leafsim.appearance.photo import species_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output
-from leafsim.commands.common import Progress, emit, species_params, stop_of
+from leafsim.commands.common import Progress, emit, ready_kernels, species_params, stop_of
 from leafsim.export.mesh import export_mesh, format_of
 from leafsim.pipeline import build_leaf
 from leafsim.sim.run import Run, Stop
@@ -56,6 +56,7 @@ def cmd_export(args):
     sp, params = species_params(args, effects=True)
     if args.texture == "photo" and sp.image is None:
         raise LeafsimError(f"--texture photo: species '{sp.key}' has no photo (drawn outline)")
+    ready_kernels()
     model = build_leaf(sp, params, args.seed).model
     run = Run(model, params, seed=args.seed)
     until = stop_of(args)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output
-from leafsim.commands.common import emit
+from leafsim.commands.common import emit, ready_kernels
 from leafsim.measure.accuracy import GROUPS, markdown, study, write_report
 from leafsim.measure.bench import main as bench_main
 
@@ -29,6 +29,7 @@ def cmd_accuracy(args):
                                "--floor-reference are for the reference study (drop them or --limit)")
         if args.cache is not None:
             check_output(Path(args.cache), "--cache folder", folder=True)
+        ready_kernels()
         report = limit_study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json,
                              cache=None if args.cache is None else Path(args.cache))
         if out is not None:
@@ -40,6 +41,7 @@ def cmd_accuracy(args):
     groups = None if args.groups is None else [g.strip() for g in args.groups.split(",") if g.strip()]
     if groups is not None and (not groups or set(groups) - set(GROUPS)):
         raise LeafsimError(f"--groups {args.groups}: expected a comma list of {', '.join(sorted(GROUPS))}")
+    ready_kernels()
     report = study(args.species, quick=args.quick, seed=args.seed, config=args.config, progress=not args.json,
                    floor=args.floor, floor_reference=args.floor_reference, groups=groups)
     if out is not None:
@@ -48,4 +50,5 @@ def cmd_accuracy(args):
 
 
 def cmd_bench(args):
+    ready_kernels()
     return bench_main(json_out=args.json, quick=args.quick)

@@ -16,7 +16,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output, remove_stale_temps
 from leafsim.base.signals import DeferredSignals, Interrupted
 from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
-from leafsim.commands.common import Progress, emit, species_params, stop_of
+from leafsim.commands.common import Progress, emit, ready_kernels, species_params, stop_of
 from leafsim.pipeline import build_leaf
 from leafsim.render.sequence import FrameWriter
 from leafsim.sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
@@ -124,6 +124,7 @@ def cmd_run(args):
     ck = out / CHECKPOINT if out is not None else None
     if args.resume:
         check_meta(ck, meta)  # before the build: a mismatch costs nothing
+    ready_kernels()
     model = build_leaf(sp, params, args.seed).model
     build_s = time.perf_counter() - t0
     run = Run(model, params, seed=args.seed)

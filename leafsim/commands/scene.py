@@ -6,12 +6,13 @@ import os
 import sys
 from pathlib import Path
 
-from leafsim.commands.common import emit
+from leafsim.commands.common import emit, ready_kernels
 from leafsim.scene.run import load_scene, run_scene
 
 
 def cmd_scene(args):
     scene = load_scene(args.scene)
+    ready_kernels()  # here, once, before the workers start (they load the compiled kernels)
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem
     rep = run_scene(scene, out, workers=workers, scheduler=args.scheduler)

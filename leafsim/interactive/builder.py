@@ -44,6 +44,7 @@ def build(sp, seed: int, params: ParamSet, live: ParamSet, report: Callable[[flo
     values on top); ``report(fraction, text)`` before each stage (it may raise
     :class:`Cancelled`)."""
     t0 = time.perf_counter()
+    _warm_up(report)
     shape, veins, model = build_leaf(sp, params, seed, report)
     photo, photo_error = None, None
     if sp.image is not None:
@@ -55,6 +56,32 @@ def build(sp, seed: int, params: ParamSet, live: ParamSet, report: Callable[[flo
     report(0.98, "simulator: preparing the stages")
     sim = Simulator(model, live, seed=int(seed))
     return BuildResult(sp, int(seed), params, shape, veins, model, photo, photo_error, time.perf_counter() - t0, sim)
+
+
+#: the status bar's text while the first build of a leafsim version compiles the kernels
+WARM_TEXT = "compiling the simulation kernels (the first run of this version does it once)"
+
+
+def _warm_up(report: Callable[[float, str], None]) -> None:
+    """The first build of a leafsim version compiles the kernels first (:mod:`leafsim.interactive.warmup`),
+    shown as its first stage with a count; a newer build request does not interrupt the
+    compile (it is needed anyway): the cancellation takes effect after it."""
+    from leafsim.interactive.warmup import is_warm, warm_up
+
+    if is_warm():
+        return
+    cancelled = []
+
+    def tell(n, s):
+        try:
+            report(0.0, f"{WARM_TEXT}: {n} done, {s:.0f} s")  # the status bar shortens it
+        except Cancelled as e:
+            cancelled.append(e)
+
+    tell(0, 0.0)
+    warm_up(tell)
+    if cancelled:
+        raise cancelled[0]
 
 
 def live_params(built: ParamSet, current: ParamSet) -> ParamSet:

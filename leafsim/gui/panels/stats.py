@@ -26,6 +26,8 @@ class StatsPanel:
             imgui.text(f"weather    {pb.sim_rate * s.params['environment.time_warp'] / 3600:6.3g} h / wall s")
         if not s.ready:
             imgui.text("building the first leaf ...")
+            if s.building and s.progress_text:
+                imgui.text_wrapped(s.progress_text)  # the first run of a version: the kernels compiling
             return
         c = s.counts()
         imgui.text(f"frame {s.frame}   {clock_text(s.state, s.params)}   {'playing' if pb.playing else 'paused'}")

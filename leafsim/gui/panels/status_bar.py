@@ -6,6 +6,7 @@ from __future__ import annotations
 from imgui_bundle import imgui
 
 from leafsim.gui.layout import tip
+from leafsim.interactive.builder import WARM_TEXT
 
 #: width of the progress bar on the right [px]
 PROGRESS_W = 300.0
@@ -48,7 +49,10 @@ class StatusBar:
     def progress(self, width: float) -> None:
         s = self.app.session
         pb = s.playback
-        if s.building:
+        compiling = s.building and s.progress_text.startswith(WARM_TEXT)
+        if compiling:  # the first build of a version: the bar is too narrow for "building …: " too
+            frac, text = 0.0, s.progress_text.replace(WARM_TEXT, "compiling kernels")
+        elif s.building:
             frac, text = max(s.progress, 0.01), f"building {s.species_key}: {s.progress_text}"
         elif pb.warming_up:
             frac, text = 0.0, "first step: compiling kernels"
@@ -60,7 +64,10 @@ class StatusBar:
         else:
             frac, text = 0.0, "starting"
         imgui.progress_bar(frac, (width, 0), text)
-        if pb.warming_up:
+        if compiling:
+            tip("The first run of a leafsim version compiles the simulation kernels (20 s to about a minute on a small "
+                "machine; scripts/setup.sh does it during set-up); they are kept for later runs")
+        elif pb.warming_up:
             tip("The first step of a first run compiles the simulation kernels (about a minute on a small machine); "
                 "they are kept for later runs")
         elif pb.drying:

@@ -1,0 +1,136 @@
+"""The first run of a leafsim version compiles its numba kernels; this module does it up front
+and says so.
+
+Kernels are compiled once per version of their sources and then load from the on-disk cache
+(:mod:`leafsim.base.cache`) in well under a second.  The compile itself takes 20 s to more than
+a minute on a 2-core machine, and a command or a window that sits silent that long looks hung.
+``scripts/setup.sh`` compiles during set-up; whoever skips it, or upgrades leafsim without
+running it again, gets the compile here instead, announced: the CLI prints a line before it and
+one after it (how many kernels, how long), and the GUI's status bar shows it as the first stage
+of the first build with a count of the kernels compiled so far.
+
+A marker file in the cache folder (named after the digest of the kernel sources, so a new
+version is cold again) records that the default drying's kernels have been compiled.  Kernels
+outside that path (the static and Sun integrators, float32 dynamics) still compile on first use,
+in seconds.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from leafsim.base.cache import configure_numba_cache, kernel_sources_digest
+
+#: what the user is told while the kernels compile
+MESSAGE = "compiling the simulation kernels: the first run of this leafsim version does it once (20 s to about a minute)"
+
+
+def _marker() -> Path | None:
+    folder = configure_numba_cache()
+    if not folder:
+        return None
+    return Path(folder) / f"leafsim-warm-{kernel_sources_digest()}"
+
+
+def is_warm() -> bool:
+    """The default drying's kernels are in the cache for this version of the sources (False
+    when there is no writable cache folder: then every process compiles)."""
+    m = _marker()
+    return m is not None and m.is_file()
+
+
+class _Counter:
+    """numba compile events → ``report(kernels compiled so far, seconds)``."""
+
+    def __init__(self, report, t0):
+        self.n, self.report, self.t0 = 0, report, t0
+
+    def listener(self):
+        from numba.core import event
+
+        counter = self
+
+        class L(event.Listener):
+            def on_start(self, ev):
+                pass
+
+            def on_end(self, ev):
+                counter.n += 1
+                if counter.report is not None:
+                    counter.report(counter.n, time.perf_counter() - counter.t0)
+
+        return L()
+
+
+def _exercise() -> None:
+    """Compile what a default drying and the window's first frames use: a draft maple built and
+    stepped (dynamics, osmosis, shrink, contacts, colour), every pigment kernel, the leaf's
+    colours and the renderer's geometry (no OpenGL needed)."""
+    from leafsim.appearance.view import LeafView
+    from leafsim.config.presets import quality_overrides
+    from leafsim.config.species import DEFAULT_SPECIES, get_species
+    from leafsim.pipeline import build_leaf
+    from leafsim.render.geom import bounds, orient_up, vertex_normals
+    from leafsim.sim.pigments import precompile
+    from leafsim.sim.run import Run
+
+    sp = get_species(DEFAULT_SPECIES, None)
+    params = sp.params.with_overrides(quality_overrides("draft"), where="warm-up")
+    model = build_leaf(sp, params, 0).model
+    run = Run(model, params, seed=0)
+    for _ in range(2):
+        run.step()
+    run.stats()  # the constraint residual and momenta the stats panel shows
+    precompile()
+    mesh = LeafView(model, None, run.sim.state().pigments).mesh(run.state, params)
+    pos = np.ascontiguousarray(mesh.positions, dtype=np.float32)  # as the renderer holds them
+    tri = orient_up(pos, np.asarray(mesh.triangles))
+    vertex_normals(pos, tri)
+    bounds(pos)
+
+
+def warm_up(report: Callable[[int, float], None] | None = None,
+            exercise: Callable[[], None] | None = None) -> tuple[int, float] | None:
+    """Compile the kernels now unless this version's are cached already (then None, at once).
+    ``report(n, seconds)`` is called as each kernel finishes compiling; ``exercise`` is what
+    compiles them (default: :func:`_exercise`).  Returns (kernels compiled, seconds) and marks
+    the cache warm."""
+    if is_warm():
+        return None
+    from numba.core import event
+
+    t0 = time.perf_counter()
+    counter = _Counter(report, t0)
+    with event.install_listener("numba:compile", counter.listener()):
+        (exercise or _exercise)()
+    m = _marker()
+    if m is not None:
+        try:
+            m.touch()
+        except OSError:  # a read-only cache: compiled, but every process will say so again
+            pass
+    return counter.n, time.perf_counter() - t0
+
+
+def warm_up_cli(stream=None) -> None:
+    """:func:`warm_up` for a command line: one line before (on a terminal, a live count) and
+    one after, on stderr (stdout stays the command's own: ``--json`` prints one object)."""
+    stream = sys.stderr if stream is None else stream
+    if is_warm():
+        return
+    live = getattr(stream, "isatty", lambda: False)()
+    print(f"leafsim: {MESSAGE} …", file=stream, flush=True)
+
+    def report(n, s):
+        if live:
+            print(f"\r  {n} kernels compiled, {s:.0f} s", end="", file=stream, flush=True)
+
+    done = warm_up(report)
+    if done is not None:
+        print(("\n" if live else "") + f"leafsim: compiled {done[0]} kernels in {done[1]:.0f} s (cached for the next runs)",
+              file=stream, flush=True)
