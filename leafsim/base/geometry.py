@@ -98,13 +98,45 @@ def resample_polyline(line: np.ndarray, spacing: float) -> np.ndarray:
     return np.column_stack([np.interp(t, s, line[:, 0]), np.interp(t, s, line[:, 1])])
 
 
-def points_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Boolean (n,) mask of points strictly inside a closed polygon (even-odd rule)."""
-    pts = np.ascontiguousarray(np.asarray(pts, float).reshape(-1, 2))
-    poly = np.ascontiguousarray(np.asarray(poly, float).reshape(-1, 2))
-    out = np.zeros(len(pts), bool)
-    from leafsim.base.polykernels import inside_even_odd  # numba only when a kernel is needed
+#: up to this many points the (points × edges) numpy expressions answer (a one-point check
+#: when a species library is loaded needs no compiled kernel); more go to the compiled loops
+#: of :mod:`leafsim.base.polykernels` (the same arithmetic in the same order: bit-identical)
+FEW_POINTS = 4
 
+
+def _xy(pts, what: str) -> np.ndarray:
+    """``pts`` as a C-contiguous float64 (n, 2) array: one point (2,) or points (n, 2)."""
+    a = np.asarray(pts, dtype=np.float64)
+    if a.ndim == 1 and a.shape[0] == 2:
+        a = a[None]
+    if a.ndim != 2 or a.shape[1] != 2:
+        raise ValueError(f"{what}: expected points of shape (n, 2), got {a.shape}")
+    return np.ascontiguousarray(a)
+
+
+def _ring(poly) -> np.ndarray:
+    """A polygon's vertices (m, ≥ 2) as C-contiguous float64 (m, 2) (x, y of each)."""
+    a = np.asarray(poly, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] < 2:
+        raise ValueError(f"polygon: expected vertices of shape (m, 2), got {a.shape}")
+    return np.ascontiguousarray(a[:, :2])
+
+
+def points_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Boolean (n,) mask of points strictly inside a closed polygon (even-odd rule): an edge
+    (y0 > y) != (y1 > y) crosses the ray to +x where x < x0 + (y − y0)(x1 − x0)/(y1 − y0)."""
+    pts, poly = _xy(pts, "points_in_polygon"), _ring(poly)
+    if len(pts) <= FEW_POINTS:
+        x0, y0 = poly[:, 0], poly[:, 1]
+        x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+        x, y = pts[:, 0:1], pts[:, 1:2]
+        cond = (y0 > y) != (y1 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xi = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+        return (np.count_nonzero(cond & (x < xi), axis=1) % 2) == 1
+    from leafsim.base.polykernels import inside_even_odd  # compiled only when many points ask
+
+    out = np.zeros(len(pts), bool)
     inside_even_odd(pts, poly, out)
     return out
 
@@ -114,7 +146,7 @@ def points_in_region(pts: np.ndarray, contour: np.ndarray, holes=()) -> np.ndarr
     inside = points_in_polygon(pts, contour)
     for h in holes:
         if inside.any():
-            inside[inside] &= ~points_in_polygon(np.asarray(pts, float).reshape(-1, 2)[inside], h)
+            inside[inside] &= ~points_in_polygon(_xy(pts, "points_in_region")[inside], h)
     return inside
 
 
@@ -173,12 +205,23 @@ def ray_polygon_hit(origin: np.ndarray, direction: np.ndarray, poly: np.ndarray,
 
 
 def distance_to_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Distance (n,) from each point to the nearest polygon edge."""
-    pts = np.ascontiguousarray(np.asarray(pts, float).reshape(-1, 2))
-    poly = np.ascontiguousarray(np.asarray(poly, float).reshape(-1, 2))
-    out = np.empty(len(pts))
-    from leafsim.base.polykernels import distance_to_edges  # numba only when a kernel is needed
+    """Distance (n,) from each point to the nearest polygon edge (NaN where a NaN or infinite
+    coordinate makes it undefined)."""
+    pts, poly = _xy(pts, "distance_to_polygon"), _ring(poly)
+    if len(pts) <= FEW_POINTS:
+        if not len(poly):
+            return np.full(len(pts), np.inf)
+        P, Q = poly, np.roll(poly, -1, axis=0)
+        with np.errstate(invalid="ignore"):  # a NaN or infinite coordinate: NaN, said by the result
+            d = Q - P
+            L2 = np.maximum((d * d).sum(1), 1e-30)
+            x = pts[:, None, :]
+            t = np.clip(((x - P) * d).sum(-1) / L2, 0, 1)
+            proj = P + t[..., None] * d
+            return np.sqrt(((x - proj) ** 2).sum(-1)).min(1)
+    from leafsim.base.polykernels import distance_to_edges  # compiled only when many points ask
 
+    out = np.empty(len(pts))
     distance_to_edges(pts, poly, out)
     return out
 

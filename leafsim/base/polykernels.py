@@ -44,7 +44,8 @@ def inside_even_odd(pts, poly, out):  # pragma: no cover - numba
 @njit(cache=True, nogil=True)
 def distance_to_edges(pts, poly, out):  # pragma: no cover - numba
     """out[i] = distance from point i to the nearest edge of the closed polygon ``poly``
-    (projection clamped to the segment; edges shorter than 1e-15 count as points)."""
+    (projection clamped to the segment; edges shorter than 1e-15 count as points).  NaN when a
+    NaN appears on the way (a NaN or infinite coordinate), as numpy's ``min`` gives."""
     m = poly.shape[0]
     for i in range(pts.shape[0]):
         x = pts[i, 0]
@@ -65,6 +66,9 @@ def distance_to_edges(pts, poly, out):  # pragma: no cover - numba
             ex = x - (px + t * dx)
             ey = y - (py + t * dy)
             d2 = ex * ex + ey * ey
+            if d2 != d2:  # NaN: numpy's min propagates it
+                best = d2
+                break
             if d2 < best:
                 best = d2
         out[i] = np.sqrt(best)

@@ -106,8 +106,8 @@ def stop_of(args, start: int = 0):
 
 class Progress:
     """A progress bar on stderr (tqdm) while a leaf runs toward its :class:`Stop`, shown only
-    on a terminal and never with ``--json``.  Until the first frame is done it says that the
-    kernels may be compiling (a first run on a fresh install takes about a minute there)."""
+    on a terminal and never with ``--json``.  (A first run of a version compiles the kernels
+    before the bar: :func:`ready_kernels`.)"""
 
     def __init__(self, args, run, stop, desc: str):
         import sys
@@ -117,7 +117,7 @@ class Progress:
         if sys.stderr.isatty() and not getattr(args, "json", False):
             from tqdm import tqdm
 
-            self.bar = tqdm(total=1000, desc=f"{desc}: first frame (compiles the kernels on a first run)",
+            self.bar = tqdm(total=1000, desc=f"{desc}: first frame",
                             file=sys.stderr, bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}",
                             leave=False)
             self.desc = desc

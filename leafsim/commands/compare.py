@@ -31,6 +31,8 @@ def cmd_compare(args):
         raise LeafsimError(f"--photo {args.photo}: file not found")
     png_output("--out", args.out)
     sp, params = species_params(args, effects=True)
+    if args.photo is None and sp.image is None:  # before the kernels compile (run_compare says the same)
+        raise LeafsimError(f"species '{sp.key}' has no photo (drawn outline): give --photo IMAGE to compare with")
     ready_kernels()
     bar: list = []
 

@@ -125,6 +125,7 @@ def cmd_run(args):
     if args.resume:
         check_meta(ck, meta)  # before the build: a mismatch costs nothing
     ready_kernels()
+    t0 = time.perf_counter()  # build_s: the build, not a first run's compile
     model = build_leaf(sp, params, args.seed).model
     build_s = time.perf_counter() - t0
     run = Run(model, params, seed=args.seed)

@@ -12,10 +12,9 @@ from leafsim.scene.run import load_scene, run_scene
 
 def cmd_scene(args):
     scene = load_scene(args.scene)
-    ready_kernels()  # here, once, before the workers start (they load the compiled kernels)
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem
-    rep = run_scene(scene, out, workers=workers, scheduler=args.scheduler)
+    rep = run_scene(scene, out, workers=workers, scheduler=args.scheduler, before=ready_kernels)
     bad = rep["failed"]
     text = (f"{scene.name}: {rep['ran']} leaves simulated, {rep['skipped']} already done, {len(bad)} failed "
             f"in {rep['total_s']:.1f} s ({rep['leaves_per_s'] or 0:.3g} leaves/s) -> {out}")

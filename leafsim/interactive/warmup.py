@@ -18,6 +18,7 @@ in seconds.
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Callable
@@ -30,16 +31,40 @@ from leafsim.base.cache import configure_numba_cache, kernel_sources_digest
 MESSAGE = "compiling the simulation kernels: the first run of this leafsim version does it once (20 s to about a minute)"
 
 
+_lock = threading.Lock()
+_done_here = False  # this process has warmed up (or found the cache warm)
+_marker_path: list = []  # computed once per process: [Path | None]
+
+
 def _marker() -> Path | None:
-    folder = configure_numba_cache()
-    if not folder:
-        return None
-    return Path(folder) / f"leafsim-warm-{kernel_sources_digest()}"
+    """The marker file: in the kernel cache folder, named after what numba's cache depends on
+    (the kernel sources' digest, numba, Python, the CPU), so any of them changing is cold
+    again.  None when there is no writable cache folder."""
+    if not _marker_path:
+        folder = configure_numba_cache()
+        path = None
+        if folder:
+            import platform
+
+            import numba
+
+            try:
+                from llvmlite import binding
+
+                cpu = binding.get_host_cpu_name()
+            except Exception:  # an llvmlite without it: the machine's name for the processor
+                cpu = platform.machine()
+            key = f"{kernel_sources_digest()}-{numba.__version__}-py{sys.version_info[0]}{sys.version_info[1]}-{cpu}"
+            path = Path(folder) / ("leafsim-warm-" + "".join(c if c.isalnum() or c in "-._" else "_" for c in key))
+        _marker_path.append(path)
+    return _marker_path[0]
 
 
 def is_warm() -> bool:
-    """The default drying's kernels are in the cache for this version of the sources (False
-    when there is no writable cache folder: then every process compiles)."""
+    """The default drying's kernels are compiled: cached for this version of the sources,
+    numba, Python and CPU, or compiled by this process already."""
+    if _done_here:
+        return True
     m = _marker()
     return m is not None and m.is_file()
 
@@ -95,31 +120,41 @@ def _exercise() -> None:
 
 
 def warm_up(report: Callable[[int, float], None] | None = None,
-            exercise: Callable[[], None] | None = None) -> tuple[int, float] | None:
-    """Compile the kernels now unless this version's are cached already (then None, at once).
+            exercise: Callable[[], None] | None = None) -> tuple[int, float, bool] | None:
+    """Compile the kernels now unless they are compiled already (then None, at once).
     ``report(n, seconds)`` is called as each kernel finishes compiling; ``exercise`` is what
-    compiles them (default: :func:`_exercise`).  Returns (kernels compiled, seconds) and marks
-    the cache warm."""
+    compiles them (default: :func:`_exercise`).  One warm-up at a time: a second caller waits
+    for the first and then finds the kernels compiled.  Returns (kernels compiled, seconds,
+    whether the cache keeps them) and marks the cache warm.  An exercise that fails raises
+    (nothing is marked)."""
+    global _done_here
     if is_warm():
         return None
     from numba.core import event
 
-    t0 = time.perf_counter()
-    counter = _Counter(report, t0)
-    with event.install_listener("numba:compile", counter.listener()):
-        (exercise or _exercise)()
-    m = _marker()
-    if m is not None:
-        try:
-            m.touch()
-        except OSError:  # a read-only cache: compiled, but every process will say so again
-            pass
-    return counter.n, time.perf_counter() - t0
+    with _lock:
+        if is_warm():  # another thread warmed up while this one waited
+            return None
+        t0 = time.perf_counter()
+        counter = _Counter(report, t0)
+        with event.install_listener("numba:compile", counter.listener()):
+            (exercise or _exercise)()
+        _done_here = True
+        m, kept = _marker(), False
+        if m is not None:
+            try:
+                m.touch()
+                kept = True
+            except OSError:  # a read-only cache folder
+                pass
+        return counter.n, time.perf_counter() - t0, kept
 
 
 def warm_up_cli(stream=None) -> None:
     """:func:`warm_up` for a command line: one line before (on a terminal, a live count) and
-    one after, on stderr (stdout stays the command's own: ``--json`` prints one object)."""
+    one after, on stderr (stdout stays the command's own: ``--json`` prints one object).  A
+    warm-up that fails is said in one line and the command goes on (its own run compiles what
+    it needs, or fails with its own message)."""
     stream = sys.stderr if stream is None else stream
     if is_warm():
         return
@@ -130,7 +165,12 @@ def warm_up_cli(stream=None) -> None:
         if live:
             print(f"\r  {n} kernels compiled, {s:.0f} s", end="", file=stream, flush=True)
 
-    done = warm_up(report)
+    try:
+        done = warm_up(report)
+    except Exception as e:  # never stop the user's command for the warm-up's sake
+        print(("\n" if live else "") + f"leafsim: the kernel warm-up failed ({type(e).__name__}: {' '.join(str(e).split())[:200]}); "
+              "going on, the run compiles what it needs", file=stream, flush=True)
+        return
     if done is not None:
-        print(("\n" if live else "") + f"leafsim: compiled {done[0]} kernels in {done[1]:.0f} s (cached for the next runs)",
-              file=stream, flush=True)
+        where = "cached for the next runs" if done[2] else "no writable cache folder: the next run compiles them again"
+        print(("\n" if live else "") + f"leafsim: compiled {done[0]} kernels in {done[1]:.0f} s ({where})", file=stream, flush=True)

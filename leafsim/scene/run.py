@@ -23,6 +23,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -369,10 +370,12 @@ def _dask_results(jobs: list, out: Path, address: str):
 
 
 def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None, progress: bool = True,
-              render: bool = True) -> dict:
+              render: bool = True, before: Callable[[], None] | None = None) -> dict:
     """Run every leaf of ``scene`` not already done in ``out``, then place the leaves, write
     ``placement.json``, ``summary.json`` and the overview image; returns the run report
-    (also written as ``run.json``: the only file with timings)."""
+    (also written as ``run.json``: the only file with timings).  ``before()`` runs once the
+    arguments are checked, when there are leaves to simulate (the CLI compiles the kernels
+    there, so the workers load them)."""
     from tqdm import tqdm
 
     if workers < 1:
@@ -381,6 +384,9 @@ def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None,
     t0 = time.perf_counter()
     todo = [j for j in scene.jobs if not is_done(j, out)]
     results = []
+    if todo and before is not None:
+        before()
+        t0 = time.perf_counter()
     if todo:
         gen = _dask_results(todo, out, scheduler) if scheduler else _local_results(todo, out, min(workers, len(todo)))
         with tqdm(total=len(todo), desc=scene.name, unit="leaf", disable=None if progress else True) as bar:

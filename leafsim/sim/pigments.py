@@ -21,7 +21,7 @@ The senescence exposure of a step is the season's and the drought's::
 & Alegre 2004, Funct. Plant Biol. 31:203).  Death comes with dryness: ``E = dry_rate·d⁴·a·dt``,
 where ``a = min(w / colour.reaction_water, 1)`` (1 when that is 0): the dead tissue's reactions
 run on the water it still holds, so tissue that dries fast keeps the green it died with
-(herbarium green) and a bone-dry particle never changes.
+(herbarium green); a bone-dry particle then changes only with the season clock.
 
 * chlorophyll  ``C ← C·exp(−chlorophyll_decay·H)``, then a share ``1 − exp(−E)`` of what is
   left turns necrotic — programmed breakdown in living cells (unmasking the carotenoids),

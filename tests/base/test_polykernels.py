@@ -56,3 +56,47 @@ def test_shapes_and_known_values():
     assert points_in_polygon([0.5, 0.5], square.tolist()).shape == (1,)
     assert distance_to_polygon(np.empty((0, 2)), square).shape == (0,)
     assert distance_to_polygon(np.array([[0.5, 2.0]], np.float32), square.astype(np.float32))[0] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("n", [1, 3, 4, 5, 40])
+def test_few_and_many_points_agree_with_the_reference_at_nan_and_inf(n):
+    """Both paths (numpy up to FEW_POINTS points, the compiled loops above) give the reference's
+    bits, NaN and infinite coordinates included (NaN distance, outside)."""
+    rng = np.random.default_rng(n)
+    poly = _polygon(rng, 50, snap=False)
+    pts = rng.uniform(-1.2, 1.2, (n, 2))
+    pts[0] = [np.nan, 0.1]
+    if n > 1:
+        pts[1] = [np.inf, -np.inf]
+    with np.errstate(invalid="ignore"):
+        ref_in, ref_d = _inside_numpy(pts, poly), _distance_numpy(pts, poly)
+    got_in, got_d = points_in_polygon(pts, poly), distance_to_polygon(pts, poly)
+    assert np.array_equal(got_in, ref_in)
+    assert np.array_equal(got_d, ref_d, equal_nan=True) and np.isnan(got_d[0])
+    bad = poly.copy()
+    bad[7] = np.nan  # a NaN vertex: NaN distances, as numpy's min gives
+    with np.errstate(invalid="ignore"):
+        assert np.array_equal(distance_to_polygon(pts[-1:].repeat(6, 0), bad), _distance_numpy(pts[-1:].repeat(6, 0), bad),
+                              equal_nan=True)
+
+
+def test_wrong_shapes_are_refused():
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    with pytest.raises(ValueError, match=r"shape \(n, 2\)"):
+        points_in_polygon(np.zeros((10, 3)), square)
+    with pytest.raises(ValueError, match=r"shape \(n, 2\)"):
+        distance_to_polygon(np.zeros((10, 3)), square)
+    with pytest.raises(ValueError, match=r"shape \(m, 2\)"):
+        distance_to_polygon(np.zeros((10, 2)), square[:, 0])
+
+
+def test_listing_the_species_loads_no_compiler():
+    """`leafsim species` checks every outline (one-point queries): no numba for that."""
+    import subprocess
+    import sys
+
+    code = ("import io, sys, contextlib\nfrom leafsim.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n    rc = main(['species'])\n"
+            "print(rc, 'numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.stdout.split() == ["0", "False"], out.stdout + out.stderr

@@ -21,6 +21,7 @@ def cold(tmp_path, monkeypatch):
     """A marker in a fresh folder: the kernels count as not compiled yet."""
     marker = tmp_path / "leafsim-warm-test"
     monkeypatch.setattr(warmup, "_marker", lambda: marker)
+    monkeypatch.setattr(warmup, "_done_here", False)
     return marker
 
 
@@ -42,8 +43,8 @@ def _compile_two():
 
 def test_warm_up_counts_compiles_and_marks_the_cache(cold):
     seen = []
-    n, seconds = warmup.warm_up(lambda k, s: seen.append((k, s)), exercise=_compile_two)
-    assert n == 2 and [k for k, _ in seen] == [1, 2] and seconds >= 0.0
+    n, seconds, kept = warmup.warm_up(lambda k, s: seen.append((k, s)), exercise=_compile_two)
+    assert n == 2 and [k for k, _ in seen] == [1, 2] and seconds >= 0.0 and kept
     assert cold.is_file() and warmup.is_warm()
     assert warmup.warm_up(exercise=_compile_two) is None  # warm: at once, nothing run
 
@@ -71,9 +72,8 @@ def test_gui_build_shows_the_compile_as_its_first_stage(cold, monkeypatch):
     assert reports == []
 
 
-def test_a_newer_build_cancels_after_the_compile(tmp_path, monkeypatch):
-    marker = tmp_path / "m"
-    monkeypatch.setattr(warmup, "_marker", lambda: marker)
+def test_a_newer_build_cancels_after_the_compile(cold, monkeypatch):
+    marker = cold
     monkeypatch.setattr(warmup, "_exercise", _compile_two)
 
     def report(p, t):
@@ -82,6 +82,49 @@ def test_a_newer_build_cancels_after_the_compile(tmp_path, monkeypatch):
     with pytest.raises(builder.Cancelled):
         builder._warm_up(report)
     assert marker.is_file()  # the compile ran to its end (it is needed anyway)
+
+
+def test_one_warm_up_at_a_time(cold, monkeypatch):
+    """A second build asking while the first compiles waits, then finds the kernels compiled."""
+    import threading
+
+    runs = []
+
+    def slow_exercise():
+        runs.append(1)
+        _compile_two()
+
+    monkeypatch.setattr(warmup, "_exercise", slow_exercise)
+    results = []
+    threads = [threading.Thread(target=lambda: results.append(warmup.warm_up())) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert len(runs) == 1 and sorted(r is None for r in results) == [False, True, True]
+
+
+def test_a_failed_or_uncached_warm_up_is_said_and_the_command_goes_on(cold, monkeypatch):
+    def broken():
+        raise RuntimeError("no\nleaf")
+
+    monkeypatch.setattr(warmup, "_exercise", broken)
+    out = io.StringIO()
+    warmup.warm_up_cli(out)  # no exception
+    last = out.getvalue().splitlines()[-1]
+    assert last.startswith("leafsim: the kernel warm-up failed (RuntimeError: no leaf)") and not cold.exists()
+    reports = []
+    builder._warm_up(lambda p, t: reports.append(t))  # the GUI's build goes on too
+    assert reports and not cold.exists()
+    # no writable cache folder: compiled once in this process, and said so truthfully
+    monkeypatch.setattr(warmup, "_marker", lambda: None)
+    monkeypatch.setattr(warmup, "_exercise", _compile_two)
+    out = io.StringIO()
+    warmup.warm_up_cli(out)
+    assert "no writable cache folder" in out.getvalue().splitlines()[-1]
+    again = io.StringIO()
+    warmup.warm_up_cli(again)  # this process has compiled them: quiet
+    assert again.getvalue() == ""
 
 
 @pytest.mark.slow

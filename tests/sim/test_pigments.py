@@ -275,7 +275,8 @@ def _dry_through(p: ParamSet, seconds: float, steps: int = 400, hold: float = 5.
 
 def test_reaction_water_keeps_fast_dried_tissue_green():
     """Herbarium green: the reactions of dead tissue run on its water, so tissue that passes the
-    dying range fast keeps chlorophyll it had; a dry particle never changes; 0 = the old model."""
+    dying range fast keeps chlorophyll it had; dryness no longer drives a bone-dry particle (only
+    the season would, and it stays before the onset here); 0 = the old model."""
     base = dict(onset=1.5, drought=0.0, dry_rate=2.0)
     limited = _params(reaction_water=0.35, **base)
     fast, slow = _dry_through(limited, 0.5), _dry_through(limited, 8.0)
@@ -287,7 +288,7 @@ def test_reaction_water_keeps_fast_dried_tissue_green():
     # without the limit the dead tissue converts everything, however fast it dried
     unlimited = _dry_through(_params(reaction_water=0.0, **base), 0.5)
     assert unlimited.chlorophyll[0] < 1e-3
-    # bone-dry tissue does not change at all, however long it waits
+    # bone-dry tissue before the season's onset does not change at all, however long it waits
     pig = init_pigments(1, limited, seed=0)
     before = (pig.chlorophyll.copy(), pig.browning.copy(), pig.necrosis.copy())
     for _ in range(20):
