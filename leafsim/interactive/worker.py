@@ -347,9 +347,10 @@ class SimWorker:
         return self._dry
 
     def dry_progress(self) -> float:
-        """0 at full water, 1 at the "dry to end" threshold."""
+        """0 at full water, 1 at the "dry to end" threshold: the share of the drying's work
+        done (:meth:`Simulator.drying_progress`)."""
         wf = self.water_fraction(self._snap.state)
-        return float(min(max((1.0 - wf) / (1.0 - DRY_END_FRACTION), 0.0), 1.0))
+        return self.simulator.drying_progress(wf, DRY_END_FRACTION)
 
     def step_sync(self, n: int = 1) -> dict:
         """Advance ``n`` frames on the caller's thread (scripts, tests); waits for a running step."""

@@ -108,6 +108,35 @@ def path_allowed(params) -> bool:
     return params["dynamics.path"] != "own" and all(params[k] == PARAMS[k].default for k in PATH_SOLVER_KEYS)
 
 
+#: a hinge and a thickness volume cost this many springs (docs/performance.md: 2.4–2.7 and 1.9–2.6)
+HINGE_COST, VOLUME_COST = 2.5, 2.0
+
+
+def frame_cost(model: Model, params) -> float:
+    """A dynamics frame's cost in spring projections: constraints × substeps × iterations (the
+    dynamics are most of a frame's time on either mesh)."""
+    from leafsim.sim.effects.dynamics import effective_substeps
+
+    n = len(model.spring_ij) + HINGE_COST * len(model.hinge_idx) + VOLUME_COST * len(model.vol_idx)
+    return float(n) * effective_substeps(params) * int(params["dynamics.iterations"])
+
+
+def work_done(lost: float, lost_end: float, handover: float | None, ratio: float) -> float:
+    """The share of a drying's work done once ``lost`` of the water is gone, of the work to
+    ``lost_end``: frames come at about the same rate per unit of water lost all along, and
+    each one costs ``ratio`` times more once the own mesh has taken over (below ``handover``
+    of the water left; None = no drying path, the work is the water lost)."""
+    lost, lost_end = max(lost, 0.0), max(lost_end, 1e-12)
+    if handover is None or ratio <= 0.0:
+        return min(lost / lost_end, 1.0)
+    x_h = 1.0 - handover
+
+    def work(x):
+        return min(x, x_h) + ratio * max(x - x_h, 0.0)
+
+    return float(min(max(work(lost) / max(work(lost_end), 1e-12), 0.0), 1.0))
+
+
 class DryingPath:
     """Steps the coarse mesh of ``model.path`` for a Simulator of ``model``.
 
@@ -128,13 +157,15 @@ class DryingPath:
 
     def _configure(self, params) -> None:
         self.handover = float(params["dynamics.handover"])
+        #: how many times a frame on the own mesh costs one on the coarse mesh (progress bars)
+        self.cost_ratio = frame_cost(self.model, params) / max(frame_cost(self.coarse, self.sim.params), 1.0)
         # hanging from the petiole: the own mesh's pinned particles stay exactly where they are
         hanging = params["dynamics.scene"] == "hanging" and self.model.particle_pinned.any()
         self.pinned = np.flatnonzero(self.model.particle_pinned) if hanging else None
 
     def set_params(self, params, coarse_params) -> None:
-        self._configure(params)
         self.sim.set_params(coarse_params)
+        self._configure(params)
 
     def active(self, state: State) -> bool:
         """The coarse mesh carries the mechanics: the leaf still holds more than the hand-over

@@ -62,12 +62,13 @@ class Stop:
 
     def progress(self, run: "Run", start: int = 0) -> float:
         """How far the run is toward the nearest criterion, 0 … 1 (frames from ``start``,
-        water lost toward ``water_left``, the season clock toward ``season``)."""
+        the drying's work toward ``water_left``: :meth:`Simulator.drying_progress`, the season clock
+        toward ``season``)."""
         parts = []
         if self.frames is not None:
             parts.append((run.state.frame - start) / max(self.frames - start, 1))
-        if self.water_left is not None:
-            parts.append((1.0 - run.water_left) / max(1.0 - self.water_left, 1e-12))
+        if self.water_left is not None:  # the work done, not just the water (a drying path's frames are cheaper)
+            parts.append(run.sim.drying_progress(run.water_left, self.water_left))
         if self.season is not None:
             parts.append(run.season / max(self.season, 1e-12))
         return float(min(max(max(parts, default=0.0), 0.0), 1.0))

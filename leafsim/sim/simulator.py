@@ -19,7 +19,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.config.params import ParamSet
 from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
 from leafsim.sim.model import Model, State
-from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_allowed, path_params
+from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_allowed, path_params, work_done
 
 #: the watchdog measures energy and momentum every this many frames
 WATCH_EVERY = 5
@@ -113,6 +113,15 @@ class Simulator:
         drying-path mesh where the leaf now is, or the next step's mechanics would undo it."""
         if self._path is not None and state.path is not None:
             self._path.sync(state)
+
+    def drying_progress(self, water_left: float, target: float) -> float:
+        """The share of the work of a drying to ``target`` of the water that is done at
+        ``water_left``: the water lost, weighted by what a frame costs on the mesh that carries
+        the mechanics then (the drying path's frames are cheap, the own mesh's are not: on maple
+        the last 15 % of the water took two thirds of the time)."""
+        p = self._path
+        return work_done(1.0 - water_left, 1.0 - target, None if p is None else p.handover,
+                         0.0 if p is None else p.cost_ratio)
 
     @property
     def on_path(self) -> bool:

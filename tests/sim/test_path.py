@@ -197,3 +197,25 @@ def test_stalk_and_blade_transfer_separately(maple):
         return x
 
     assert np.allclose(P @ moved(m.path), moved(m), rtol=0.0, atol=1e-8 * m.length)
+
+
+def test_progress_counts_the_work_not_the_water(maple):
+    """A drying's progress weights the water lost on the own mesh by what its frames cost
+    (maple: the last 15 % of the water took two thirds of the time): monotone, 0 → 1, and at
+    the hand-over only the path's share of the work."""
+    from leafsim.sim.path import work_done
+
+    assert work_done(0.5, 0.98, None, 0.0) == pytest.approx(0.5 / 0.98)  # no path: the water lost
+    ratio = 10.0
+    at_handover = work_done(0.85, 0.98, 0.15, ratio)
+    assert at_handover == pytest.approx(0.85 / (0.85 + ratio * 0.13))
+    xs = np.linspace(0.0, 1.0, 201)
+    w = [work_done(x, 0.98, 0.15, ratio) for x in xs]
+    assert w[0] == 0.0 and w[-1] == 1.0 and all(b >= a for a, b in zip(w, w[1:]))
+    _, params, model = maple
+    run = Run(model, params, seed=0)
+    p = run.sim._path
+    assert p is not None and p.cost_ratio > 2.0  # the own mesh is finer and takes more substeps
+    for left in (1.0, 0.5, 0.15, 0.05, 0.02):
+        assert run.sim.drying_progress(left, 0.02) == pytest.approx(work_done(1 - left, 0.98, 0.15, p.cost_ratio))
+    assert run.sim.drying_progress(0.15, 0.02) < 0.5  # water-linear would say 0.87
