@@ -167,6 +167,10 @@ class Playback:
     def dry_progress(self) -> float:
         return 0.0 if self.worker is None else self.worker.dry_progress()
 
+    def dry_time_left(self) -> float | None:
+        """Wall seconds "Dry to end" still needs (None: not drying, or too early to tell)."""
+        return None if self.worker is None else self.worker.dry_time_left()
+
     def reset(self, fresh: Callable[[], None], wait: bool = True) -> None:
         """Back to the fresh leaf.  Without a running worker thread ``fresh()`` makes it at once;
         with one, the worker makes it between two steps (``wait=False``: return at once, the

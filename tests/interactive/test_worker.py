@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from leafsim.interactive.session import Session
+from leafsim.interactive.worker import ETA_AFTER_S, ETA_AFTER_WORK, time_left, time_left_from_decay
 from leafsim.sim.run import DRY_END_FRACTION
 
 
@@ -111,6 +112,7 @@ def test_speed_limits_simulated_time(s):
 
 def test_dry_to_end(s):
     s.set_params({"osmosis.evaporation_top": 50.0, "osmosis.evaporation_bottom": 50.0})
+    assert s.playback.dry_time_left() is None  # not drying: nothing to estimate
     s.playback.dry_to_end()
     assert s.playback.drying
     assert until(lambda: (s.playback.take_snapshot() or True) and not s.playback.drying, 120)
@@ -118,6 +120,17 @@ def test_dry_to_end(s):
     assert s.water_fraction() <= DRY_END_FRACTION + 1e-9
     assert s.playback.dry_progress() == pytest.approx(1.0) and not s.playback.playing
     assert s.playback.worker.dry_done
+    assert s.playback.dry_time_left() is None  # done
+
+
+def test_time_left_extrapolates_the_pace_since_the_press():
+    # 10 s for 0.2 → 0.45 of the work: 0.55 left at 0.025 a second
+    assert time_left(10.0, 0.2, 0.45) == pytest.approx(22.0)
+    assert time_left(30.0, 0.0, 1.0) == 0.0
+    # too early to tell: under ETA_AFTER_S, or under ETA_AFTER_WORK of the work done
+    assert time_left(ETA_AFTER_S * 0.99, 0.0, 0.5) is None
+    assert time_left(100.0, 0.4, 0.4 + ETA_AFTER_WORK * 0.99) is None
+    assert time_left(ETA_AFTER_S, 0.4, 0.4 + ETA_AFTER_WORK) is not None
 
 
 def test_divergence_stops_and_reports(s):
@@ -200,3 +213,13 @@ def test_warming_up_until_the_first_step_and_play_until_pauses_there():
         assert s.frame == 7 and not pb.playing
     finally:
         s.close()
+
+
+def test_time_left_from_decay_follows_an_exponential_drying():
+    # water halves every 100 frames at 0.05 s a frame: from 0.08 to 0.02 is two halvings, 10 s
+    assert time_left_from_decay(0.0, 0.16, 5.0, 0.08, 100, 0.02) == pytest.approx(10.0)
+    assert time_left_from_decay(0.0, 0.16, 5.0, 0.02, 100, 0.02) == 0.0
+    # no estimate unless the water falls over a positive time
+    assert time_left_from_decay(0.0, 0.08, 5.0, 0.08, 100, 0.02) is None
+    assert time_left_from_decay(5.0, 0.16, 5.0, 0.08, 100, 0.02) is None
+    assert time_left_from_decay(0.0, 0.16, 5.0, 0.08, 0, 0.02) is None

@@ -8,6 +8,13 @@ from imgui_bundle import imgui
 from leafsim.gui.layout import tip
 from leafsim.interactive.builder import WARM_TEXT
 
+
+def duration(seconds: float) -> str:
+    """``"17 s"`` or ``"2 min 05 s"`` (rounded to the second)."""
+    r = int(round(seconds))
+    return f"{r} s" if r < 60 else f"{r // 60} min {r % 60:02d} s"
+
+
 #: width of the progress bar on the right [px]
 PROGRESS_W = 300.0
 
@@ -58,6 +65,9 @@ class StatusBar:
             frac, text = 0.0, "first step: compiling kernels"
         elif pb.drying:
             frac, text = max(pb.dry_progress(), 0.01), f"drying to the end: {100 * pb.dry_progress():.0f} %"
+            left = pb.dry_time_left()
+            if left is not None:
+                text += f", {duration(left)} left"
         elif s.ready:
             state = "playing" if pb.playing else "paused"
             frac, text = 0.0, f"{state}  {pb.sim_rate:.3g} sim s / s"
@@ -71,4 +81,5 @@ class StatusBar:
             tip("The first step of a first run compiles the simulation kernels (about a minute on a small machine); "
                 "they are kept for later runs")
         elif pb.drying:
-            tip("Fast-forward until 2 % of the water is left; press Stop drying to cancel")
+            tip("Fast-forward until 2 % of the water is left; press Stop drying to cancel. The time left is "
+                "estimated from the pace since the press")
