@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
@@ -11,6 +12,7 @@ from leafsim.base.fileio import check_output
 from leafsim.config.params import PARAMS, ParamSet, parse_set_args
 from leafsim.config.presets import quality_overrides
 from leafsim.config.species import DEFAULT_SPECIES, Species, get_species
+from leafsim.interactive.eta import duration
 
 
 def warn(text: str) -> None:
@@ -113,12 +115,19 @@ class Progress:
         import sys
 
         self.run, self.stop, self.start = run, stop, run.state.frame
-        self.bar = None
+        self.bar = self.eta = None
         if sys.stderr.isatty() and not getattr(args, "json", False):
             from tqdm import tqdm
 
+            # a drying says its own time left (tqdm's recent rate runs short once the drying slows)
+            if stop.water_left is not None and stop.frames is None and stop.season is None:
+                from leafsim.interactive.eta import DryingEta
+
+                self.eta = DryingEta(stop.water_left)
+                self.eta.start(time.monotonic(), stop.progress(run, self.start))
+            left = "" if self.eta is not None else "<{remaining}"
             self.bar = tqdm(total=1000, desc=f"{desc}: first frame",
-                            file=sys.stderr, bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}",
+                            file=sys.stderr, bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}" + left + "{postfix}",
                             leave=False)
             self.desc = desc
         self._first = True
@@ -129,11 +138,18 @@ class Progress:
         if self._first:
             self.bar.set_description_str(self.desc, refresh=False)
             self._first = False
-        done = int(round(1000 * self.stop.progress(self.run, self.start)))
+        progress = self.stop.progress(self.run, self.start)
+        done = int(round(1000 * progress))
         if done > self.bar.n:
             self.bar.update(done - self.bar.n)
         s = self.run.state
-        self.bar.set_postfix_str(f"frame {s.frame}, water {100 * self.run.water_left:.0f} %", refresh=False)
+        text = f"frame {s.frame}, water {100 * self.run.water_left:.0f} %"
+        if self.eta is not None:
+            now = time.monotonic()
+            self.eta.frame(now, self.run.water_left, self.run.sim.on_path)
+            left = self.eta.left(now, progress)
+            text += "" if left is None else f", {duration(left)} left"
+        self.bar.set_postfix_str(text, refresh=False)
 
     def close(self) -> None:
         if self.bar is not None:

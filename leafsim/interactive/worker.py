@@ -24,7 +24,6 @@ Example
 
 from __future__ import annotations
 
-import math
 import os
 import threading
 import time
@@ -34,6 +33,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from leafsim.interactive.eta import DryingEta
 from leafsim.sim.run import DRY_END_FRACTION, DRY_MAX_FRAMES, Run
 
 #: nice increment of the worker thread (Linux: per thread); the UI and llvmpipe keep priority
@@ -68,38 +68,6 @@ class Snapshot:
     @property
     def time(self) -> float:
         return self.state.time
-
-
-#: "Dry to end" estimates its time left only after this long [s] and this share of its work
-ETA_AFTER_S, ETA_AFTER_WORK = 2.0, 0.03
-#: frames of the recent window the water's decay is measured over (on the leaf's own mesh)
-ETA_WINDOW = 100
-
-
-def time_left(elapsed: float, p0: float, p: float) -> float | None:
-    """Seconds still needed to reach progress 1 at the pace of the last ``elapsed`` seconds,
-    in which progress went from ``p0`` to ``p`` (the share of the drying's work,
-    :meth:`Simulator.drying_progress`); None before ``ETA_AFTER_S`` and ``ETA_AFTER_WORK`` of
-    the work.  Used while the drying path carries the mechanics (maple: 27 s shown with 31 s
-    left, 20 s with 24 s left at the hand-over)."""
-    done = p - p0
-    if elapsed < ETA_AFTER_S or done < ETA_AFTER_WORK:
-        return None
-    return max(elapsed * (1.0 - p) / done, 0.0)
-
-
-def time_left_from_decay(t0: float, w0: float, t1: float, w1: float, frames: int, target: float) -> float | None:
-    """Seconds still needed for the water fraction to fall from ``w1`` to ``target`` when it
-    fell from ``w0`` to ``w1`` over the last ``frames`` frames, in ``t1 − t0`` seconds: the
-    water decays about exponentially once the leaf's own mesh carries the mechanics (evaporation
-    ∝ the water left), and every frame there costs the same.  Maple: 20 / 13 / 8 / 4 s shown
-    with 17 / 10 / 7 / 3 s left.  None unless the water is falling."""
-    if frames <= 0 or not (w0 > w1 > 0.0) or t1 <= t0:
-        return None
-    if w1 <= target:
-        return 0.0
-    per_frame = math.log(w0 / w1) / frames
-    return math.log(w1 / target) / per_frame * (t1 - t0) / frames
 
 
 def name_thread(name: str) -> None:
@@ -146,8 +114,7 @@ class SimWorker:
         self._steps = 0            # single steps requested
         self._dry = False
         self._dry_until = 0
-        self._dry_start: tuple[float, float] | None = None  # (monotonic clock, progress) at the press
-        self._dry_seen: deque = deque(maxlen=ETA_WINDOW + 1)  # (clock, water fraction) of the own mesh's frames
+        self._eta = DryingEta(DRY_END_FRACTION)  # the time "Dry to end" still needs
         self._pause_at: int | None = None  # play pauses at this frame (scripted runs)
         self._steps_done = 0  # steps finished by this worker (0: the first may be compiling)
         self._stop = False
@@ -260,12 +227,8 @@ class SimWorker:
         if not np.isfinite(s.particle_q).all() and self.error is None:
             self.error = f"simulation diverged (NaN/Inf) at frame {s.frame}: press Reset or lower dynamics.dt"
         wf = self.water_fraction(s) if self._dry else 1.0
-        if self._dry:  # the own mesh's frames, for the time left (a frame on the drying path resets it)
-            with self._cond:
-                if self.simulator.on_path:
-                    self._dry_seen.clear()
-                else:
-                    self._dry_seen.append((time.monotonic(), wf))
+        if self._dry:
+            self._eta.frame(time.monotonic(), wf, self.simulator.on_path)
         done = self._dry and (wf <= DRY_END_FRACTION or self.error is not None or s.frame >= self._dry_until)
         pause = self._pause_at is not None and s.frame >= self._pause_at
         hz = DRY_PUBLISH_HZ if self._dry else PUBLISH_HZ
@@ -381,8 +344,10 @@ class SimWorker:
             self._dry = bool(on) and self.error is None
             self._dry_until = self.run.state.frame + DRY_MAX_FRAMES
             self.dry_done = False
-            self._dry_start = (time.monotonic(), self.dry_progress()) if self._dry else None
-            self._dry_seen.clear()
+            if self._dry:
+                self._eta.start(time.monotonic(), self.dry_progress())
+            else:
+                self._eta.stop()
             self._cond.notify_all()
 
     @property
@@ -396,19 +361,9 @@ class SimWorker:
         return self.simulator.drying_progress(wf, DRY_END_FRACTION)
 
     def dry_time_left(self) -> float | None:
-        """Seconds of wall time "Dry to end" still needs: from the water's decay over the own
-        mesh's last frames (:func:`time_left_from_decay`) once it carries the mechanics, from the
-        pace since the press before (:func:`time_left`); None when not drying or too early."""
-        with self._cond:
-            start, seen = self._dry_start, list(self._dry_seen)
-        if not self._dry or start is None:
-            return None
-        if len(seen) > ETA_WINDOW // 2:  # the own mesh's steady frames: the water's decay
-            (t0, w0), (t1, w1) = seen[0], seen[-1]
-            left = time_left_from_decay(t0, w0, t1, w1, len(seen) - 1, DRY_END_FRACTION)
-            if left is not None:
-                return left
-        return time_left(time.monotonic() - start[0], start[1], self.dry_progress())
+        """Wall seconds "Dry to end" still needs (:class:`DryingEta`); None when not drying or
+        too early to tell."""
+        return self._eta.left(time.monotonic(), self.dry_progress()) if self._dry else None
 
     def step_sync(self, n: int = 1) -> dict:
         """Advance ``n`` frames on the caller's thread (scripts, tests); waits for a running step."""

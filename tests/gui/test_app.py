@@ -594,7 +594,7 @@ def test_random_sliders_rebuilds_and_species_switches_while_playing():
 
 
 def test_status_bar_durations_read_as_seconds_then_minutes():
-    from leafsim.gui.panels.status_bar import duration
+    from leafsim.interactive.eta import duration
 
     assert [duration(x) for x in (0.4, 17.2, 59.4, 59.6, 125.0, 3600.0)] == [
         "0 s", "17 s", "59 s", "1 min 00 s", "2 min 05 s", "60 min 00 s"]

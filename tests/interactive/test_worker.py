@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from leafsim.interactive.session import Session
-from leafsim.interactive.worker import ETA_AFTER_S, ETA_AFTER_WORK, time_left, time_left_from_decay
+from leafsim.interactive.eta import ETA_AFTER_S, ETA_AFTER_WORK, time_left, time_left_from_decay
 from leafsim.sim.run import DRY_END_FRACTION
 
 
@@ -215,11 +215,23 @@ def test_warming_up_until_the_first_step_and_play_until_pauses_there():
         s.close()
 
 
-def test_time_left_from_decay_follows_an_exponential_drying():
-    # water halves every 100 frames at 0.05 s a frame: from 0.08 to 0.02 is two halvings, 10 s
-    assert time_left_from_decay(0.0, 0.16, 5.0, 0.08, 100, 0.02) == pytest.approx(10.0)
-    assert time_left_from_decay(0.0, 0.16, 5.0, 0.02, 100, 0.02) == 0.0
-    # no estimate unless the water falls over a positive time
-    assert time_left_from_decay(0.0, 0.08, 5.0, 0.08, 100, 0.02) is None
-    assert time_left_from_decay(5.0, 0.16, 5.0, 0.08, 100, 0.02) is None
-    assert time_left_from_decay(0.0, 0.16, 5.0, 0.08, 0, 0.02) is None
+def test_time_left_from_decay_integrates_the_fitted_loss_rate():
+    import math
+
+    # exponential (a = 1): the water halves every 100 frames at 0.05 s a frame, so 0.08 → 0.02
+    # is two more halvings: 200 frames, 10 s (the halves' rates at their mean water: 1 % off)
+    exp = [(0.05 * i, 0.16 * 0.5 ** (i / 100)) for i in range(101)]
+    assert time_left_from_decay(exp, 0.02) == pytest.approx(10.0, rel=0.02)
+    # a constant loss (a = 0) of 0.001 a frame: 0.06 → 0.02 is 40 frames, 2 s
+    lin = [(0.05 * i, 0.16 - 0.001 * i) for i in range(101)]
+    assert time_left_from_decay(lin, 0.02) == pytest.approx(2.0, rel=1e-3)
+    # in between (dw/df = −c w^0.5): the closed form, w(f) = (√w0 − c f / 2)²
+    c = 0.002
+    mid = [(0.05 * i, (math.sqrt(0.16) - c * i / 2) ** 2) for i in range(101)]
+    f_left = 2 * (math.sqrt(mid[-1][1]) - math.sqrt(0.02)) / c
+    assert time_left_from_decay(mid, 0.02) == pytest.approx(0.05 * f_left, rel=0.02)
+    assert time_left_from_decay([(0.0, 0.16), (1.0, 0.1), (2.0, 0.01)], 0.02) == 0.0
+    # no estimate unless the water falls in both halves over a positive time
+    assert time_left_from_decay([(0.05 * i, 0.08) for i in range(101)], 0.02) is None
+    assert time_left_from_decay([(0.0, w) for _, w in exp], 0.02) is None
+    assert time_left_from_decay(exp[:2], 0.02) is None

@@ -7,12 +7,7 @@ from imgui_bundle import imgui
 
 from leafsim.gui.layout import tip
 from leafsim.interactive.builder import WARM_TEXT
-
-
-def duration(seconds: float) -> str:
-    """``"17 s"`` or ``"2 min 05 s"`` (rounded to the second)."""
-    r = int(round(seconds))
-    return f"{r} s" if r < 60 else f"{r // 60} min {r % 60:02d} s"
+from leafsim.interactive.eta import duration
 
 
 #: width of the progress bar on the right [px]
