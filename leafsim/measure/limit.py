@@ -159,11 +159,13 @@ def candidate_settings(base, quick: bool = False) -> list[Setting]:
 
 
 def limit_study(species: str = "oak", quick: bool = False, seed: int = 0, config=None, progress: bool = True,
-                cache: Path | None = None, candidates: list[Setting] | None = None) -> dict:
+                cache: Path | None = None, candidates: list[Setting] | None = None, keep: dict | None = None) -> dict:
     """Dry ``species`` on the limit meshes, extrapolate, and measure every candidate against
     the limit (see the module doc).  ``cache``: a folder where every run is kept (plain
     ``.npz``, :func:`save_run`) and from which a run of the same settings, protocol and solver
-    source is taken instead of run again (a study of hours resumes)."""
+    source is taken instead of run again (a study of hours resumes).  ``keep``: a dict that
+    receives the limit itself (``"limit"``, what :func:`.accuracy.errors` compares against) and
+    the probe, to score runs made elsewhere."""
     sp = get_species(species, config)
     base = sp.params
     if quick:
@@ -199,6 +201,8 @@ def limit_study(species: str = "oak", quick: bool = False, seed: int = 0, config
     lim_data, orders = extrapolate([r.end for r in ref_runs], [r.water for r in ref_runs],
                                    [r.time_to_dry for r in ref_runs])
     limit = _Limit(lim_data)
+    if keep is not None:
+        keep.update(limit=limit, probe=probe)
     rows = [_limit_row(s, r, errors(r, limit, probe)) for s, r in zip(refs, ref_runs)]
     for s in cands:
         try:
