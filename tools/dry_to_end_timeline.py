@@ -39,7 +39,7 @@ def _hook() -> None:
             total = t - first[0]
             print(f"[dry to end] dry at {t - T0:.2f} s: {total:.2f} s of wall time from the press "
                   f"(frame {self.run.state.frame})", file=sys.stderr)
-            for k in range(1, 10):
+            for k in range(1, 10 if seen else 1):
                 e, p, left = min(seen, key=lambda x: abs(x[0] - k * total / 10))
                 shown = "—" if left is None else f"{left:5.1f} s"
                 print(f"[dry to end] at {e:5.1f} s: bar {100 * p:3.0f} %, time left shown {shown}, "

@@ -12,7 +12,7 @@ from leafsim.base.fileio import check_output
 from leafsim.config.params import PARAMS, ParamSet, parse_set_args
 from leafsim.config.presets import quality_overrides
 from leafsim.config.species import DEFAULT_SPECIES, Species, get_species
-from leafsim.interactive.eta import duration
+from leafsim.interactive.eta import DryingEta, duration
 
 
 def warn(text: str) -> None:
@@ -121,8 +121,6 @@ class Progress:
 
             # a drying says its own time left (tqdm's recent rate runs short once the drying slows)
             if stop.water_left is not None and stop.frames is None and stop.season is None:
-                from leafsim.interactive.eta import DryingEta
-
                 self.eta = DryingEta(stop.water_left)
                 self.eta.start(time.monotonic(), stop.progress(run, self.start))
             left = "" if self.eta is not None else "<{remaining}"

@@ -226,12 +226,13 @@ class SimWorker:
         s = self.run.state
         if not np.isfinite(s.particle_q).all() and self.error is None:
             self.error = f"simulation diverged (NaN/Inf) at frame {s.frame}: press Reset or lower dynamics.dt"
-        wf = self.water_fraction(s) if self._dry else 1.0
-        if self._dry:
+        drying = self._dry
+        wf = self.water_fraction(s) if drying else 1.0
+        if drying:
             self._eta.frame(time.monotonic(), wf, self.simulator.on_path)
-        done = self._dry and (wf <= DRY_END_FRACTION or self.error is not None or s.frame >= self._dry_until)
+        done = drying and (wf <= DRY_END_FRACTION or self.error is not None or s.frame >= self._dry_until)
         pause = self._pause_at is not None and s.frame >= self._pause_at
-        hz = DRY_PUBLISH_HZ if self._dry else PUBLISH_HZ
+        hz = DRY_PUBLISH_HZ if drying else PUBLISH_HZ
         if done or pause or publish_now or self.error is not None or time.perf_counter() - self._t_pub >= 1.0 / hz:
             self._publish(ms)  # before the flags change: whoever sees "done" sees its frame
         if pause:

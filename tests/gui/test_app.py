@@ -592,9 +592,3 @@ def test_random_sliders_rebuilds_and_species_switches_while_playing():
     assert seen["errors"] == [] and seen["nan_unreported"] == 0
     assert seen["frames"] > 0 and seen["sim_advanced"] and seen["finite"] and seen["rendered"]
 
-
-def test_status_bar_durations_read_as_seconds_then_minutes():
-    from leafsim.interactive.eta import duration
-
-    assert [duration(x) for x in (0.4, 17.2, 59.4, 59.6, 125.0, 3600.0)] == [
-        "0 s", "17 s", "59 s", "1 min 00 s", "2 min 05 s", "60 min 00 s"]

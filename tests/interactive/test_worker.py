@@ -3,13 +3,23 @@ dry-to-end; and that the numba kernels release the GIL so the worker thread lets
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
 import pytest
 
 from leafsim.interactive.session import Session
-from leafsim.interactive.eta import ETA_AFTER_S, ETA_AFTER_WORK, time_left, time_left_from_decay
+from leafsim.interactive.eta import (
+    ETA_AFTER_S,
+    ETA_AFTER_WORK,
+    ETA_WINDOW,
+    NO_PATH_FIT_BELOW,
+    DryingEta,
+    duration,
+    time_left,
+    time_left_from_decay,
+)
 from leafsim.sim.run import DRY_END_FRACTION
 
 
@@ -216,8 +226,6 @@ def test_warming_up_until_the_first_step_and_play_until_pauses_there():
 
 
 def test_time_left_from_decay_integrates_the_fitted_loss_rate():
-    import math
-
     # exponential (a = 1): the water halves every 100 frames at 0.05 s a frame, so 0.08 → 0.02
     # is two more halvings: 200 frames, 10 s (the halves' rates at their mean water: 1 % off)
     exp = [(0.05 * i, 0.16 * 0.5 ** (i / 100)) for i in range(101)]
@@ -235,3 +243,51 @@ def test_time_left_from_decay_integrates_the_fitted_loss_rate():
     assert time_left_from_decay([(0.05 * i, 0.08) for i in range(101)], 0.02) is None
     assert time_left_from_decay([(0.0, w) for _, w in exp], 0.02) is None
     assert time_left_from_decay(exp[:2], 0.02) is None
+    # a target of 0 is never reached by some fits (a ≥ 1): no estimate, no division by zero
+    assert time_left_from_decay(exp, 0.0) is None
+    assert time_left_from_decay([(0.0, 0.16), (1.0, float("nan")), (2.0, 0.08)], 0.02) is None
+
+
+def _feed(eta, curve, t0=0.0, every=1, on_path=False):
+    """Frames of 0.05 s whose water follows ``curve`` (a function of the osmosis step), the
+    water moving every ``every``-th frame only; returns the clock after the last frame."""
+    t = t0
+    for f in range(every * 150):
+        t += 0.05
+        eta.frame(t, curve(f // every), on_path)
+    return t
+
+
+def test_drying_eta_fits_the_tail_per_water_step_and_counts_down():
+    curve = lambda k: 0.3 * 0.5 ** (k / 100)  # noqa: E731  halves every 100 water steps
+    for every in (1, 4):
+        eta = DryingEta(0.02)
+        eta.start(0.0, 0.0)
+        t = _feed(eta, curve, every=every)  # no drying path, all below NO_PATH_FIT_BELOW
+        w = curve(149)
+        frames_left = every * 100 * math.log2(w / 0.02)
+        assert eta.left(t, 0.5) == pytest.approx(0.05 * frames_left, rel=0.03)
+        # read 2 s later without a new frame: 2 s less
+        assert eta.left(t + 2.0, 0.5) == pytest.approx(0.05 * frames_left - 2.0, rel=0.03)
+
+
+def test_drying_eta_uses_the_pace_until_the_tail():
+    eta = DryingEta(0.02)
+    eta.start(0.0, 0.0)
+    t = _feed(eta, lambda k: 0.95 - 0.001 * k)  # no path, above NO_PATH_FIT_BELOW: the pace
+    assert eta.left(t, 0.4) == pytest.approx(t * 0.6 / 0.4)
+    eta.start(0.0, 0.0)
+    t = _feed(eta, lambda k: 0.9 - 0.001 * k, on_path=True)  # path frames: never fitted
+    assert eta.left(t, 0.3) == pytest.approx(t * 0.7 / 0.3)
+    # after the hand-over the own mesh's frames are fitted, above NO_PATH_FIT_BELOW too
+    t = _feed(eta, lambda k: 0.8 * 0.5 ** (k / 100), t0=t)
+    assert len(eta._seen) == ETA_WINDOW + 1 and 0.8 * 0.5 ** 0.49 > NO_PATH_FIT_BELOW
+    frames_left = 100 * math.log2(0.8 * 0.5 ** 1.49 / 0.02)
+    assert eta.left(t, 0.8) == pytest.approx(0.05 * frames_left, rel=0.03)
+    eta.stop()
+    assert eta.left(t, 0.8) is None
+
+
+def test_durations_read_as_seconds_minutes_hours():
+    assert [duration(x) for x in (0.4, 17.2, 59.6, 125.0, 3599.0, 3600.0 * 19.4, float("inf"))] == [
+        "0 s", "17 s", "1 min 00 s", "2 min 05 s", "59 min 59 s", "19 h 24 min", "?"]

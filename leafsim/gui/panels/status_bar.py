@@ -77,4 +77,5 @@ class StatusBar:
                 "they are kept for later runs")
         elif pb.drying:
             tip("Fast-forward until 2 % of the water is left; press Stop drying to cancel. The time left is "
-                "estimated from the pace since the press")
+                "estimated from the pace since the press, and in the drying's tail from how fast the water "
+                "has been falling")
