@@ -28,16 +28,16 @@ THESIS_PRESET = {
 PRESETS = {"thesis": THESIS_PRESET}
 
 #: quality levels: points of the accuracy study's Pareto front (docs/accuracy.md).  "fine" is the
-#: declared defaults: the fastest point within 10 % of a converged reference on every metric
-#: (mesh 0.0199 L, 40 substeps with the inertia scaled × 64, dynamics.mass_scaling; against the
-#: reference one √2 refinement finer it is within 10 % for maple, grapevine and oak).  "balanced"
+#: declared defaults, chosen as the fastest point within 10 % of a reference one √2 refinement
+#: finer on every metric for maple, grapevine and oak (mesh 0.0199 L, 40 substeps with the inertia
+#: scaled × 64, dynamics.mass_scaling); re-measured on the model with stalks and traced veins it is
+#: 9 % (maple), 13 % (oak) and 21 % (grapevine, a mesh dependence: docs/accuracy.md).  "balanced"
 #: is the previous default, a √2 coarser mesh (20 substeps from the scaling), ≈ 3.5× cheaper at
 #: ≈ 18 % worst; "draft" takes a quarter of balanced's substeps with the inertia × 256 (the same
 #: n √M).  The measured error and cost of each are in configs/quality.json, written by
 #: tools/quality_table.py from one study (docs/accuracy/maple_default).  "fine" dries most of the
 #: water with its mechanics on the draft mesh (dynamics.path, leafsim.sim.path): as close to the
-#: reference as the direct run for 2.5–3.3× less CPU (docs/performance.md); that study measured
-#: the direct run.
+#: reference as the direct run for 2.5–3.3× less CPU (docs/performance.md).
 _QUALITY_CHANGES = {
     "draft": {"mesh.spacing": 0.028, "dynamics.substeps": 10, "dynamics.mass_scaling": 256.0, "dynamics.path": "own"},
     "balanced": {"mesh.spacing": 0.028, "dynamics.path": "own"},
