@@ -16,7 +16,7 @@ def _heron(a, b, c):
     return np.sqrt(np.maximum(s * (s - a) * (s - b) * (s - c), 0.0))
 
 
-def dried_tissue_area(key: str) -> tuple[float, float, float]:
+def dried_tissue_area(key: str) -> tuple[float, float, float, float]:
     """(area kept by the blade's triangles' rest state when bone dry, σ of the bottom surface
     springs, σ of the vein springs, water fraction) for species ``key`` on a coarse mesh."""
     sp = get_species(key)
@@ -28,7 +28,9 @@ def dried_tissue_area(key: str) -> tuple[float, float, float]:
     st.particle_water[:] = 0.0
     shrink.apply(st)
     tri = model.vol_springs
-    blade = np.ones(len(tri), bool) if model.particle_petiole is None else ~model.particle_petiole[model.vol_idx[:, 1]]
+    # the blade's triangles: none of their three T particles on the stalk
+    blade = (np.ones(len(tri), bool) if model.particle_petiole is None
+             else ~model.particle_petiole[model.vol_idx[:, 1:]].any(1))
     rest0 = model.spring_rest0[tri[blade]]
     rest = st.spring_rest[tri[blade]]
     kept = _heron(*rest.T).sum() / _heron(*rest0.T).sum()
@@ -44,7 +46,7 @@ def areas():
 def test_dried_tissue_follows_the_shrink_law_of_its_species(areas):
     for key, (kept, sigma, sigma_vein, w) in areas.items():
         # between every spring shrinking as the lamina (σ w) and every one as a vein (σ_vein w):
-        # the veins are a sixth of the layer's springs and hold the triangles they border
+        # vein springs are about a sixth of the layer's spring length and hold the triangles they border
         lamina, veins = (1.0 - sigma * w) ** 2, (1.0 - sigma_vein * w) ** 2
         assert lamina - 0.005 <= kept <= lamina + 0.5 * (veins - lamina), (key, kept, lamina, veins)
 
