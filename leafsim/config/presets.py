@@ -31,7 +31,7 @@ PRESETS = {"thesis": THESIS_PRESET}
 #: declared defaults, chosen as the fastest point within 10 % of a reference one √2 refinement
 #: finer on every metric for maple, grapevine and oak (mesh 0.0199 L, 40 substeps with the inertia
 #: scaled × 64, dynamics.mass_scaling); re-measured on the model with stalks and traced veins it is
-#: 9 % (maple), 7 % (oak, with its own shrinkage) and 21 % (grapevine, a mesh dependence:
+#: 9 % (maple), 5 % (oak, with its own shrinkage and static finish) and 21 % (grapevine, a mesh dependence:
 #: docs/accuracy.md).  "balanced"
 #: is the previous default, a √2 coarser mesh (20 substeps from the scaling), ≈ 3.5× cheaper at
 #: ≈ 18 % worst; "draft" takes a quarter of balanced's substeps with the inertia × 256 (the same

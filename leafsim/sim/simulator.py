@@ -18,6 +18,7 @@ import time
 from leafsim.base.errors import LeafsimError
 from leafsim.config.params import ParamSet
 from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
+from leafsim.sim.effects.dynamics import held
 from leafsim.sim.model import Model, State
 from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_allowed, path_params, work_done
 
@@ -72,10 +73,14 @@ class Simulator:
             self._shrink = self._shrink or Shrink(self.model)
             self._shrink.configure(params)
         self.dynamic = e["pbd"] or e["gravity"]
+        on_path = self.dynamic and self.model.path is not None and path_allowed(params)
         if self.dynamic:
             self._dynamics = self._dynamics or Dynamics(self.model)
-            self._dynamics.configure(params, e)
-        if self.dynamic and self.model.path is not None and path_allowed(params):
+            # after the drying path's hand-over the own mesh finishes with XPBD or, where the
+            # leaf is held, with static equilibria (dynamics.finish)
+            finish = on_path and params["dynamics.finish"] == "static" and held(self.model, params, e)
+            self._dynamics.configure(params.with_overrides({"dynamics.integrator": "static"}) if finish else params, e)
+        if on_path:
             # the drying's mechanics on the model's coarser path mesh (leafsim.sim.path)
             coarse = path_params(params, params["dynamics.path"])
             on = tuple(k for k in PATH_EFFECTS if e.get(k))

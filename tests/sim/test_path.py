@@ -219,3 +219,26 @@ def test_progress_counts_the_work_not_the_water(maple):
     for left in (1.0, 0.5, 0.15, 0.05, 0.02):
         assert run.sim.drying_progress(left, 0.02) == pytest.approx(work_done(1 - left, 0.98, 0.15, p.cost_ratio))
     assert run.sim.drying_progress(0.15, 0.02) < 0.5  # water-linear would say 0.87
+
+
+def test_static_finish_solves_equilibria_after_the_hand_over_where_the_leaf_is_held(oak):
+    _, p, m = oak
+    assert p["dynamics.finish"] == "static"  # oak's own setting (configs/leaves.json)
+    q = p.with_overrides({"dynamics.static_every": 16})
+    sim = Simulator(m, q)
+    st = sim.state()
+    solves = 0
+    while st.particle_water.sum() > 0.1 * m.particle_water0.sum():
+        sim.step(st)
+        eq = getattr(sim._dynamics, "equilibrium", None)
+        if sim.on_path:
+            assert eq is None or not eq.log  # the coarse mesh carries the mechanics
+        elif len(eq.log) > solves:
+            solves = len(eq.log)
+            assert eq.last.converged and eq.last.residual <= q["dynamics.static_tolerance"]
+            assert not st.particle_qd.any()  # at rest in its equilibrium
+    assert solves >= 2
+    # a free leaf has no equilibrium: it finishes with XPBD (no error), as does finish = xpbd
+    for over in ({"dynamics.scene": "free"}, {"dynamics.finish": "xpbd"}):
+        sim = Simulator(m, q.with_overrides(over))
+        assert not sim._dynamics.static

@@ -37,6 +37,15 @@ SUN_MAX_STEPS = 100_000
 CONTACT_NEAR_SKIN = 0.25
 
 
+def held(model, params, effects) -> bool:
+    """Something holds the leaf up, so it has a static equilibrium: it lies on the ground, or
+    hangs by its pinned stalk, or nothing pulls it (no gravity)."""
+    scene = params["dynamics.scene"]
+    on_ground = bool(effects["ground"]) and scene == "ground"
+    hanging = scene == "hanging" and bool(model.particle_pinned.any()) and bool(effects["pbd"])
+    return on_ground or hanging or not effects["gravity"]
+
+
 def effective_substeps(params, key: str = "dynamics.substeps") -> int:
     """Substeps per frame: ``dynamics.substeps`` at the default mesh spacing r₀, scaled by
     (r₀ / r)² with ``dynamics.substep_scaling``.  A bending hinge's XPBD stiffness relative to
@@ -178,8 +187,7 @@ class Dynamics:
         if self.static:
             from leafsim.sim.equilibrium import Equilibrium
 
-            held = self.ground or (self.scene == "hanging" and bool(m.particle_pinned.any()) and effects["pbd"])
-            if effects["gravity"] and not held:
+            if not held(m, params, effects):
                 raise LeafsimError("dynamics.integrator = static: a leaf that nothing holds up has no equilibrium "
                                    "(it falls): expected dynamics.scene ground with effects.ground, or hanging with "
                                    "effects.pbd, or the xpbd integrator")
