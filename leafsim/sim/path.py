@@ -108,6 +108,9 @@ def path_allowed(params) -> bool:
     return params["dynamics.path"] != "own" and all(params[k] == PARAMS[k].default for k in PATH_SOLVER_KEYS)
 
 
+#: an own-mesh frame of a static finish (dynamics.finish = static) against a drying-path frame:
+#: oak, every 64 frames, 5.7 against 1.7 ms a frame (docs/performance.md, "A static finish")
+STATIC_FINISH_COST = 3.4
 #: a hinge and a thickness volume cost this many springs (docs/performance.md: 2.4–2.7 and 1.9–2.6)
 HINGE_COST, VOLUME_COST = 2.5, 2.0
 
@@ -147,25 +150,28 @@ class DryingPath:
     runs (a live change of them makes a new one).
     """
 
-    def __init__(self, model: Model, params, sim, effects: tuple = ()):
+    def __init__(self, model: Model, params, sim, effects: tuple = (), static_finish: bool = False):
         self.model, self.coarse = model, model.path
         self.effects = tuple(effects)
         self.P = transfer_matrix(self.coarse, model)        # coarse → own (positions, velocities)
         self.R = transfer_matrix(model, self.coarse)        # own → coarse (relative water)
         self.sim = sim
-        self._configure(params)
+        self._configure(params, static_finish)
 
-    def _configure(self, params) -> None:
+    def _configure(self, params, static_finish: bool = False) -> None:
         self.handover = float(params["dynamics.handover"])
         #: how many times a frame on the own mesh costs one on the coarse mesh (progress bars)
-        self.cost_ratio = frame_cost(self.model, params) / max(frame_cost(self.coarse, self.sim.params), 1.0)
+        if static_finish:  # equilibria every few frames after the hand-over (dynamics.finish)
+            self.cost_ratio = STATIC_FINISH_COST
+        else:
+            self.cost_ratio = frame_cost(self.model, params) / max(frame_cost(self.coarse, self.sim.params), 1.0)
         # hanging from the petiole: the own mesh's pinned particles stay exactly where they are
         hanging = params["dynamics.scene"] == "hanging" and self.model.particle_pinned.any()
         self.pinned = np.flatnonzero(self.model.particle_pinned) if hanging else None
 
-    def set_params(self, params, coarse_params) -> None:
+    def set_params(self, params, coarse_params, static_finish: bool = False) -> None:
         self.sim.set_params(coarse_params)
-        self._configure(params)
+        self._configure(params, static_finish)
 
     def active(self, state: State) -> bool:
         """The coarse mesh carries the mechanics: the leaf still holds more than the hand-over

@@ -74,20 +74,21 @@ class Simulator:
             self._shrink.configure(params)
         self.dynamic = e["pbd"] or e["gravity"]
         on_path = self.dynamic and self.model.path is not None and path_allowed(params)
+        # after the drying path's hand-over the own mesh finishes with XPBD or, where the leaf is
+        # held, with static equilibria (dynamics.finish)
+        finish = on_path and params["dynamics.finish"] == "static" and held(self.model, params, e)
         if self.dynamic:
             self._dynamics = self._dynamics or Dynamics(self.model)
-            # after the drying path's hand-over the own mesh finishes with XPBD or, where the
-            # leaf is held, with static equilibria (dynamics.finish)
-            finish = on_path and params["dynamics.finish"] == "static" and held(self.model, params, e)
             self._dynamics.configure(params.with_overrides({"dynamics.integrator": "static"}) if finish else params, e)
         if on_path:
             # the drying's mechanics on the model's coarser path mesh (leafsim.sim.path)
             coarse = path_params(params, params["dynamics.path"])
             on = tuple(k for k in PATH_EFFECTS if e.get(k))
             if self._path is None or self._path.effects != on:
-                self._path = DryingPath(self.model, params, Simulator(self.model.path, coarse, on, seed=self.seed), on)
+                self._path = DryingPath(self.model, params, Simulator(self.model.path, coarse, on, seed=self.seed), on,
+                                        finish)
             else:
-                self._path.set_params(params, coarse)
+                self._path.set_params(params, coarse, finish)
         else:
             self._path = None
         if self._colour is not None or e["colour"]:
