@@ -94,8 +94,8 @@ class _Counter:
 
 def _exercise() -> None:
     """Compile what a default drying and the window's first frames use: a draft maple built and
-    stepped (dynamics, osmosis, shrink, contacts, colour), every pigment kernel, the leaf's
-    colours and the renderer's geometry (no OpenGL needed)."""
+    stepped (dynamics, osmosis, shrink, contacts, colour), one static equilibrium solve, every
+    pigment kernel, the leaf's colours and the renderer's geometry (no OpenGL needed)."""
     from leafsim.appearance.view import LeafView
     from leafsim.config.presets import quality_overrides
     from leafsim.config.species import DEFAULT_SPECIES, get_species
@@ -111,6 +111,12 @@ def _exercise() -> None:
     for _ in range(2):
         run.step()
     run.stats()  # the constraint residual and momenta the stats panel shows
+    # the static equilibrium's kernels: a species whose drying finishes with it (dynamics.finish,
+    # oak) would otherwise compile them at its hand-over, silently
+    static = params.with_overrides({"dynamics.scene": "ground", "dynamics.integrator": "static",
+                                    "dynamics.static_iterations": 2}, where="warm-up")
+    run.sim._dynamics.configure(static, run.sim.effects)
+    run.sim._dynamics.apply(run.state)
     precompile()
     mesh = LeafView(model, None, run.sim.state().pigments).mesh(run.state, params)
     pos = np.ascontiguousarray(mesh.positions, dtype=np.float32)  # as the renderer holds them

@@ -108,9 +108,15 @@ def path_allowed(params) -> bool:
     return params["dynamics.path"] != "own" and all(params[k] == PARAMS[k].default for k in PATH_SOLVER_KEYS)
 
 
-#: an own-mesh frame of a static finish (dynamics.finish = static) against a drying-path frame:
-#: oak, every 64 frames, 5.7 against 1.7 ms a frame (docs/performance.md, "A static finish")
-STATIC_FINISH_COST = 3.4
+#: an own-mesh frame of a static finish (dynamics.finish = static), in ms: a frame's osmosis,
+#: shrink and colour, and an equilibrium solve shared by dynamics.static_every frames; against a
+#: drying-path frame (measured on oak: 0.5, 340 and 1.7 ms; docs/performance.md, "A static finish")
+FINISH_FRAME_MS, FINISH_SOLVE_MS, PATH_FRAME_MS = 0.5, 340.0, 1.7
+
+
+def static_finish_cost(every: int) -> float:
+    """How many drying-path frames an own-mesh frame of a static finish costs (progress bars)."""
+    return (FINISH_FRAME_MS + FINISH_SOLVE_MS / max(int(every), 1)) / PATH_FRAME_MS
 #: a hinge and a thickness volume cost this many springs (docs/performance.md: 2.4–2.7 and 1.9–2.6)
 HINGE_COST, VOLUME_COST = 2.5, 2.0
 
@@ -162,7 +168,7 @@ class DryingPath:
         self.handover = float(params["dynamics.handover"])
         #: how many times a frame on the own mesh costs one on the coarse mesh (progress bars)
         if static_finish:  # equilibria every few frames after the hand-over (dynamics.finish)
-            self.cost_ratio = STATIC_FINISH_COST
+            self.cost_ratio = static_finish_cost(params["dynamics.static_every"])
         else:
             self.cost_ratio = frame_cost(self.model, params) / max(frame_cost(self.coarse, self.sim.params), 1.0)
         # hanging from the petiole: the own mesh's pinned particles stay exactly where they are

@@ -162,6 +162,11 @@ class Simulator:
                     self._path.sync(state)  # the hand-over level was raised live: start from here
                 self._path.step(state)
             else:
+                if self._path is not None and self._path_was_active and self._dynamics.static:
+                    # a static finish takes over: its equilibrium at once, friction and predictor
+                    # from here (not from before a live return to the path mesh)
+                    self._dynamics.equilibrium.reset()
+                    self._dynamics.solve_now = True
                 self._dynamics.apply(state)
             self._path_was_active = path
             t1 = time.perf_counter()

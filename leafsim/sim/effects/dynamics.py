@@ -75,6 +75,9 @@ class Dynamics:
 
     def __init__(self, model: Model):
         self.model = model
+        #: solve the static equilibrium on the next frame whatever its number (set when a static
+        #: finish takes over from the drying path, so the own mesh starts from its equilibrium)
+        self.solve_now = False
         n = model.particle_count
         self.q_old = np.zeros((n, 3))
         self.invm = np.zeros(n)
@@ -266,8 +269,9 @@ class Dynamics:
             self._apply_sun(state)
             return
         if self.static:
-            if state.frame % self.static_every:
+            if state.frame % self.static_every and not self.solve_now:
                 return
+            self.solve_now = False
             info = self.equilibrium.solve(state)
             self.last_iterations = info.iterations
             self.last_contacts = info.contacts
