@@ -19,7 +19,7 @@ from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
 from leafsim.commands.common import Progress, emit, ready_kernels, species_params, stop_of
 from leafsim.pipeline import build_leaf
 from leafsim.render.sequence import FrameWriter
-from leafsim.sim.checkpoint import check_meta, load_checkpoint, save_checkpoint
+from leafsim.sim.checkpoint import check_meta, load_carry, load_checkpoint, save_checkpoint
 from leafsim.sim.curl import dried_shape
 from leafsim.sim.run import Run, Stop
 from leafsim.sim.shape import save_npz, shape_metrics
@@ -84,7 +84,7 @@ class _Outputs:
             self.frames.write(k, self.run.state)
         # a frame that produced NaN never replaces the last good checkpoint (--resume needs it)
         if self.ck is not None and a.checkpoint_every and (stopping or k % a.checkpoint_every == 0) and not st["nan"]:
-            save_checkpoint(self.ck, self.run.model, self.run.state, self.meta)
+            save_checkpoint(self.ck, self.run.model, self.run.state, self.meta, self.run.sim.carry())
 
     def close(self) -> None:
         if self.stream is not None:
@@ -131,6 +131,7 @@ def cmd_run(args):
     run = Run(model, params, seed=args.seed)
     if args.resume:
         run.state = load_checkpoint(ck, model, meta)
+        run.sim.restore(load_carry(ck, model))
         if args.frames is not None and args.until is None and args.frames < run.state.frame:
             raise LeafsimError(f"--frames {args.frames}: the checkpoint in {out} is at frame {run.state.frame} already "
                                f"(resume with --frames ≥ {run.state.frame})")
@@ -152,7 +153,7 @@ def cmd_run(args):
                                   + (f", statistics in {args.stats}" if args.stats else "") + f"; {where}")
     broken = bool(stats) and stats[-1]["nan"]  # run_report below says so; keep the good files
     if ck is not None and args.checkpoint_every and not broken:
-        save_checkpoint(ck, model, run.state, meta)  # the final state: --resume --frames M continues it
+        save_checkpoint(ck, model, run.state, meta, run.sim.carry())  # the final state: --resume --frames M continues it
     if out is not None and not broken:
         save_npz(out / "final.npz", model, run.state)
     if outputs.frames is not None and run.state.frame % args.every:

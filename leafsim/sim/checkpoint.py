@@ -1,9 +1,11 @@
 """Checkpoints of a headless run: the complete simulation state of one frame, written atomically.
 
-A :class:`~leafsim.sim.model.State` (with its pigments) is everything that changes from frame
-to frame — the effects keep nothing across frames that is not rebuilt from the model and the
-parameters — so rebuilding the model from the same species, parameters and seed and loading
-the state continues the run bit-identically to one that was never interrupted.
+A :class:`~leafsim.sim.model.State` (with its pigments and its drying-path mesh's state) is
+what changes from frame to frame; the few things a stage hands on besides (the static
+solver's friction anchors and predictor, whether the drying path carried the last frame:
+:meth:`~leafsim.sim.simulator.Simulator.carry`) are kept beside it.  Rebuilding the model
+from the same species, parameters and seed and loading both continues the run
+bit-identically to one that was never interrupted.
 
 The file is an ``.npz`` (no pickles) holding the state arrays, the pigments and a JSON record
 ``meta`` of what the run was made with (species, config, seed, every parameter value, effects
@@ -45,9 +47,12 @@ def model_fingerprint(model: Model) -> str:
     return h.hexdigest()[:20]
 
 
-def save_checkpoint(path, model: Model, state: State, meta: dict) -> None:
-    """Write ``state`` (and ``meta``, plus format, frame and model fingerprint) atomically."""
+def save_checkpoint(path, model: Model, state: State, meta: dict, carry: dict | None = None) -> None:
+    """Write ``state`` (and ``meta``, plus format, frame and model fingerprint) atomically, with
+    ``carry``, what the simulator's stages hand to the next frame beyond the state
+    (:meth:`~leafsim.sim.simulator.Simulator.carry`)."""
     arrays = {f"state_{f.name}": getattr(state, f.name) for f in fields(State) if f.name not in ("pigments", "path")}
+    arrays.update({f"carry_{k}": np.asarray(v) for k, v in (carry or {}).items()})
     if state.path is not None:  # the drying-path mesh's state (leafsim.sim.path)
         arrays.update({f"path_{f.name}": getattr(state.path, f.name) for f in fields(State) if f.name not in ("pigments", "path")})
     record = dict(meta, format=FORMAT, frame=state.frame, model=model_fingerprint(model))
@@ -118,6 +123,53 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
     state = State(**arrays, pigments=pig, path=coarse)
     check_state(state, model, f"{path}: checkpoint", frame=meta.get("frame"))
     return state
+
+
+def load_carry(path, model: Model) -> dict:
+    """What the stages handed to the next frame when the checkpoint at ``path`` was written
+    (:meth:`~leafsim.sim.simulator.Simulator.restore` takes it; empty for a checkpoint written
+    before it was kept), each array checked for the shape, type and range this model's
+    simulator writes.  Call after :func:`load_checkpoint`."""
+    path = Path(path)
+    data = _open(path)[1]
+    n = model.particle_count
+    where = f"{path}: checkpoint"
+    out = {}
+    try:
+        for key in data.files:
+            if not key.startswith("carry_"):
+                continue
+            name, a = key.removeprefix("carry_"), np.array(data[key])
+            shape = {"path_was_active": (1,), "equilibrium_normal": (n,), "equilibrium_anchor": (n, 2)}.get(name)
+            if name == "equilibrium_history_time":
+                shape = (min(len(a), 2),)
+            elif name == "equilibrium_history_q":
+                shape = (min(len(a), 2), n, 3)
+            if shape is None:
+                raise _fail(where, f"holds an unknown solver record {name!r}")
+            kind = "b" if name == "path_was_active" else "f"
+            if a.shape != shape or a.dtype.kind != kind:
+                raise _fail(where, f"solver record {name} is {a.dtype} {a.shape}, expected "
+                                   f"{'bool' if kind == 'b' else 'float64'} {shape} for this model")
+            if kind == "f" and not np.isfinite(a).all():
+                raise _fail(where, f"solver record {name} holds NaN or infinite values")
+            out[name] = a
+    except LeafsimError:
+        raise
+    except Exception as e:  # a damaged member
+        raise LeafsimError(f"{path}: cannot read checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:80]})") from None
+    if "equilibrium_normal" in out and (out["equilibrium_normal"] < 0).any():
+        raise _fail(where, "solver record equilibrium_normal holds negative normal forces")
+    if "equilibrium_anchor" in out:
+        far = np.abs(out["equilibrium_anchor"] - model.particle_rest[:, :2].mean(0)).max()
+        if far > MAX_REACH * model.length:
+            raise _fail(where, f"solver record equilibrium_anchor holds an anchor {far:.3g} m from the leaf")
+    hq, ht = out.get("equilibrium_history_q"), out.get("equilibrium_history_time")
+    if (hq is None) != (ht is None) or (hq is not None and len(hq) != len(ht)):
+        raise _fail(where, "solver records equilibrium_history_time and _q do not match")
+    if hq is not None and len(hq) and np.abs(hq - model.particle_rest.mean(0)).max() > MAX_REACH * model.length:
+        raise _fail(where, "solver record equilibrium_history_q holds a particle far from the leaf")
+    return out
 
 
 def _fail(where: str, msg: str) -> LeafsimError:

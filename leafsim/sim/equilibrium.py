@@ -137,6 +137,22 @@ class Equilibrium:
         self.anchor = self.model.particle_rest[:, :2].copy()
         self._fric = None
 
+    def carry(self) -> dict:
+        """What one solve hands the next (the ground's normal forces and friction anchors of
+        the last equilibrium, the predictor's last two equilibria): a checkpoint keeps it so a
+        resumed run solves exactly as one never interrupted."""
+        k = len(self.history)
+        return {"normal": self.normal.copy(), "anchor": self.anchor.copy(),
+                "history_time": np.array([t for t, _ in self.history], float),
+                "history_q": np.array([q for _, q in self.history]).reshape(k, self.n, 3)}
+
+    def restore(self, carry: dict) -> None:
+        """Take back what :meth:`carry` gave (arrays checked by the caller)."""
+        self.normal = np.array(carry["normal"], float)
+        self.anchor = np.array(carry["anchor"], float)
+        self.history = [(float(t), np.array(q, float)) for t, q in zip(carry["history_time"], carry["history_q"])]
+        self._fric = None
+
     def configure(self, params) -> None:
         m = self.model
         self.g = float(params["dynamics.gravity"]) if self.dyn.g != 0.0 else 0.0

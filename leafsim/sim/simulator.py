@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from leafsim.base.errors import LeafsimError
 from leafsim.config.params import ParamSet
 from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
@@ -128,6 +130,28 @@ class Simulator:
         p = self._path
         return work_done(1.0 - water_left, 1.0 - target, None if p is None else p.handover,
                          0.0 if p is None else p.cost_ratio)
+
+    def carry(self) -> dict:
+        """What the stages hand from one frame to the next beyond the :class:`State`: whether
+        the drying-path mesh carried the last frame's mechanics (its hand-over starts a static
+        finish) and the static solver's friction and predictor (:meth:`Equilibrium.carry`).
+        ``leafsim run``'s checkpoints keep it beside the state (a resumed run is then
+        bit-identical also after a static finish has taken over)."""
+        out = {"path_was_active": np.array([self._path_was_active], bool)}
+        d = self._dynamics
+        if d is not None and d.static and getattr(d, "equilibrium", None) is not None:
+            out.update({f"equilibrium_{k}": v for k, v in d.equilibrium.carry().items()})
+        return out
+
+    def restore(self, carry: dict) -> None:
+        """Take back what :meth:`carry` gave (checked arrays: :func:`leafsim.sim.checkpoint.load_carry`);
+        a key this simulator has no stage for is ignored, a missing one leaves the stage fresh."""
+        if "path_was_active" in carry:
+            self._path_was_active = bool(carry["path_was_active"][0])
+        d = self._dynamics
+        eq = {k.removeprefix("equilibrium_"): v for k, v in carry.items() if k.startswith("equilibrium_")}
+        if eq and d is not None and d.static and getattr(d, "equilibrium", None) is not None:
+            d.equilibrium.restore(eq)
 
     @property
     def on_path(self) -> bool:

@@ -128,6 +128,42 @@ def test_resume_in_the_path_phase_is_bit_identical(tmp_path, capsys):
         assert np.array_equal(a[k], b[k]), k
 
 
+def test_resume_in_a_static_finish_is_bit_identical(tmp_path, capsys):
+    """Oak finishes with static equilibria (dynamics.finish): the checkpoint keeps the solver's
+    friction anchors, normal forces and predictor and that the hand-over has happened, so a run
+    resumed between two solves solves the next one exactly as the uninterrupted run (hand-over
+    at 60 % water, frame 947; solves at 947, 960, 992)."""
+    base = ["run", "--species", "oak", "--set", "dynamics.handover=0.6", "--checkpoint-every", "5"]
+    ref = tmp_path / "ref"
+    assert main(base + ["--frames", "1000", "--out", str(ref), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["water_fraction"] < 0.6  # the own mesh has taken over
+    out = tmp_path / "out"
+    assert main(base + ["--frames", "970", "--out", str(out)]) == 0
+    capsys.readouterr()
+    saved = np.load(out / "checkpoint.npz")
+    assert len(saved["carry_equilibrium_history_time"]) == 2 and (saved["carry_equilibrium_normal"] > 0).any()
+    assert not saved["carry_path_was_active"][0]
+    assert main(base + ["--frames", "1000", "--out", str(out), "--resume", "--json"]) == 0
+    a, b = np.load(ref / "final.npz"), np.load(out / "final.npz")
+    for k in ("particle_q", "particle_qd", "particle_water"):
+        assert np.array_equal(a[k], b[k]), k
+
+
+def test_damaged_solver_record_is_refused(tmp_path, capsys):
+    base = ["run", "--species", "oak", "--set", "dynamics.handover=0.99", "--checkpoint-every", "5"]
+    out = tmp_path / "out"
+    assert main(base + ["--frames", "40", "--out", str(out)]) == 0
+    capsys.readouterr()
+    ck = out / "checkpoint.npz"
+    data = dict(np.load(ck))
+    data["carry_equilibrium_normal"] = -np.abs(data["carry_equilibrium_normal"]) - 1.0
+    with open(ck, "wb") as f:
+        np.savez(f, **data)
+    assert main(base + ["--frames", "50", "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "equilibrium_normal" in err and "negative" in err and len(err.splitlines()) == 1
+
+
 def test_hanging_leaf_keeps_its_petiole_pinned(maple):
     _, p, m = maple
     sim = Simulator(m, p.with_overrides({"dynamics.scene": "hanging"}))
