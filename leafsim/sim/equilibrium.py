@@ -346,17 +346,10 @@ class Equilibrium:
         self.reuse = definite  # only a definite factorisation preconditions the next steps
         return self.lu.solve(b), definite
 
-    def solve(self, state: State) -> SolveInfo:
-        """Move ``state``'s particles to the equilibrium nearest where they are (velocities
-        zero); update the friction anchors and normal forces for the next solve."""
-        t0 = time.perf_counter()
-        f0 = self.factorisations
+    def _setup(self, state: State):
+        """The solve's constants: the elastic records, masses and weights, the ground's and the
+        self-contact's stiffness and the contact radius of the shrunk tissue."""
         m = self.model
-        q = state.particle_q
-        if self.history and (state.time <= self.history[-1][0] or self.history[-1][1].shape != q.shape):
-            # another leaf, a reset or a rewind: friction and the predictor start afresh
-            self.reset()
-            self.anchor[:] = q[:, :2]
         rec = self._records(state)
         mass = m.particle_cytosol + state.particle_water
         weight = np.maximum(mass * max(self.g, 1e-3), 1e-300)
@@ -364,11 +357,91 @@ class Equilibrium:
         # the whole leaf's weight on one particle sinks it 1.5 δ (a curled leaf rests on a few)
         self.kg = np.full(self.n, float(weight.sum()) / self.delta)
         shrunk = max(float(np.mean(state.spring_rest[self.dyn.T_springs] / m.spring_rest0[self.dyn.T_springs])), 0.1)
-        radius = self.dyn.radius * shrunk
-        self.radius = radius
+        self.radius = radius = self.dyn.radius * shrunk
         kc = float(np.median(rec[1]))  # contact stiffness: a typical membrane spring's
+        return rec, mass, weight, radius, kc
+
+    def _direction(self, H, b, grad, state: State, lam: float):
+        """The Newton step (n, 3) from H Δ = b, with the Levenberg–Marquardt damping ``lam``
+        raised until the factorisation is definite and the step descends; returns (step,
+        slope ∇E·step, the damping used)."""
         free3 = np.repeat(self.free, 3)
-        A = None
+        if not self.free.all():
+            H = H[free3][:, free3]
+            b = b[free3]
+        dH = H.diagonal()
+        scale = np.maximum(np.abs(dH), 1e-6 * float(np.abs(dH).mean()))
+        lev = LEVENBERG * float(np.abs(dH).mean())
+        while True:
+            A = H + sps.diags(lam * scale + lev, format="csr")
+            dx, definite = self._linear_solve(A, b)
+            step = np.zeros(3 * self.n)
+            step[free3 if not self.free.all() else slice(None)] = dx
+            step = step.reshape(self.n, 3)
+            slope = float((grad * step).sum())
+            if definite and slope < 0.0:
+                return step, slope, lam
+            # indefinite (the leaf is past a buckling point or tipping over): Levenberg–
+            # Marquardt, more of the diagonal until the factorisation is definite and the
+            # step descends
+            lam = max(10.0 * lam, LAM_MIN)
+            self.reuse = False
+            self.damped += 1
+            if lam > LAM_MAX:
+                raise LeafsimError(f"dynamics.integrator = static: no descent direction at frame {state.frame} "
+                                   f"(the energy or its derivatives are not finite?): expected a finite state")
+
+    def _line_search(self, q, step, slope, E, parts, rec, mass, pairs, radius, kc) -> float:
+        """Move ``q`` along the step's path (:meth:`_path`): backtracking to the Armijo
+        condition, or on beyond the full step while the energy keeps falling; returns α."""
+        alpha = 1.0
+        along = self._path(q.copy(), step, mass)
+        # below the energy's rounding (a few ulp of its largest part) a decrease cannot be
+        # seen: there the full step is taken (the quadratic model is exact at that scale)
+        tiny = -slope < NOISE * sum(abs(x) for x in parts)
+        while True:
+            q[:] = along(alpha)
+            if tiny or self.energy(q, rec, mass, pairs, radius, kc) <= E + ARMIJO * alpha * slope or alpha < 1e-8:
+                break
+            alpha *= 0.5
+        if alpha == 1.0 and not tiny:
+            # the model underestimated the step (a soft mode the Hessian does not see, e.g. a
+            # leaf rolling over its contacts): go on along it while the energy keeps falling
+            e1 = self.energy(q, rec, mass, pairs, radius, kc)
+            while alpha < EXPAND:
+                q[:] = along(2.0 * alpha)
+                e2 = self.energy(q, rec, mass, pairs, radius, kc)
+                if e2 >= e1:
+                    q[:] = along(alpha)
+                    break
+                alpha *= 2.0
+                e1 = e2
+        return alpha
+
+    def _settle(self, state: State) -> None:
+        """After a solve: velocities zero, the predictor's history, and the ground's normal
+        forces and friction anchors for the next solve."""
+        q = state.particle_q
+        state.particle_qd[:] = 0.0
+        self.history = (self.history + [(state.time, q.copy())])[-2:]
+        if self.ground:
+            self.normal = np.zeros(self.n)
+            below = q[:, 2] < 0.0
+            self.normal[below] = ground_penalty(-q[below, 2], self.kg[below], self.delta)[1]
+            press = self.normal > 0.0
+            self.anchor[press] = q[press, :2]
+
+    def solve(self, state: State) -> SolveInfo:
+        """Move ``state``'s particles to the equilibrium nearest where they are (velocities
+        zero); update the friction anchors and normal forces for the next solve."""
+        t0 = time.perf_counter()
+        f0 = self.factorisations
+        q = state.particle_q
+        if self.history and (state.time <= self.history[-1][0] or self.history[-1][1].shape != q.shape):
+            # another leaf, a reset or a rewind: friction and the predictor start afresh
+            self.reset()
+            self.anchor[:] = q[:, :2]
+        rec, mass, weight, radius, kc = self._setup(state)
         res0 = res = math.inf
         it = 0
         # a solve's first step factorises afresh (the rest state moved since the last solve and
@@ -395,54 +468,8 @@ class Equilibrium:
                 break
             K = sps.bsr_matrix((self.data, self.indices, self.indptr), shape=(3 * self.n, 3 * self.n)).tocsr()
             H = K + self._hessian_extra(diag, pairs, q, kc)
-            b = -grad.reshape(-1)
-            if not self.free.all():
-                H = H[free3][:, free3]
-                b = b[free3]
-            dH = H.diagonal()
-            scale = np.maximum(np.abs(dH), 1e-6 * float(np.abs(dH).mean()))
-            lev = LEVENBERG * float(np.abs(dH).mean())
-            while True:
-                A = H + sps.diags(lam * scale + lev, format="csr")
-                dx, definite = self._linear_solve(A, b)
-                step = np.zeros(3 * self.n)
-                step[free3 if not self.free.all() else slice(None)] = dx
-                step = step.reshape(self.n, 3)
-                slope = float((grad * step).sum())
-                if definite and slope < 0.0:
-                    break
-                # indefinite (the leaf is past a buckling point or tipping over): Levenberg–
-                # Marquardt, more of the diagonal until the factorisation is definite and the
-                # step descends
-                lam = max(10.0 * lam, LAM_MIN)
-                self.reuse = False
-                self.damped += 1
-                if lam > LAM_MAX:
-                    raise LeafsimError(f"dynamics.integrator = static: no descent direction at frame {state.frame} "
-                                       f"(the energy or its derivatives are not finite?): expected a finite state")
-            alpha = 1.0
-            x0 = q.copy()
-            along = self._path(x0, step, mass)
-            # below the energy's rounding (a few ulp of its largest part) a decrease cannot be
-            # seen: there the full step is taken (the quadratic model is exact at that scale)
-            tiny = -slope < NOISE * (abs(Ee) + abs(Ex) + abs(Ec))
-            while True:
-                q[:] = along(alpha)
-                if tiny or self.energy(q, rec, mass, pairs, radius, kc) <= E + ARMIJO * alpha * slope or alpha < 1e-8:
-                    break
-                alpha *= 0.5
-            if alpha == 1.0 and not tiny:
-                # the model underestimated the step (a soft mode the Hessian does not see, e.g. a
-                # leaf rolling over its contacts): go on along it while the energy keeps falling
-                e1 = self.energy(q, rec, mass, pairs, radius, kc)
-                while alpha < EXPAND:
-                    q[:] = along(2.0 * alpha)
-                    e2 = self.energy(q, rec, mass, pairs, radius, kc)
-                    if e2 >= e1:
-                        q[:] = along(alpha)
-                        break
-                    alpha *= 2.0
-                    e1 = e2
+            step, slope, lam = self._direction(H, -grad.reshape(-1), grad, state, lam)
+            alpha = self._line_search(q, step, slope, E, (Ee, Ex, Ec), rec, mass, pairs, radius, kc)
             # a full step: trust the Hessian more; a cut one: less
             lam = lam / 3.0 if alpha >= 1.0 else max(4.0 * lam, LAM_MIN)
             if lam < LAM_MIN:
@@ -450,14 +477,7 @@ class Equilibrium:
             it += 1
             self.trace.append((res, alpha, E))
             pairs = self._contacts(q, radius)
-        state.particle_qd[:] = 0.0
-        self.history = (self.history + [(state.time, q.copy())])[-2:]
-        if self.ground:
-            self.normal = np.zeros(self.n)
-            below = q[:, 2] < 0.0
-            self.normal[below] = ground_penalty(-q[below, 2], self.kg[below], self.delta)[1]
-            press = self.normal > 0.0
-            self.anchor[press] = q[press, :2]
+        self._settle(state)
         self.last = SolveInfo(it, res0, res, E, int((q[:, 2] < 0.0).sum()) if self.ground else 0, len(pairs), time.perf_counter() - t0,
                               res <= self.tol)
         self.log.append((it, self.factorisations - f0, self.last.seconds, res))
