@@ -19,7 +19,10 @@ and volume's exact 12 × 12 Hessian onto its non-negative eigenvalues (projected
 measured too (4 December) and dropped: it never needed the Levenberg–Marquardt damping, but
 from oak's hand-over it stopped at the 200-iteration cap (residual 0.03 × weight, linear near
 the solution) where the exact form converges in 19, and from maple's it also reached the cap
-(residual 41 × weight, 112 s) where the exact form needs 173.
+(residual 41 × weight, 112 s) where the exact form needs 173.  A hybrid (the exact form,
+and the projected one in place of the damping where the exact one is indefinite) halved
+maple's first solve (84 iterations, 55 s against 97 s) but slowed oak's (24 against 19):
+not adopted, since the static finish stays slower than XPBD on maple either way.
 """
 
 from __future__ import annotations
