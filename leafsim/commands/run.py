@@ -13,7 +13,7 @@ import numpy as np
 
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import check_output, remove_stale_temps
+from leafsim.base.fileio import check_output, output_target, remove_stale_temps
 from leafsim.base.signals import DeferredSignals, Interrupted
 from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
 from leafsim.commands.common import Progress, emit, ready_kernels, species_params, stop_of
@@ -39,13 +39,26 @@ def check_run_args(args) -> Path | None:
         raise LeafsimError(f"{'--resume' if args.resume else '--checkpoint-every'} needs --out DIR (the checkpoint lives there)")
     out = Path(args.out) if args.out else None
     if out is not None:
+        if out.is_symlink() and not out.exists():
+            raise LeafsimError(f"--out {out}: a broken symbolic link (expected a folder or nothing)")
         if out.exists() and not out.is_dir():
             raise LeafsimError(f"--out {out}: exists and is not a folder")
         if not out.parent.exists():
             raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
         check_output(out, "--out folder", folder=True)
-        if args.resume and not (out / CHECKPOINT).is_file():
-            raise LeafsimError(f"--resume: no checkpoint at {out / CHECKPOINT} (run first with --out {out})")
+        ck = out / CHECKPOINT
+        if args.resume and (ck.exists() or ck.is_symlink()) and not ck.is_file():
+            raise LeafsimError(f"--resume: {ck} is not a regular file (expected the checkpoint a run with --out {out} wrote)")
+        if args.resume and not ck.is_file():
+            raise LeafsimError(f"--resume: no checkpoint at {ck} (run first with --out {out})")
+        if out.is_dir():
+            # what the run will write there, checked now, not after the simulation
+            output_target(out / "final.npz", "the final state")
+            if args.checkpoint_every != 0:
+                output_target(ck, "checkpoint")
+            if args.every:
+                for f in sorted(out.glob("frame_*.png")):
+                    output_target(f, "PNG frame")
     if args.stats:
         if not Path(args.stats).parent.exists():
             raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")

@@ -27,7 +27,7 @@ from leafsim.compare import metrics as C
 from leafsim.outline.trace import refuse_non_leaf, to_leaf_shape
 from leafsim.pipeline import build_leaf, photo_veins, trace_photo
 from leafsim.render.topdown import TopDown
-from leafsim.sim.run import Run
+from leafsim.sim.run import NotReached, Run
 from leafsim.sim.simulator import Simulator
 
 #: senescent-stage matching samples the drying run every this many frames
@@ -136,6 +136,10 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, la
         for _ in run.frames(until=look):
             if leaf.progress is not None:
                 leaf.progress(run)
+    left = leaf.model.water_fraction(run.state.particle_water)
+    if want_frame is None and left > DRY_LEFT and run.state.frame >= MAX_FRAMES:
+        raise NotReached(f"{leaf.sp.key}: the leaf did not dry within {MAX_FRAMES} frames (water left {left:.3g}, "
+                         f"expected ≤ {DRY_LEFT:g}): do the effects and parameters let it dry?")
     if target is not None and run.state.frame % MATCH_EVERY:  # the dried stage itself
         rgb, mask = leaf.render(run.state, True)
         inner = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0

@@ -141,10 +141,12 @@ def load_carry(path, model: Model) -> dict:
                 continue
             name, a = key.removeprefix("carry_"), np.array(data[key])
             shape = {"path_was_active": (1,), "equilibrium_normal": (n,), "equilibrium_anchor": (n, 2)}.get(name)
-            if name == "equilibrium_history_time":
+            if name == "equilibrium_history_time" and a.ndim >= 1:
                 shape = (min(len(a), 2),)
-            elif name == "equilibrium_history_q":
+            elif name == "equilibrium_history_q" and a.ndim >= 1:
                 shape = (min(len(a), 2), n, 3)
+            elif name.startswith("equilibrium_history_"):
+                shape = (2,) if name.endswith("time") else (2, n, 3)
             if shape is None:
                 raise _fail(where, f"holds an unknown solver record {name!r}")
             kind = "b" if name == "path_was_active" else "f"
@@ -158,8 +160,19 @@ def load_carry(path, model: Model) -> dict:
         raise
     except Exception as e:  # a damaged member
         raise LeafsimError(f"{path}: cannot read checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:80]})") from None
-    if "equilibrium_normal" in out and (out["equilibrium_normal"] < 0).any():
-        raise _fail(where, "solver record equilibrium_normal holds negative normal forces")
+    eq = sorted(k for k in out if k.startswith("equilibrium_"))
+    every = ["equilibrium_anchor", "equilibrium_history_q", "equilibrium_history_time", "equilibrium_normal"]
+    if eq and eq != every:
+        raise _fail(where, f"holds the static solver's records {', '.join(eq)} without "
+                           f"{', '.join(k for k in every if k not in eq)} (all four or none)")
+    # the ground's normal forces carry the leaf's weight: none beyond 10⁴ × its fresh weight
+    most = 1e4 * float(model.particle_mass0.sum()) * 9.81
+    if "equilibrium_normal" in out and ((out["equilibrium_normal"] < 0).any() or (out["equilibrium_normal"] > most).any()):
+        raise _fail(where, f"solver record equilibrium_normal holds normal forces outside [0, {most:.3g}] N "
+                           "(negative, or beyond 10⁴ × the leaf's weight)")
+    ht0 = out.get("equilibrium_history_time")
+    if ht0 is not None and ((ht0 < 0).any() or (ht0 > 1e9).any()):
+        raise _fail(where, "solver record equilibrium_history_time holds times outside [0, 1e9] s")
     if "equilibrium_anchor" in out:
         far = np.abs(out["equilibrium_anchor"] - model.particle_rest[:, :2].mean(0)).max()
         if far > MAX_REACH * model.length:

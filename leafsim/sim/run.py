@@ -30,6 +30,10 @@ from leafsim.sim.stats import StatsStream, frame_stats
 DRY_END_FRACTION = 0.02
 #: ... within this many frames (a leaf that never dries, e.g. evaporation switched off)
 DRY_MAX_FRAMES = 200000
+#: a water or season criterion whose measure has not moved towards it in this many frames is
+#: taken as unreachable (evaporation or aging switched off by a parameter) instead of running
+#: on to ``max_frames``
+STALL_FRAMES = 2000
 
 
 class Diverged(LeafsimError):
@@ -149,6 +153,7 @@ class Run:
         A frame that leaves NaN/Inf in the state is yielded (its statistics can still be
         written), then :class:`Diverged` is raised.  Breaking out of the loop stops the run
         at the frame just yielded."""
+        watch = _Stall(self, stop) if stop is not None and stop.frames is None else None
         while True:
             if stop is not None:
                 if stop.reached(self):
@@ -156,6 +161,8 @@ class Run:
                 if stop.max_frames is not None and self.state.frame >= stop.max_frames:
                     raise NotReached(f"{self._prefix}stopping criterion {stop.describe()} not reached within max_frames = "
                                      f"{stop.max_frames} (water left {self.water_left:.3g}, season {self.season:.3g})")
+                if watch is not None:
+                    watch.check()
             ms = self.step()
             finite = self.finite()
             yield ms
@@ -163,6 +170,43 @@ class Run:
                 raise Diverged(f"{self._prefix}the simulation produced NaN/Inf at frame {self.state.frame}")
             if until is not None and until(self.state):
                 return
+
+
+class _Stall:
+    """Refuses a water or season criterion the run cannot reach: at once when the effect that
+    moves its measure is off (no osmosis: the water never falls; no colour: the season clock
+    stands), else when the measure has not moved towards it in :data:`STALL_FRAMES` frames
+    (not while a weather record drives the drying)."""
+
+    def __init__(self, run: Run, stop: Stop):
+        self.run, self.stop = run, stop
+        fx = run.sim.effects
+        if stop.water_left is not None and not fx.get("osmosis", False):
+            self._fail("the water left cannot fall with effects.osmosis off")
+        if stop.season is not None and not fx.get("colour", False):
+            self._fail("the season clock stands still with effects.colour off")
+        self.best = self._measures()
+        self.since = run.state.frame
+        # a weather record may hold the air saturated for days (no drying): there only the
+        # frame budget ends a run that does not dry
+        self.patient = run.sim.params["environment.drive"] == "weather"
+
+    def _measures(self) -> tuple:
+        return (-self.run.water_left if self.stop.water_left is not None else 0.0,
+                self.run.season if self.stop.season is not None else 0.0)
+
+    def _fail(self, why: str) -> None:
+        r = self.run
+        raise NotReached(f"{r._prefix}stopping criterion {self.stop.describe()} cannot be reached: {why} "
+                         f"(water left {r.water_left:.3g}, season {r.season:.3g} at frame {r.state.frame})")
+
+    def check(self) -> None:
+        now = self._measures()
+        if any(n > b + 1e-9 * max(abs(b), 1.0) for n, b in zip(now, self.best)):
+            self.best, self.since = now, self.run.state.frame
+        elif self.run.state.frame - self.since >= STALL_FRAMES and not self.patient:
+            what = "the water left" if self.stop.water_left is not None else "the season clock"
+            self._fail(f"{what} has not moved towards it in {STALL_FRAMES} frames (evaporation or aging switched off?)")
 
 
 def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stats_path=None, on_frame=None,

@@ -160,3 +160,61 @@ def test_the_runaway_of_the_issue_is_stopped():
     one_line(code, out, err, "simulation unstable", "internal motion", "shrink.sigma_surface_bottom = 3 (draft quality 0.15)",
              "shrink.l_min = 0.1")
     assert "dynamics.substeps" not in err
+
+
+def test_outputs_in_the_out_folder_are_checked_before_the_run(tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    os.mkfifo(out / "final.npz")
+    one_line(*run_cli("run", *OAK, "--frames", "3", "--out", out, "--checkpoint-every", "0"), "final.npz", "named pipe")
+    (out / "final.npz").unlink()
+    (out / "checkpoint.npz").mkdir()
+    one_line(*run_cli("run", *OAK, "--frames", "3", "--out", out), "checkpoint.npz", "it is a folder")
+    one_line(*run_cli("run", *OAK, "--frames", "3", "--out", out, "--resume"), "is not a regular file")
+    (out / "checkpoint.npz").rmdir()
+    (out / "frame_00000.png").mkdir()
+    one_line(*run_cli("run", *OAK, "--frames", "3", "--out", out, "--every", "1"), "frame_00000.png", "it is a folder")
+    (tmp_path / "dangling").symlink_to(tmp_path / "missing")
+    one_line(*run_cli("run", *OAK, "--frames", "3", "--out", tmp_path / "dangling"), "broken symbolic link")
+    assert (out / "frame_00000.png").is_dir() and not (tmp_path / "missing").exists()
+
+
+def test_a_criterion_the_run_cannot_reach_is_refused_not_run_forever(tmp_path, monkeypatch):
+    import leafsim.compare.run as compare_run
+    import leafsim.sim.run as sim_run
+
+    # the effect that moves the measure is off: refused at once
+    one_line(*run_cli("run", *OAK, "--until", "dry", "--effects", "shrink,pbd"), "effects.osmosis off")
+    one_line(*run_cli("run", *OAK, "--until", "season=2", "--effects", "osmosis"), "effects.colour off")
+    one_line(*run_cli("export", *OAK, "--until", "dry", "--effects", "shrink", "--out", tmp_path / "x.glb"),
+             "effects.osmosis off")
+    assert not (tmp_path / "x.glb").exists()
+    # the measure stands still (evaporation off): refused after STALL_FRAMES frames without progress
+    monkeypatch.setattr(sim_run, "STALL_FRAMES", 40)
+    err = one_line(*run_cli("run", *OAK, "--until", "water=0.5", "--set", "osmosis.evaporation_top=0",
+                            "--set", "osmosis.evaporation_bottom=0", "--set", "osmosis.edge_evaporation=0"),
+                   "has not moved towards it in 40 frames")
+    assert "at frame 40" in err
+    # compare's dried stage of a leaf that cannot dry is an error, not a "dried" row at full water
+    monkeypatch.setattr(compare_run, "MAX_FRAMES", 30)
+    one_line(*run_cli("compare", *OAK, "--stage", "dried", "--effects", "colour"), "did not dry within 30 frames")
+
+
+def test_incomplete_or_absurd_solver_records_are_refused(tmp_path):
+    out = tmp_path / "o"
+    static = [*OAK, "--set", "dynamics.integrator=static"]  # its checkpoints carry the solver's records
+    assert run_cli("run", *static, "--frames", "4", "--out", out, "--checkpoint-every", "2")[0] == 0
+    ck = out / "checkpoint.npz"
+    good = dict(np.load(ck))
+    assert {"carry_equilibrium_normal", "carry_equilibrium_anchor"} <= set(good)
+    for damage, needle in (("drop anchor", "without equilibrium_anchor"), ("huge normal", "outside [0,"),
+                           ("0-d history", "equilibrium_history_time is")):
+        d = dict(good)
+        if damage == "drop anchor":
+            del d["carry_equilibrium_anchor"]
+        elif damage == "huge normal":
+            d["carry_equilibrium_normal"] = d["carry_equilibrium_normal"] + 1e300
+        else:
+            d["carry_equilibrium_history_time"] = np.array(0.5)
+        np.savez(ck, **d)
+        one_line(*run_cli("run", *static, "--frames", "8", "--out", out, "--checkpoint-every", "2", "--resume"), needle)
