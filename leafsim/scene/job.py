@@ -73,11 +73,93 @@ class LeafFailure(LeafsimError):
 
 
 def is_done(job: LeafJob, out: Path) -> bool:
-    """True when ``done.json`` of the leaf names this job's key (a rerun skips it)."""
+    """True when ``done.json`` of the leaf names this job's key and it and ``view.npz`` hold
+    what a finished leaf writes (:func:`check_done`, :func:`load_view`): a rerun skips such a
+    leaf, and simulates one whose files were damaged or edited again."""
+    folder = leaf_dir(out, job.name)
     try:
-        return json.loads((leaf_dir(out, job.name) / "done.json").read_text())["key"] == job.key
-    except (OSError, ValueError, KeyError, TypeError):
+        if check_done(folder / "done.json").get("key") != job.key:
+            return False
+        load_view(folder / "view.npz")
+    except (OSError, LeafsimError):
         return False
+    return True
+
+
+#: done.json's numbers: name → (kind, smallest, largest)
+_DONE = {"frames": (int, 0, 10 ** 9), "time_s": (float, 0.0, 1e9), "water_left": (float, 0.0, 1.0),
+         "season": (float, 0.0, 1e3), "particles_simulated": (int, 1, 10 ** 9), "particles_shown": (int, 1, 10 ** 9),
+         "margin_lift": (float, -1e3, 1e3), "area_3d": (float, 0.0, 1e3), "area_top": (float, 0.0, 1e3)}
+
+
+def check_done(path: Path) -> dict:
+    """``done.json`` of a finished leaf, its numbers checked (finite, in range); LeafsimError
+    naming the file and key otherwise."""
+    if not path.is_file():
+        raise LeafsimError(f"{path}: not a regular file")
+    if path.stat().st_size > 1 << 20:
+        raise LeafsimError(f"{path}: larger than a leaf summary")
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError) as e:
+        raise LeafsimError(f"{path}: not JSON ({e})") from None
+    if not isinstance(d, dict) or not isinstance(d.get("key"), str):
+        raise LeafsimError(f"{path}: expected an object with the job's key")
+    for k, (kind, lo, hi) in _DONE.items():
+        v = d.get(k)
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and (kind is float or isinstance(v, int))
+        if not ok or not (lo <= v <= hi):  # NaN fails the comparison
+            raise LeafsimError(f"{path}: '{k}' is {v!r}, expected a{'n integer' if kind is int else ' number'} in [{lo}, {hi}]")
+    return d
+
+
+def load_view(path: Path) -> dict:
+    """The ``view.npz`` arrays of a finished leaf (:func:`view_arrays`), each checked for the
+    key, dtype kind, shape and range a scene composition draws; LeafsimError naming the file
+    and array otherwise."""
+    if not path.is_file():
+        raise LeafsimError(f"{path}: not a regular file")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            v = {k: z[k] for k in z.files}
+    except Exception as e:  # zip, zlib, numpy or a pickled member
+        raise LeafsimError(f"{path}: cannot read ({type(e).__name__}: {str(e).splitlines()[0][:80] if str(e) else ''})") from None
+
+    def bad(name, why):
+        return LeafsimError(f"{path}: array '{name}' {why}")
+
+    kinds = {"positions": "f", "triangles": "i", "colours": "f", "thickness": "f", "length": "f",
+             "vein_index": "i", "vein_width": "f", "vein_start": "i", "vein_order": "i"}
+    for name, kind in kinds.items():
+        if name not in v:
+            raise bad(name, "is missing")
+        if v[name].dtype.kind != kind:
+            raise bad(name, f"is {v[name].dtype}, expected {'floats' if kind == 'f' else 'integers'}")
+        if kind == "f" and not np.isfinite(v[name]).all():
+            raise bad(name, "holds NaN or infinite values")
+    q, tri, col = v["positions"], v["triangles"], v["colours"]
+    length, thick = float(np.asarray(v["length"]).reshape(-1)[0]) if v["length"].size == 1 else -1.0, v["thickness"]
+    if not (0.0 < length <= 10.0):
+        raise bad("length", "is not a leaf length in (0, 10] m")
+    if thick.size != 1 or not (0.0 < float(thick.reshape(-1)[0]) <= 0.1 * length):
+        raise bad("thickness", "is not a thickness in (0, L/10]")
+    m = len(q)
+    if q.ndim != 2 or q.shape[1] != 3 or m == 0 or np.abs(q).max() > 100.0 * length:
+        raise bad("positions", f"is {q.shape}, expected (m, 3) within 100 leaf lengths")
+    if tri.ndim != 2 or tri.shape[1] != 3 or not len(tri) or tri.min() < 0 or tri.max() >= m:
+        raise bad("triangles", f"is {tri.shape}, expected (t, 3) indices into the {m} positions")
+    if col.shape != (m, 3) or col.min() < 0.0 or col.max() > 1.0:
+        raise bad("colours", f"is {col.shape}, expected ({m}, 3) linear RGB in [0, 1]")
+    vi, vs, vw, vo = v["vein_index"], v["vein_start"], v["vein_width"], v["vein_order"]
+    if vi.ndim != 1 or (len(vi) and (vi.min() < 0 or vi.max() >= m)):
+        raise bad("vein_index", f"is not a list of indices into the {m} positions")
+    if vs.ndim != 1 or not len(vs) or vs[0] != 0 or vs[-1] != len(vi) or (np.diff(vs) < 0).any():
+        raise bad("vein_start", "is not the vein polylines' offsets into vein_index")
+    if vw.shape != vi.shape or (vw < 0).any() or (len(vw) and vw.max() > length):
+        raise bad("vein_width", "is not one width in [0, L] per vein point")
+    if vo.shape != (len(vs) - 1,):
+        raise bad("vein_order", "is not one order per vein polyline")
+    return v
 
 
 # ------------------------------------------------------------------ simulation

@@ -33,11 +33,9 @@ SAMPLES_PER_CELL = 2.0
 
 def load_views(out: Path, jobs) -> dict:
     """``view.npz`` arrays of every finished leaf, by name."""
-    views = {}
-    for j in jobs:
-        with np.load(leaf_dir(out, j.name) / "view.npz") as z:
-            views[j.name] = {k: z[k] for k in z.files}
-    return views
+    from leafsim.scene.job import load_view
+
+    return {j.name: load_view(leaf_dir(out, j.name) / "view.npz") for j in jobs}
 
 
 def rot_z(a: float) -> np.ndarray:

@@ -30,7 +30,7 @@ import numpy as np
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes, read_json
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
-from leafsim.scene.job import LeafJob, is_done, run_leaf
+from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
 from leafsim.scene.layout import leaf_dir
 
 _TOP_KEYS = {"name", "description", "seed", "config", "layout", "overview", "groups"}
@@ -421,7 +421,7 @@ def compose(scene: Scene, out: Path, render: bool = True) -> None:
     placed = place(scene.layout, scene.seed, done, views)
     summary = {"scene": scene.name, "leaves": {}, "lod": {}}
     for j in done:
-        d = json.loads((leaf_dir(out, j.name) / "done.json").read_text())
+        d = check_done(leaf_dir(out, j.name) / "done.json")
         summary["leaves"][j.name] = {k: v for k, v in d.items() if k != "key"}
         lod = leaf_dir(out, j.name) / "lod.json"
         if lod.exists():

@@ -87,6 +87,47 @@ def test_two_workers_give_the_same_bytes_and_rerun_skips(one_worker, tmp_path):
     assert all(p.stat().st_mtime_ns == t for p, t in stamp.items() if p.parent.parent.name == "leaves")
 
 
+def test_damaged_files_of_a_finished_leaf_make_a_rerun_simulate_it_again(one_worker, tmp_path):
+    """A rerun trusts a finished leaf only when its done.json and view.npz hold what a finished
+    leaf writes: junk, NaN, a missing array or a bad index is simulated again (to the same
+    bytes), not composed into the scene (it was an internal error or NaN in placement.json)."""
+    scene, out1, _ = one_worker
+    import shutil
+
+    from leafsim.scene.job import check_done, load_view
+
+    ref = _files(out1)
+    for damage in ("junk view", "nan positions", "no triangles", "bad index", "nan water", "string frames"):
+        out = tmp_path / damage.replace(" ", "_")
+        shutil.copytree(out1, out)
+        leaf = out / "leaves" / "oak-001"
+        view, done = leaf / "view.npz", leaf / "done.json"
+        v = {k: np.array(x) for k, x in np.load(view).items()}
+        d = json.loads(done.read_text())
+        if damage == "junk view":
+            view.write_bytes(b"not a zip file")
+        elif damage == "nan positions":
+            v["positions"][0, 0] = np.nan
+        elif damage == "no triangles":
+            del v["triangles"]
+        elif damage == "bad index":
+            v["triangles"][0, 0] = len(v["positions"])
+        elif damage == "nan water":
+            d["water_left"] = float("nan")
+        else:
+            d["frames"] = "abc"
+        if damage != "junk view" and damage.split()[-1] not in ("water", "frames"):
+            with open(view, "wb") as f:
+                np.savez(f, **v)
+        done.write_text(json.dumps(d))
+        with pytest.raises(LeafsimError, match=str(leaf.name)):
+            load_view(view)
+            check_done(done)
+        rep = run_scene(scene, out, workers=1, progress=False)
+        assert rep["ran"] == 1 and rep["skipped"] == 2 and rep["failed"] == [], (damage, rep)
+        assert _files(out) == ref, damage
+
+
 def test_changed_group_reruns_only_its_leaves(one_worker, tmp_path):
     scene, out1, _ = one_worker
     import shutil
