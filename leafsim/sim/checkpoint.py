@@ -114,8 +114,14 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
             coarse = State(**{f.name: np.array(data[f"path_{f.name}"]) for f in fields(State) if f.name not in ("pigments", "path")})
         pig = None
         if "pigments" in meta:
-            pig = PigmentState(**{k: np.array(data[f"pig_{k}"]) for k in _PIGMENT_ARRAYS},
-                               age=float(meta["pigments"]["age"]), seed=int(meta["pigments"]["seed"]))
+            rec = meta["pigments"]
+            age, seed = (rec.get("age"), rec.get("seed")) if isinstance(rec, dict) else (None, None)
+            if not (isinstance(age, (int, float)) and 0.0 <= age <= 1e3) or not (isinstance(seed, int) and 0 <= seed < 2 ** 63):
+                raise LeafsimError(f"{path}: checkpoint's pigment record is {rec!r}, expected an age in [0, 1000] "
+                                   "and a non-negative integer seed")
+            pig = PigmentState(**{k: np.array(data[f"pig_{k}"]) for k in _PIGMENT_ARRAYS}, age=float(age), seed=seed)
+        elif any(k.startswith("pig_") for k in data.files):
+            raise LeafsimError(f"{path}: checkpoint holds pigment arrays without their record (age, seed) in meta")
     except KeyError as e:
         raise LeafsimError(f"{path}: checkpoint is missing {e.args[0]}") from None
     except Exception as e:  # a damaged member: zlib, numpy or a wrong type
@@ -227,9 +233,14 @@ def check_state(state: State, model: Model, where: str, frame=None) -> None:
         raise _fail(where, "array spring_rest holds rest lengths outside (0, 2] × their fresh lengths")
     if (np.abs(state.hinge_rest) > np.pi).any() or (np.abs(state.hinge_plastic) > np.pi).any():
         raise _fail(where, "array hinge_rest/hinge_plastic holds angles beyond ±π")
-    t, k = float(state.scalars[0]), float(state.scalars[1])
+    t, k, tw = float(state.scalars[0]), float(state.scalars[1]), float(state.scalars[2])
     if t < 0 or t > 1e9 or k < 0 or k != round(k) or (frame is not None and int(k) != frame):
         raise _fail(where, f"array scalars holds time {t:g} s, frame {k:g} (expected non-negative, frame {frame})")
+    if t > (k + 1) * PARAMS["dynamics.dt"].hi * (1 + 1e-9):
+        raise _fail(where, f"array scalars holds time {t:g} s at frame {k:g}: more than frame × the longest Δt "
+                           f"({PARAMS['dynamics.dt'].hi:g} s)")
+    if not (0.0 <= tw <= 1e12):
+        raise _fail(where, f"array scalars holds weather time {tw:g} s, expected [0, 1e12] s")
     pig = state.pigments
     if pig is not None:
         n = model.particle_count
@@ -240,7 +251,8 @@ def check_state(state: State, model: Model, where: str, frame=None) -> None:
             if not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dtype:
                 got = f"{a.dtype} {a.shape}" if isinstance(a, np.ndarray) else type(a).__name__
                 raise _fail(where, f"pigment array {name} is {got}, expected {np.dtype(dtype)} {shape}")
-            if not np.isfinite(a).all() or (name != "leaf" and (a < 0).any()) or (np.abs(a) > MAX_PIGMENT).any():
+            if (not np.isfinite(a).all() or (name != "leaf" and (a < 0).any()) or (name == "leaf" and (a[:5] <= 0).any())
+                    or (np.abs(a) > MAX_PIGMENT).any()):
                 raise _fail(where, f"pigment array {name} holds NaN, infinite, negative or huge values "
                                    f"(pigment contents are fractions of a summer content, at most {MAX_PIGMENT:g})")
         if not np.isfinite(pig.age):

@@ -104,6 +104,8 @@ def test_errors_name_their_real_cause(tmp_path):
     ("nan", "NaN or infinite"),
     ("too much water", "more water"),
     ("truncated file", "cannot read checkpoint"),
+    ("time beyond the frames", "more than frame × the longest Δt"),
+    ("negative leaf factor", "pigment array leaf"),
 ])
 def test_a_damaged_checkpoint_is_refused_before_any_kernel(tmp_path, damage, needle):
     out = tmp_path / "o"
@@ -123,6 +125,11 @@ def test_a_damaged_checkpoint_is_refused_before_any_kernel(tmp_path, damage, nee
             d["state_particle_qd"][3, 1] = np.nan
         elif damage == "too much water":
             d["state_particle_water"] = d["state_particle_water"] * 3
+        elif damage == "time beyond the frames":
+            d["state_scalars"] = d["state_scalars"].copy()
+            d["state_scalars"][0] = 1e9
+        elif damage == "negative leaf factor":
+            d["pig_leaf"] = -50.0 * np.abs(d["pig_leaf"])
         np.savez(ck, **d)
     one_line(*run_cli("run", *OAK, "--frames", "8", "--out", out, "--checkpoint-every", "2", "--resume"), needle)
 
