@@ -218,6 +218,15 @@ class _Duplicate(ValueError):
     pass
 
 
+class _TooLong(ValueError):
+    pass
+
+
+#: the longest integer a JSON input may write (Python refuses to parse beyond 4300 digits; no
+#: leafsim value needs more than a few)
+MAX_INT_DIGITS = 30
+
+
 def read_json(path: str | os.PathLike, what: str = "file", max_bytes: int = MAX_JSON_BYTES):
     """Parse the JSON file ``path``; LeafsimError (one line naming the file and, for bad JSON,
     the line and column) when it is missing, not a regular file, larger than ``max_bytes``,
@@ -237,8 +246,16 @@ def read_json(path: str | os.PathLike, what: str = "file", max_bytes: int = MAX_
     except UnicodeDecodeError as e:
         raise LeafsimError(f"{path}: {what} is not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); "
                            "expected a UTF-8 JSON file") from None
+    def whole(digits: str) -> int:
+        if len(digits.lstrip("-")) > MAX_INT_DIGITS:
+            raise _TooLong(digits[:12])
+        return int(digits)
+
     try:
-        return json.loads(text, object_pairs_hook=_no_duplicates)
+        return json.loads(text, object_pairs_hook=_no_duplicates, parse_int=whole)
+    except _TooLong as e:
+        raise LeafsimError(f"{path}: an integer of more than {MAX_INT_DIGITS} digits ({e.args[0]}…): expected "
+                           f"numbers a leafsim {what} can hold") from None
     except _Duplicate as e:
         raise LeafsimError(f"{path}: duplicate key '{e.args[0]}' (a JSON object names each key once; the "
                            "second would silently replace the first)") from None

@@ -17,6 +17,34 @@ _DEBUG = False
 MIN_WORKING_SIDE = 300
 
 
+#: the most pixels a photo may have (a 50 MP camera gives 50 million; a small file can claim
+#: billions: a 0.5 MB 1-bit PNG of 65 000 × 65 000 took gigabytes to decode)
+MAX_DECODE_PIXELS = 150_000_000
+
+
+def _header_size(data: np.ndarray) -> tuple[int, int] | None:
+    """(width, height) a PNG's or JPEG's header claims, before decoding; None for other kinds."""
+    b = data[:1 << 16].tobytes()
+    if b[:8] == b"\x89PNG\r\n\x1a\n" and b[12:16] == b"IHDR":
+        return int.from_bytes(b[16:20], "big"), int.from_bytes(b[20:24], "big")
+    if b[:2] == b"\xff\xd8":
+        i = 2
+        while i + 9 <= len(b) and b[i] == 0xFF:
+            marker, seg = b[i + 1], int.from_bytes(b[i + 2:i + 4], "big")
+            if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+                return int.from_bytes(b[i + 7:i + 9], "big"), int.from_bytes(b[i + 5:i + 7], "big")
+            i += 2 + seg
+    return None
+
+
+def _quiet_opencv() -> None:
+    """OpenCV's decoders print their own complaints on stderr; leafsim says one line instead."""
+    try:
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    except AttributeError:
+        pass
+
+
 def load_image(path: str | os.PathLike) -> np.ndarray:
     """Read a photo as uint8 BGR (h, w, 3) or BGRA (h, w, 4).
 
@@ -32,7 +60,15 @@ def load_image(path: str | os.PathLike) -> np.ndarray:
         raise LeafsimError(f"{where}: cannot read image ({exc.strerror or exc})") from None
     if data.size == 0:
         raise LeafsimError(f"{where}: cannot read image (empty file)")
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    size = _header_size(data)
+    if size is not None and size[0] * size[1] > MAX_DECODE_PIXELS:
+        raise LeafsimError(f"{where}: cannot read image ({size[0]}×{size[1]} pixels, more than "
+                           f"{MAX_DECODE_PIXELS // 1_000_000} million: expected a photo of one leaf)")
+    _quiet_opencv()
+    try:
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    except cv2.error as exc:  # OpenCV's own limits (pixels, memory)
+        raise LeafsimError(f"{where}: cannot read image (OpenCV: {str(exc).strip().splitlines()[-1][:80]})") from None
     if img is None:
         raise LeafsimError(f"{where}: cannot read image (not a PNG/JPEG/TIFF/BMP image or corrupt data)")
     if img.size == 0 or img.shape[0] == 0 or img.shape[1] == 0:

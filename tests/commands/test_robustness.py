@@ -63,6 +63,15 @@ def test_inputs_that_are_not_bounded_files_are_refused(tmp_path, fifo):
     big = tmp_path / "big.json"
     big.write_text(json.dumps(cfg))
     one_line(*run_cli("species", "--config", big), "25,000 points, expected at most 20,000")
+    huge = tmp_path / "huge.json"
+    huge.write_text('{"species": {"x": {"length_m": 1' + "0" * 5000 + '}}}')
+    one_line(*run_cli("species", "--config", huge), "an integer of more than 30 digits")
+    bomb = tmp_path / "bomb.png"  # a tiny file whose header claims 65 000 × 65 000 pixels
+    ok, png = cv2.imencode(".png", np.zeros((8, 8), np.uint8))
+    raw = bytearray(png.tobytes())
+    raw[16:24] = (65000).to_bytes(4, "big") * 2
+    bomb.write_bytes(bytes(raw))
+    one_line(*run_cli("outline", bomb), "65000×65000 pixels")
     dup = tmp_path / "dup.json"
     dup.write_text(Path("configs/leaves.json").read_text().replace('"species": {', '"species": {"oak": {}, ', 1))
     one_line(*run_cli("species", "--config", dup), "duplicate key 'oak'")
