@@ -8,7 +8,7 @@ from pathlib import Path
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import check_output
+from leafsim.base.fileio import check_output, output_target
 from leafsim.commands.common import Progress, emit, ready_kernels, species_params, stop_of
 from leafsim.export.mesh import export_mesh, format_of
 from leafsim.pipeline import build_leaf
@@ -28,6 +28,12 @@ def _check(args) -> str:
     folder = Path(args.out).parent
     if not folder.is_dir():
         raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")
+    # the files written beside the mesh, checked now too (a folder named x.bin failed after the drying)
+    out = Path(args.out)
+    side = {"gltf": [(out.with_suffix(".bin"), "glTF buffer")],
+            "obj": [(out.with_suffix(".mtl"), "material"), (out.with_name(out.stem + "_photo.png"), "texture")]}
+    for path, what in side.get(fmt, []):
+        output_target(path, what)
     return fmt
 
 

@@ -47,6 +47,9 @@ def test_outputs_onto_special_files_are_refused_untouched(tmp_path, fifo):
     one_line(*run_cli("outline", "images/quercus_01.png", "--out", tmp_path / "x.jpg"), "expected a .png file name")
     one_line(*run_cli("export", *OAK, "--out", fifo), "named pipe")
     one_line(*run_cli("export", *OAK, "--out", tmp_path), "it is a folder")
+    (tmp_path / "m.bin").mkdir()  # the buffer beside a .gltf: refused before the build
+    one_line(*run_cli("export", *OAK, "--out", tmp_path / "m.gltf", "--frames", "3"), "m.bin", "it is a folder")
+    assert not (tmp_path / "m.gltf").exists()
     one_line(*run_cli("run", *OAK, "--frames", "2", "--stats", fifo), "named pipe")
     assert fifo.is_fifo() and tmp_path.is_dir()
     if os.path.isdir("/proc"):  # found before the build, not after it
