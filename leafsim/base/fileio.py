@@ -222,9 +222,10 @@ class _TooLong(ValueError):
     pass
 
 
-#: the longest integer a JSON input may write (Python refuses to parse beyond 4300 digits; no
-#: leafsim value needs more than a few)
-MAX_INT_DIGITS = 30
+#: the longest integer a JSON input may write: below Python's own limit of 4300 digits, beyond
+#: which parsing failed with an internal error (shorter huge numbers reach the checks of their
+#: key, which name it)
+MAX_INT_DIGITS = 4000
 
 
 def read_json(path: str | os.PathLike, what: str = "file", max_bytes: int = MAX_JSON_BYTES):

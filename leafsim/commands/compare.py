@@ -28,7 +28,8 @@ def stage_arg(text: str | None):
 def cmd_compare(args):
     stage = stage_arg(args.stage)
     if args.photo is not None and not Path(args.photo).is_file():
-        raise LeafsimError(f"--photo {args.photo}: file not found")
+        raise LeafsimError(f"--photo {args.photo}: " + ("not a regular file (a folder, a device or a pipe), expected an image"
+                                                          if Path(args.photo).exists() else "file not found"))
     png_output("--out", args.out)
     sp, params = species_params(args, effects=True)
     if args.photo is None and sp.image is None:  # before the kernels compile (run_compare says the same)

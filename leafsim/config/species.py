@@ -263,6 +263,8 @@ def _image(path: Path, key: str, name: str, value: Any) -> Path:
         image = (base_dir / image).resolve()
     if image.is_dir():
         raise _err(path, key, name, f"photo {image} is a folder, expected an image file")
+    if image.exists() and not image.is_file():
+        raise _err(path, key, name, f"photo {image} is not a regular file (a device or a pipe), expected an image file")
     if not image.is_file():
         raise _err(path, key, name, f"photo {image} not found")
     return image

@@ -161,6 +161,8 @@ def load_scene(path) -> Scene:
 
 
 def _too_many(n: int) -> str:
+    if n > 10 ** 15:  # beyond a float's reach (a count of 400 digits): no sizes to quote
+        return f"{str(n)[:12]}… ({len(str(n))} digits) leaves: a scene holds at most {MAX_SCENE_LEAVES:,}"
     return (f"{n:,} leaves would need ≈ {n * SETUP_BYTES_PER_LEAF / 1e9:.2g} GB and {n * SETUP_S_PER_LEAF:.2g} CPU s "
             f"just to set up, before any simulation; a scene holds at most {MAX_SCENE_LEAVES:,} (split it into several scenes)")
 

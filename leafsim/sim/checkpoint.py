@@ -122,8 +122,8 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
             pig = PigmentState(**{k: np.array(data[f"pig_{k}"]) for k in _PIGMENT_ARRAYS}, age=float(age), seed=seed)
         elif any(k.startswith("pig_") for k in data.files):
             raise LeafsimError(f"{path}: checkpoint holds pigment arrays without their record (age, seed) in meta")
-    except KeyError as e:
-        raise LeafsimError(f"{path}: checkpoint is missing {e.args[0]}") from None
+    except KeyError as e:  # numpy says "NAME is not a file in the archive"
+        raise LeafsimError(f"{path}: checkpoint is missing the array {str(e.args[0]).split()[0]}") from None
     except Exception as e:  # a damaged member: zlib, numpy or a wrong type
         raise LeafsimError(f"{path}: cannot read checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:80]})") from None
     state = State(**arrays, pigments=pig, path=coarse)
