@@ -191,7 +191,11 @@ class MeshSource:
 
 def format_of(path, fmt: str | None) -> str:
     """The export format: ``fmt`` when given, else the file's suffix; LeafsimError otherwise."""
-    fmt = fmt or Path(path).suffix.lstrip(".").lower()
+    suffix = Path(path).suffix.lstrip(".").lower()
+    if fmt and suffix in FORMATS and suffix != fmt:
+        raise LeafsimError(f"{path}: the name says {suffix}, --format says {fmt} (a {fmt} file named .{suffix} "
+                           "would not open as one): name it .{fmt} or leave --format out".replace("{fmt}", fmt))
+    fmt = fmt or suffix
     if fmt not in FORMATS:
         raise LeafsimError(f"{path}: unknown mesh format {fmt!r} (expected one of {', '.join(FORMATS)})")
     return fmt

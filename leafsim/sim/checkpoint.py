@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 from dataclasses import fields
 from pathlib import Path
 
@@ -84,9 +85,36 @@ def check_meta(path, expect: dict) -> dict:
     return meta
 
 
+#: no array of a checkpoint holds more elements than this (a model of millions of particles
+#: stays far below; a small damaged or hostile file can inflate: 13 MB of zeros made 3 GB)
+MAX_ELEMENTS = 20_000_000
+
+
+def _bounded(path: Path) -> None:
+    """Read each member's .npy header (not its data) and refuse a member that claims more
+    than :data:`MAX_ELEMENTS` elements, before numpy inflates it."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as z:
+        for info in z.infolist():
+            with z.open(info) as f:
+                version = np.lib.format.read_magic(f)
+                shape = (np.lib.format.read_array_header_1_0(f) if version == (1, 0)
+                         else np.lib.format.read_array_header_2_0(f))[0]
+            if math.prod(shape) > MAX_ELEMENTS:
+                raise LeafsimError(f"{path}: checkpoint member {info.filename} claims shape {shape}, more than "
+                                   f"{MAX_ELEMENTS:,} elements: not a leafsim checkpoint")
+
+
 def _open(path: Path):
     if not path.is_file():
         raise LeafsimError(f"--resume: no checkpoint at {path} (run first with --out and --checkpoint-every)")
+    try:
+        _bounded(path)
+    except LeafsimError:
+        raise
+    except Exception as e:  # not a zip of .npy members
+        raise LeafsimError(f"{path}: cannot read checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:80] if str(e) else ''})") from None
     try:
         data = np.load(path, allow_pickle=False)
         meta = json.loads(str(data["meta"]))

@@ -119,6 +119,7 @@ def test_errors_name_their_real_cause(tmp_path):
     ("truncated file", "cannot read checkpoint"),
     ("time beyond the frames", "more than frame × the longest Δt"),
     ("negative leaf factor", "pigment array leaf"),
+    ("inflating member", "more than 20,000,000 elements"),
 ])
 def test_a_damaged_checkpoint_is_refused_before_any_kernel(tmp_path, damage, needle):
     out = tmp_path / "o"
@@ -143,7 +144,9 @@ def test_a_damaged_checkpoint_is_refused_before_any_kernel(tmp_path, damage, nee
             d["state_scalars"][0] = 1e9
         elif damage == "negative leaf factor":
             d["pig_leaf"] = -50.0 * np.abs(d["pig_leaf"])
-        np.savez(ck, **d)
+        elif damage == "inflating member":  # compresses to a few hundred kB, would inflate to 200 MB
+            d["state_particle_q"] = np.zeros((25_000_000,), np.float64)
+        (np.savez_compressed if damage == "inflating member" else np.savez)(ck, **d)
     one_line(*run_cli("run", *OAK, "--frames", "8", "--out", out, "--checkpoint-every", "2", "--resume"), needle)
 
 
