@@ -1,8 +1,9 @@
 """Does relaxing the handed-over state with XPBD frames make the first static solve cheaper?
 The measurement behind docs/performance.md ("A static finish, measured": relaxing first).
 
-Dries ``species`` at its defaults with the XPBD finish (drying path) to the hand-over, then after each
-count N of own-mesh XPBD frames solves the static equilibrium (:class:`Equilibrium`, fresh
+Dries ``species`` at its defaults with the XPBD finish (drying path) to the hand-over (whose
+step is the own mesh's first XPBD frame), then after each count N of further own-mesh XPBD
+frames solves the static equilibrium (:class:`Equilibrium`, fresh
 friction) on a copy of the state and prints the Newton iterations, the largest force before
 and after (× a particle's weight), the time and how far the solve moved the leaf.
 

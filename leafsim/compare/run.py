@@ -136,10 +136,6 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, la
         for _ in run.frames(until=look):
             if leaf.progress is not None:
                 leaf.progress(run)
-    left = leaf.model.water_fraction(run.state.particle_water)
-    if want_frame is None and left > DRY_LEFT and run.state.frame >= MAX_FRAMES:
-        raise NotReached(f"{leaf.sp.key}: the leaf did not dry within {MAX_FRAMES} frames (water left {left:.3g}, "
-                         f"expected ≤ {DRY_LEFT:g}): do the effects and parameters let it dry?")
     if target is not None and run.state.frame % MATCH_EVERY:  # the dried stage itself
         rgb, mask = leaf.render(run.state, True)
         inner = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
@@ -213,6 +209,10 @@ def _rows(leaf: _Leaf, own: C.Reference, stage, species_photo: bool) -> list[Row
     if stage is not None and stage != "young":
         frame = None if stage == "dried" else int(stage)
         dried, at, _ = _dry_run(leaf, frame, None)
+        left = leaf.model.water_fraction(dried.particle_water)
+        if frame is None and left > DRY_LEFT:
+            raise NotReached(f"{leaf.sp.key}: --stage dried: the leaf did not dry within {MAX_FRAMES} frames (water left "
+                             f"{left:.3g}, expected ≤ {DRY_LEFT:g}): do the effects and parameters let it dry?")
         st = dried if frame is None else at
         return [Row("stage", own, st, note=f"stage {stage}")]
     rows = [Row("young", own, leaf.state0, note="photo of a senescent leaf: the young model is the palette green"

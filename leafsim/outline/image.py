@@ -24,12 +24,16 @@ MAX_DECODE_PIXELS = 150_000_000
 
 def _header_size(data: np.ndarray) -> tuple[int, int] | None:
     """(width, height) a PNG's or JPEG's header claims, before decoding; None for other kinds."""
-    b = data[:1 << 16].tobytes()
+    b = data[:1 << 21].tobytes()  # the frame header follows the metadata segments (EXIF ≤ 64 kB each)
     if b[:8] == b"\x89PNG\r\n\x1a\n" and b[12:16] == b"IHDR":
         return int.from_bytes(b[16:20], "big"), int.from_bytes(b[20:24], "big")
     if b[:2] == b"\xff\xd8":
         i = 2
         while i + 9 <= len(b) and b[i] == 0xFF:
+            while i + 1 < len(b) and b[i + 1] == 0xFF:  # fill bytes before a marker
+                i += 1
+            if i + 9 > len(b):
+                break
             marker, seg = b[i + 1], int.from_bytes(b[i + 2:i + 4], "big")
             if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
                 return int.from_bytes(b[i + 7:i + 9], "big"), int.from_bytes(b[i + 5:i + 7], "big")

@@ -24,7 +24,7 @@ from leafsim import __version__
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import atomic_write_bytes, npz_bytes
+from leafsim.base.fileio import atomic_write_bytes, npz_bytes, read_json
 from leafsim.config.species import get_species
 from leafsim.export.mesh import export_mesh
 from leafsim.pipeline import build_leaf
@@ -88,21 +88,14 @@ def is_done(job: LeafJob, out: Path) -> bool:
 
 #: done.json's numbers: name → (kind, smallest, largest)
 _DONE = {"frames": (int, 0, 10 ** 9), "time_s": (float, 0.0, 1e9), "water_left": (float, 0.0, 1.0),
-         "season": (float, 0.0, 1e3), "particles_simulated": (int, 1, 10 ** 9), "particles_shown": (int, 1, 10 ** 9),
+         "season": (float, 0.0, 1e12), "particles_simulated": (int, 1, 10 ** 9), "particles_shown": (int, 1, 10 ** 9),
          "margin_lift": (float, -1e3, 1e3), "area_3d": (float, 0.0, 1e3), "area_top": (float, 0.0, 1e3)}
 
 
 def check_done(path: Path) -> dict:
     """``done.json`` of a finished leaf, its numbers checked (finite, in range); LeafsimError
     naming the file and key otherwise."""
-    if not path.is_file():
-        raise LeafsimError(f"{path}: not a regular file")
-    if path.stat().st_size > 1 << 20:
-        raise LeafsimError(f"{path}: larger than a leaf summary")
-    try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, UnicodeDecodeError) as e:
-        raise LeafsimError(f"{path}: not JSON ({e})") from None
+    d = read_json(path, "leaf summary", max_bytes=1 << 20)
     if not isinstance(d, dict) or not isinstance(d.get("key"), str):
         raise LeafsimError(f"{path}: expected an object with the job's key")
     for k, (kind, lo, hi) in _DONE.items():
@@ -143,9 +136,9 @@ def load_view(path: Path) -> dict:
         raise bad("length", "is not a leaf length in (0, 10] m")
     if thick.size != 1 or not (0.0 < float(thick.reshape(-1)[0]) <= 0.1 * length):
         raise bad("thickness", "is not a thickness in (0, L/10]")
+    if q.ndim != 2 or q.shape[1] != 3 or len(q) == 0 or np.abs(q - q.mean(0)).max() > 100.0 * length:
+        raise bad("positions", f"is {q.shape}, expected (m, 3) within 100 leaf lengths of their centre (a free leaf falls far)")
     m = len(q)
-    if q.ndim != 2 or q.shape[1] != 3 or m == 0 or np.abs(q).max() > 100.0 * length:
-        raise bad("positions", f"is {q.shape}, expected (m, 3) within 100 leaf lengths")
     if tri.ndim != 2 or tri.shape[1] != 3 or not len(tri) or tri.min() < 0 or tri.max() >= m:
         raise bad("triangles", f"is {tri.shape}, expected (t, 3) indices into the {m} positions")
     if col.shape != (m, 3) or col.min() < 0.0 or col.max() > 1.0:

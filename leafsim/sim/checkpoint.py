@@ -85,25 +85,25 @@ def check_meta(path, expect: dict) -> dict:
     return meta
 
 
-#: no array of a checkpoint holds more elements than this (a model of millions of particles
-#: stays far below; a small damaged or hostile file can inflate: 13 MB of zeros made 3 GB)
-MAX_ELEMENTS = 20_000_000
+#: no array of a checkpoint holds more bytes than this (a model of millions of particles stays
+#: far below; a small damaged or hostile file can inflate: 13 MB of zeros made 3 GB)
+MAX_MEMBER_BYTES = 160_000_000
 
 
 def _bounded(path: Path) -> None:
     """Read each member's .npy header (not its data) and refuse a member that claims more
-    than :data:`MAX_ELEMENTS` elements, before numpy inflates it."""
+    than :data:`MAX_MEMBER_BYTES` (its shape × its dtype's item size), before numpy inflates it."""
     import zipfile
 
     with zipfile.ZipFile(path) as z:
         for info in z.infolist():
             with z.open(info) as f:
                 version = np.lib.format.read_magic(f)
-                shape = (np.lib.format.read_array_header_1_0(f) if version == (1, 0)
-                         else np.lib.format.read_array_header_2_0(f))[0]
-            if math.prod(shape) > MAX_ELEMENTS:
-                raise LeafsimError(f"{path}: checkpoint member {info.filename} claims shape {shape}, more than "
-                                   f"{MAX_ELEMENTS:,} elements: not a leafsim checkpoint")
+                shape, _, dtype = (np.lib.format.read_array_header_1_0(f) if version == (1, 0)
+                                   else np.lib.format.read_array_header_2_0(f))
+            if math.prod(shape) * dtype.itemsize > MAX_MEMBER_BYTES:
+                raise LeafsimError(f"{path}: checkpoint member {info.filename} claims {dtype} {shape}, more than "
+                                   f"{MAX_MEMBER_BYTES:,} bytes: not a leafsim checkpoint")
 
 
 def _open(path: Path):
@@ -144,8 +144,8 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
         if "pigments" in meta:
             rec = meta["pigments"]
             age, seed = (rec.get("age"), rec.get("seed")) if isinstance(rec, dict) else (None, None)
-            if not (isinstance(age, (int, float)) and 0.0 <= age <= 1e3) or not (isinstance(seed, int) and 0 <= seed < 2 ** 63):
-                raise LeafsimError(f"{path}: checkpoint's pigment record is {rec!r}, expected an age in [0, 1000] "
+            if not (isinstance(age, (int, float)) and 0.0 <= age <= 1e12) or not (isinstance(seed, int) and 0 <= seed < 2 ** 63):
+                raise LeafsimError(f"{path}: checkpoint's pigment record is {rec!r}, expected an age in [0, 1e12] "
                                    "and a non-negative integer seed")
             pig = PigmentState(**{k: np.array(data[f"pig_{k}"]) for k in _PIGMENT_ARRAYS}, age=float(age), seed=seed)
         elif any(k.startswith("pig_") for k in data.files):
@@ -267,8 +267,8 @@ def check_state(state: State, model: Model, where: str, frame=None) -> None:
     if t > (k + 1) * PARAMS["dynamics.dt"].hi * (1 + 1e-9):
         raise _fail(where, f"array scalars holds time {t:g} s at frame {k:g}: more than frame × the longest Δt "
                            f"({PARAMS['dynamics.dt'].hi:g} s)")
-    if not (0.0 <= tw <= 1e12):
-        raise _fail(where, f"array scalars holds weather time {tw:g} s, expected [0, 1e12] s")
+    if not (0.0 <= tw <= 1e18):
+        raise _fail(where, f"array scalars holds weather time {tw:g} s, expected [0, 1e18] s")
     pig = state.pigments
     if pig is not None:
         n = model.particle_count

@@ -153,7 +153,7 @@ class Run:
         A frame that leaves NaN/Inf in the state is yielded (its statistics can still be
         written), then :class:`Diverged` is raised.  Breaking out of the loop stops the run
         at the frame just yielded."""
-        watch = _Stall(self, stop) if stop is not None and stop.frames is None else None
+        watch = None
         while True:
             if stop is not None:
                 if stop.reached(self):
@@ -161,7 +161,8 @@ class Run:
                 if stop.max_frames is not None and self.state.frame >= stop.max_frames:
                     raise NotReached(f"{self._prefix}stopping criterion {stop.describe()} not reached within max_frames = "
                                      f"{stop.max_frames} (water left {self.water_left:.3g}, season {self.season:.3g})")
-                if watch is not None:
+                if stop.frames is None:  # (made once the criterion is known not to hold already)
+                    watch = watch or _Stall(self, stop)
                     watch.check()
             ms = self.step()
             finite = self.finite()

@@ -119,7 +119,7 @@ def test_errors_name_their_real_cause(tmp_path):
     ("truncated file", "cannot read checkpoint"),
     ("time beyond the frames", "more than frame × the longest Δt"),
     ("negative leaf factor", "pigment array leaf"),
-    ("inflating member", "more than 20,000,000 elements"),
+    ("inflating member", "more than 160,000,000 bytes"),
 ])
 def test_a_damaged_checkpoint_is_refused_before_any_kernel(tmp_path, damage, needle):
     out = tmp_path / "o"
@@ -144,7 +144,7 @@ def test_a_damaged_checkpoint_is_refused_before_any_kernel(tmp_path, damage, nee
             d["state_scalars"][0] = 1e9
         elif damage == "negative leaf factor":
             d["pig_leaf"] = -50.0 * np.abs(d["pig_leaf"])
-        elif damage == "inflating member":  # compresses to a few hundred kB, would inflate to 200 MB
+        elif damage == "inflating member":  # compresses to a few hundred kB, would inflate to 200 MB (25 M floats)
             d["state_particle_q"] = np.zeros((25_000_000,), np.float64)
         (np.savez_compressed if damage == "inflating member" else np.savez)(ck, **d)
     one_line(*run_cli("run", *OAK, "--frames", "8", "--out", out, "--checkpoint-every", "2", "--resume"), needle)
@@ -206,6 +206,9 @@ def test_a_criterion_the_run_cannot_reach_is_refused_not_run_forever(tmp_path, m
     import leafsim.compare.run as compare_run
     import leafsim.sim.run as sim_run
 
+    # a criterion that already holds runs nothing, effects or not
+    code, out, err = run_cli("run", *OAK, "--until", "water=1", "--effects", "shrink,pbd", "--json")
+    assert code == 0 and json.loads(out)["frames"] == 0, (code, err)
     # the effect that moves the measure is off: refused at once
     one_line(*run_cli("run", *OAK, "--until", "dry", "--effects", "shrink,pbd"), "effects.osmosis off")
     one_line(*run_cli("run", *OAK, "--until", "season=2", "--effects", "osmosis"), "effects.colour off")

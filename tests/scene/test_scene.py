@@ -97,6 +97,11 @@ def test_damaged_files_of_a_finished_leaf_make_a_rerun_simulate_it_again(one_wor
     from leafsim.scene.job import check_done, load_view
 
     ref = _files(out1)
+    far = {k: np.array(x) for k, x in np.load(out1 / "leaves" / "oak-001" / "view.npz").items()}
+    far["positions"][:, 2] -= 500.0 * float(far["length"])  # a free leaf that fell far is still a leaf
+    with open(tmp_path / "far.npz", "wb") as f:
+        np.savez(f, **far)
+    load_view(tmp_path / "far.npz")
     for damage in ("junk view", "nan positions", "no triangles", "bad index", "nan water", "string frames"):
         out = tmp_path / damage.replace(" ", "_")
         shutil.copytree(out1, out)
