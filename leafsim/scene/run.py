@@ -28,7 +28,7 @@ from typing import Callable
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import atomic_write_bytes, read_json
+from leafsim.base.fileio import atomic_write_bytes, output_target, read_json
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
 from leafsim.scene.layout import leaf_dir
@@ -201,6 +201,8 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
     stop = _stop(w, g.get("stop"))
     lod, check = _lod(w, g.get("lod"))
     output = _output(w, g.get("output", {}))
+    if output["mesh"] and output["texture"] == "photo" and lib[sp].image is None:
+        raise w.err("output.texture", f"'photo' needs a species with a photo; {sp!r} has a drawn outline (use 'colours')")
     jobs = []
     for k, s in enumerate(seeds):
         st = dict(stop)
@@ -383,6 +385,10 @@ def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None,
     if workers < 1:
         raise LeafsimError(f"--workers {workers}: expected at least 1")
     out = check_out_dir(out)
+    # what the composition writes, checked before any leaf is simulated
+    for name, what in (("placement.json", "placement"), ("summary.json", "summary"), ("run.json", "run report"),
+                       ("overview.png", "overview")):
+        output_target(out / name, what)
     t0 = time.perf_counter()
     todo = [j for j in scene.jobs if not is_done(j, out)]
     results = []

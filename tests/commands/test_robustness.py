@@ -92,6 +92,12 @@ def test_scene_size_guards_come_before_any_work(tmp_path):
     one_line(*run_cli("scene", scene(count=10 ** 400), "--out", tmp_path / "o"), "(401 digits)", "at most 10,000")
     one_line(*run_cli("scene", scene(layout={"kind": "floor", "size": [100, 100], "cell": 0.0001}), "--out", tmp_path / "o"),
              "layout.cell", "1e+12 cells")
+    one_line(*run_cli("scene", scene(species="maple", output={"mesh": "glb", "texture": "photo"}), "--out", tmp_path / "o"),
+             "output.texture", "drawn outline")
+    (tmp_path / "o2").mkdir()
+    (tmp_path / "o2" / "placement.json").mkdir()
+    one_line(*run_cli("scene", scene(), "--out", tmp_path / "o2"), "placement.json", "it is a folder")
+    assert not any((tmp_path / "o2" / "leaves").iterdir())
     p = tmp_path / "d.json"
     p.write_text('{"groups": [{"name": "a", "species": "oak", "count": 2, "count": 100000, "stop": {"frames": 1}}]}')
     one_line(*run_cli("scene", p, "--out", tmp_path / "o"), "duplicate key 'count'")
