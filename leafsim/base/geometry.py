@@ -87,6 +87,25 @@ def resample_closed(poly: np.ndarray, n: int) -> np.ndarray:
     return np.column_stack([np.interp(t, s, p[:, 0]), np.interp(t, s, p[:, 1])])
 
 
+def resample_closed_keeping(poly: np.ndarray, n: int) -> np.ndarray:
+    """Resample a closed polygon to ``n`` points that keep every vertex (a Douglas–Peucker
+    polygon's tooth tips and notches): each edge is split into equal parts, as many as its share
+    of the perimeter asks for (largest remainders, at least one: its first vertex), starting at
+    ``poly[0]``.  With fewer points than vertices, equal arc length (:func:`resample_closed`)."""
+    poly = np.asarray(poly, float)
+    m, n = len(poly), int(n)
+    if n < m:
+        return resample_closed(poly, n)
+    p = np.vstack([poly, poly[:1]])
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    share = (n - m) * seg / max(float(seg.sum()), 1e-300)
+    k = 1 + np.floor(share).astype(np.int64)
+    k[np.argsort(-(share - np.floor(share)), kind="stable")[: n - int(k.sum())]] += 1
+    i = np.repeat(np.arange(m), k)
+    t = (np.arange(n) - np.repeat(np.cumsum(k) - k, k)) / np.repeat(k, k)
+    return p[i] + t[:, None] * (p[i + 1] - p[i])
+
+
 def resample_polyline(line: np.ndarray, spacing: float) -> np.ndarray:
     """Resample an open polyline at (about) ``spacing``, keeping both end points."""
     seg = np.linalg.norm(np.diff(line, axis=0), axis=1)

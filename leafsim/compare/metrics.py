@@ -236,7 +236,7 @@ def colour_spread(rgb: np.ndarray, mask: np.ndarray, length_px: float) -> dict:
     C = np.hypot(px[:, 1], px[:, 2])
     z = np.exp(1j * np.arctan2(px[C >= 8, 2], px[C >= 8, 1]))
     R = float(abs(z.mean())) if z.size else 0.0
-    hue_sd = float(np.degrees(np.sqrt(-2.0 * np.log(max(R, 1e-12))))) if z.size else None
+    hue_sd = float(np.degrees(np.sqrt(-2.0 * np.log(min(max(R, 1e-12), 1.0))))) if z.size else None
     dark = (m & (lab[..., 0] < float(np.median(px[:, 0])) - 15.0)).astype(np.uint8)
     n, _, stats, _ = cv2.connectedComponentsWithStats(dark, connectivity=8)
     areas = stats[1:, cv2.CC_STAT_AREA] if n > 1 else np.zeros(0)

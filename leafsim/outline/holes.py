@@ -19,7 +19,8 @@ import math
 import cv2
 import numpy as np
 
-from leafsim.base.geometry import polygon_area, resample_closed
+from leafsim.base.geometry import polygon_area, resample_closed_keeping
+from leafsim.outline.image import edge_contours
 
 
 def _disk(d: int) -> np.ndarray:
@@ -44,18 +45,16 @@ def kept_holes(filled: np.ndarray, clean: np.ndarray, min_fraction: float) -> np
 def hole_polygons(holes: np.ndarray, eps: float, spacing: float) -> list[np.ndarray]:
     """Closed polygons (x, y) of the holes, clockwise as seen (positive signed area with y
     down), simplified by Douglas–Peucker ``eps`` and resampled at about ``spacing`` pixels."""
-    cnts, _ = cv2.findContours(holes, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     out = []
-    for c in cnts:
-        if cv2.contourArea(c) < 4.0:
+    for raw in edge_contours(holes):
+        if abs(polygon_area(raw)) < 4.0:
             continue
-        raw = c.reshape(-1, 2).astype(np.float64)
         simp = cv2.approxPolyDP(raw.astype(np.float32).reshape(-1, 1, 2), eps, True).reshape(-1, 2).astype(np.float64) \
             if eps > 0 else raw
         if len(simp) < 3:
             simp = raw
         perim = float(np.linalg.norm(np.diff(np.vstack([simp, simp[:1]]), axis=0), axis=1).sum())
-        poly = resample_closed(simp, max(12, int(round(perim / max(spacing, 1e-9)))))
+        poly = resample_closed_keeping(simp, max(12, int(round(perim / max(spacing, 1e-9)))))
         if polygon_area(poly) < 0:
             poly = poly[::-1].copy()
         out.append(poly)

@@ -117,6 +117,30 @@ def _largest_component(mask: np.ndarray) -> np.ndarray:
     return np.where(lab == k, 255, 0).astype(np.uint8)
 
 
+#: :func:`edge_contours` traces a mask this many times enlarged (nearest): its contour runs
+#: 1/(2·EDGE_UPSAMPLE) px inside the pixels' edges instead of ½ px (on their centres)
+EDGE_UPSAMPLE = 4
+
+
+def edge_contours(mask: np.ndarray) -> list[np.ndarray]:
+    """The outer contours of a 0/255 mask's regions as (k, 2) float arrays in its pixel
+    coordinates (x, y), along the pixels' outer edges (within 1/(2·EDGE_UPSAMPLE) px).
+    OpenCV's contour joins the boundary pixels' centres, half a pixel inside the region: a
+    traced leaf came out ½ px too small all round and a pixel short at every tooth tip (a
+    hornbeam margin 4 % short of its photo's).  Traced on the region's bounding box enlarged
+    ``EDGE_UPSAMPLE`` times (nearest), so only the leaf's box is enlarged."""
+    ys, xs = np.nonzero(mask)
+    if not len(xs):
+        return []
+    k = EDGE_UPSAMPLE
+    x0, y0 = int(xs.min()), int(ys.min())
+    box = np.ascontiguousarray(mask[y0:int(ys.max()) + 1, x0:int(xs.max()) + 1])
+    up = cv2.resize(box, None, fx=k, fy=k, interpolation=cv2.INTER_NEAREST)
+    cnts, _ = cv2.findContours(up, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    off = np.array([x0, y0], float)
+    return [(c.reshape(-1, 2).astype(np.float64) + 0.5) / k - 0.5 + off for c in cnts]
+
+
 def working_image(img: np.ndarray, max_pixels: int) -> tuple[np.ndarray, float]:
     """``img`` downscaled (area averaging) to at most ``max_pixels`` pixels, and the factor f
     (working = photo × f; 1.0 when it is small enough).  Segmenting a 20000×20000 photo at full

@@ -2,7 +2,7 @@
 
 Pipeline: :func:`load_image` → :func:`segment_leaf` (alpha, or colour distance to the border
 background in Lab + Otsu, morphological clean-up, the largest leaf-like component, holes
-filled) → :func:`trace_outline` (outer contour, Douglas–Peucker, equal-arc-length resampling,
+filled) → :func:`trace_outline` (outer contour on the pixel edges, Douglas–Peucker, resampling that keeps its corners,
 petiole junction = base, apex, lobe tips) → :func:`to_leaf_shape` (similarity transform to
 world metres).  :func:`outline_report` and :func:`draw_outline` serve ``leafsim outline``.
 
@@ -25,11 +25,11 @@ import cv2
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.geometry import LeafShape, polygon_area, resample_closed
+from leafsim.base.geometry import LeafShape, polygon_area, resample_closed, resample_closed_keeping
 from leafsim.config.params import ParamSet
 from leafsim.outline.checks import leafness, problems
 from leafsim.outline.holes import hole_polygons, kept_holes, petiole_band, sinus_junction, without_band
-from leafsim.outline.image import _disk, _fill_holes, _largest_component, load_image, working_image
+from leafsim.outline.image import _disk, _fill_holes, _largest_component, edge_contours, load_image, working_image
 from leafsim.outline.landmarks import _base_from_shape, _find_petiole, _lobe_tips
 from leafsim.outline.segment import HOLE_MIN_FRACTION, segment_with_holes
 
@@ -43,8 +43,9 @@ class TracedOutline:
     Attributes
     ----------
     mask : (h, w) uint8 0/255 — the traced leaf region (holes filled, petiole cut off).
-    contour_px : (n, 2) float64 — closed outline (first point not repeated), equal arc length,
-        starting at the point nearest the base, counter-clockwise *as the photo is seen*
+    contour_px : (n, 2) float64 — closed outline (first point not repeated) along the mask's
+        pixel edges: the Douglas–Peucker corners (tooth tips, notches) kept and the edges
+        between them split evenly, starting at the point nearest the base, counter-clockwise *as the photo is seen*
         (i.e. negative signed area in y-down pixel coordinates).
     area_px : float — area of ``mask`` in pixels.
     base_px : (2,) float64 — petiole junction (given, or detected).
@@ -117,9 +118,7 @@ def _params(params: Mapping[str, Any] | None) -> ParamSet:
 
 
 def _outer_contour(mask: np.ndarray) -> np.ndarray:
-    cnts, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    c = max(cnts, key=cv2.contourArea)
-    return c.reshape(-1, 2).astype(np.float64)
+    return max(edge_contours(mask), key=lambda c: abs(polygon_area(c)))
 
 
 def _start_at(poly: np.ndarray, point: np.ndarray) -> np.ndarray:
@@ -267,7 +266,7 @@ def _trace(img: np.ndarray, p: ParamSet, where: str, base_px, apex_px) -> Traced
     if b.band is not None:
         simp, dense = _polygon(b.mask, eps)
     n = int(p["outline.points"])
-    contour = resample_closed(_start_at(simp, base), n)
+    contour = resample_closed_keeping(_start_at(simp, base), n)
     apex = np.asarray(apex_px, float).reshape(2) if apex_px is not None else contour[int(np.argmax(np.linalg.norm(contour - base, axis=1)))].copy()
     length = float(np.linalg.norm(apex - base))
     if length < 1e-6:

@@ -93,11 +93,13 @@ def test_closed_gap_stays_a_hole_in_outline_mesh_veins_and_render(tmp_path):
     assert silhouette_iou(mask, ref.blade) > 0.97
 
 
-@pytest.mark.parametrize("species", ["hornbeam", "grapevine", "aspen"])
+@pytest.mark.parametrize("species", ["hornbeam", "grapevine", "aspen", "oak"])
 def test_margin_teeth_kept_on_serrate_photos(species):
-    """The young model's rendered margin is at least 95 % as long as the photo's at the same
-    resolution (hornbeam is doubly serrate, the grapevine dentate, the aspen crenate-serrate);
-    evenly spaced contour particles gave 0.69–0.87."""
+    """The young model's rendered margin is within 2 % of the photo's length at the same
+    resolution (hornbeam is doubly serrate, the grapevine dentate, the aspen crenate-serrate,
+    the oak lobed); evenly spaced contour particles gave 0.69–0.87, the contour on the boundary
+    pixels' centres (half a pixel inside) 0.960 on hornbeam, the outline on the pixel edges
+    with its corners kept 0.994–1.006."""
     from leafsim.appearance.view import LeafView
     from leafsim.render.topdown import TopDown
     from leafsim.sim.simulator import Simulator
@@ -113,8 +115,8 @@ def test_margin_teeth_kept_on_serrate_photos(species):
         _, mask = td.render(LeafView(model, blade_only=True).mesh(state, params), {"albedo": "colours", "veins": False})
     L = sp.length_m * frame.scale
     ratio = margin_length(mask, L) / margin_length(ref.blade, L)
-    assert 0.95 <= ratio <= 1.05, ratio
-    assert silhouette_iou(mask, ref.blade) >= 0.985
+    assert 0.98 <= ratio <= 1.02, ratio
+    assert silhouette_iou(mask, ref.blade) >= 0.99
 
 
 def test_petiole_with_given_base_is_cut_and_never_blade():
