@@ -121,7 +121,7 @@ def _c(name, default, choices, help="", group="", rebuild=False):
 
 # ---------------------------------------------------------------- outline (rebuild)
 G = "Outline"
-_f("outline.simplify", 0.0005, 0.0, 0.02, "× diagonal", "Douglas–Peucker tolerance as a fraction of the image diagonal (≈ 1 px: keeps the margin's teeth).", G, True)
+_f("outline.simplify", 0.001, 0.0, 0.02, "× diagonal", "Douglas–Peucker tolerance as a fraction of the image diagonal (1–2 px on the shipped photos: keeps the margin's teeth as corners, not the pixel staircase).", G, True)
 _i("outline.points", 2000, 40, 8000, "", "Number of points the traced contour is resampled to (the simplified outline's corners kept, its edges split evenly); enough to carry a doubly serrate margin.", G, True)
 _f("outline.lobe_depth", 0.06, 0.0, 0.5, "× length", "Minimum sinus depth (relative to leaf length) that separates two lobes.", G, True)
 

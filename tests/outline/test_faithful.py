@@ -99,7 +99,7 @@ def test_margin_teeth_kept_on_serrate_photos(species):
     resolution (hornbeam is doubly serrate, the grapevine dentate, the aspen crenate-serrate,
     the oak lobed); evenly spaced contour particles gave 0.69–0.87, the contour on the boundary
     pixels' centres (half a pixel inside) 0.960 on hornbeam, the outline on the pixel edges
-    with its corners kept 0.994–1.006."""
+    with its corners kept 0.995–1.014."""
     from leafsim.appearance.view import LeafView
     from leafsim.render.topdown import TopDown
     from leafsim.sim.simulator import Simulator
