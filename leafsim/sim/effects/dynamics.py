@@ -165,6 +165,11 @@ class Dynamics:
         E, Ev, h = params["material.modulus"], params["material.vein_modulus"], m.thickness
         k = E * 0.5 * h * m.spring_weight + Ev * m.spring_rod
         self.salpha = 1.0 / np.maximum(k, 1e-300) / (self.h * self.h)
+        # dry stiffening of stretching (material.stiffening_stretch): the lamina's share of k
+        self.kstretch = params["material.stiffening_stretch"] * params["material.dry_stiffening"]
+        self.klam = E * 0.5 * h * m.spring_weight
+        self.krod = Ev * m.spring_rod
+        self.kdyn = np.zeros(m.spring_count) if self.kstretch > 0.0 else None
         # bending: D = E h³ / 12(1 − ν²) on discrete-shell hinges, veins add E_v I / ℓ̄
         self.kbend = E * h ** 3 / (12.0 * (1.0 - params["material.poisson"] ** 2))
         self.kdry = params["material.dry_stiffening"]
@@ -250,6 +255,10 @@ class Dynamics:
         np.divide(1.0 / self.mscale, m.particle_cytosol + state.particle_water, out=self.invm)
         if self.scene == "hanging":
             self.invm[m.particle_pinned] = 0.0
+        if self.kdyn is not None:
+            kp.spring_stiffness(m.spring_ij, state.particle_water, m.particle_water0, self.klam, self.krod, self.kstretch,
+                                self.dry_power, self.kdyn)
+            np.divide(1.0 / (self.h * self.h), np.maximum(self.kdyn, 1e-300), out=self.salpha)
         kp.pack_springs(self.sperm, self.sij, self.invm, state.spring_rest, self.salpha, self.srec)
         np.take(state.vol_rest, self.vperm, out=self.vrest)
         kb.pack_volumes(self.vidx, self.invm, self.vrest, self.vrec)
@@ -321,6 +330,9 @@ class Dynamics:
             hinges = (self.s_hidx, self.s_hk)
         else:
             hinges = (self.s_hidx[:0], self.s_hk[:0])
+        if self.kdyn is not None:
+            kp.spring_stiffness(m.spring_ij, state.particle_water, m.particle_water0, self.klam, self.krod, self.kstretch,
+                                self.dry_power, self.sk)
         np.divide(self.vmod * 0.5, np.maximum(np.abs(state.vol_rest), 1e-300), out=self.s_vk)
         if self.p_turgor > 0.0:
             rwc = state.particle_water / np.maximum(m.particle_water0, 1e-300)

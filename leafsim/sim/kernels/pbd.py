@@ -253,6 +253,23 @@ def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha, 
 
 
 @njit(cache=True, fastmath=FASTMATH, nogil=True)
+def spring_stiffness(ij, water, w0, klam, krod, kdry, power, out):
+    """Stiffness [N/m] of every spring as its tissue dries: k = k_lam (1 + k_dry dry^p) + k_rod,
+    dry = 1 − (w_a + w_b) / (w0_a + w0_b) over the spring's ends (the lamina's share k_lam
+    stiffens, the vein's rod share k_rod does not; ``material.stiffening_stretch``)."""
+    for s in range(ij.shape[0]):
+        a = ij[s, 0]
+        b = ij[s, 1]
+        dry = 1.0 - (water[a] + water[b]) / max(w0[a] + w0[b], 1e-300)
+        if dry < 0.0:
+            dry = 0.0
+        elif dry > 1.0:
+            dry = 1.0
+        f = dry if power == 1.0 else dry ** power
+        out[s] = klam[s] * (1.0 + kdry * f) + krod[s]
+
+
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def ground_clamp(q, invm, pen):
     """Ground plane z ≥ 0: lift penetrating particles and add the lift to ``pen``, the
     substep's total normal correction (∝ the normal impulse): the Coulomb budget of
