@@ -61,7 +61,8 @@ SUN_ONLY = ("dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_subste
 XPBD_ONLY = ("dynamics.relaxation", "dynamics.substeps", "dynamics.iterations")
 SUSPECTS = ("material.turgor_pressure", "dynamics.sun_courant", "dynamics.sun_damping", "dynamics.sun_substeps", "dynamics.relaxation", "dynamics.dt", "dynamics.damping", "dynamics.substeps", "dynamics.iterations",
             "dynamics.mass_scaling", "dynamics.rigid_inertia", "dynamics.air_damping",
-            "material.modulus", "material.vein_modulus", "material.dry_stiffening", "dynamics.substep_scaling",
+            "material.modulus", "material.vein_modulus", "material.dry_stiffening", "material.stiffening_stretch",
+            "dynamics.substep_scaling",
             "shrink.sigma_surface_top", "shrink.sigma_surface_bottom", "shrink.sigma_vein", "shrink.l_min",
             "shrink.alpha", "dynamics.plasticity", "dynamics.gravity", "osmosis.evaporation_top",
             "osmosis.evaporation_bottom", "mesh.thickness")
