@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from leafsim.base.geometry import resample_closed, resample_closed_keeping
@@ -25,7 +25,6 @@ def test_keeping_resample_keeps_every_vertex_and_splits_edges_evenly():
     assert _perimeter(resample_closed(saw, 40)) < _perimeter(saw) - 0.1
 
 
-@settings(max_examples=60, deadline=None)
 @given(st.integers(3, 30), st.integers(0, 200), st.integers(0, 2**31 - 1))
 def test_keeping_resample_has_n_points_in_order(m, extra, seed):
     rng = np.random.default_rng(seed)
