@@ -223,6 +223,18 @@ def uninvert(q, invm, vidx, hmin, vonly, ground, dint):
 
 
 @njit(cache=True, fastmath=FASTMATH, nogil=True)
+def pair_dryness(water, w0, a, b):
+    """The share of their water that particles a and b have lost together, clipped to [0, 1]:
+    dry = 1 − (w_a + w_b) / (w0_a + w0_b) (the stiffening of a hinge's shared edge or a spring)."""
+    dry = 1.0 - (water[a] + water[b]) / max(w0[a] + w0[b], 1e-300)
+    if dry < 0.0:
+        return 0.0
+    if dry > 1.0:
+        return 1.0
+    return dry
+
+
+@njit(cache=True, fastmath=FASTMATH, nogil=True)
 def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha, turgor=0.0, tlp=0.85, power=1.0):
     """XPBD compliance / Δt² of every hinge: k = D s(dry) · geom + k_rod c(dry) [N·m/rad], D the
     blade's bending stiffness [N·m], geom = 3|e|²/(A₁+A₂), k_rod the vein's E_v I/ℓ̄ share;
@@ -235,13 +247,7 @@ def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha, 
     p = 1 is the plain law D (1 + k_dry dry) + k_rod."""
     plain = turgor == 0.0 and power == 1.0
     for e in range(hidx.shape[0]):
-        a = hidx[e, 2]
-        b = hidx[e, 3]
-        dry = 1.0 - (water[a] + water[b]) / max(w0[a] + w0[b], 1e-300)
-        if dry < 0.0:
-            dry = 0.0
-        elif dry > 1.0:
-            dry = 1.0
+        dry = pair_dryness(water, w0, hidx[e, 2], hidx[e, 3])
         if plain:
             halpha[e] = inv_h2 / (kbend * (1.0 + kdry * dry) * hgeom[e] + krod[e])
         else:
@@ -258,13 +264,7 @@ def spring_stiffness(ij, water, w0, klam, krod, kdry, power, out):
     dry = 1 − (w_a + w_b) / (w0_a + w0_b) over the spring's ends (the lamina's share k_lam
     stiffens, the vein's rod share k_rod does not; ``material.stiffening_stretch``)."""
     for s in range(ij.shape[0]):
-        a = ij[s, 0]
-        b = ij[s, 1]
-        dry = 1.0 - (water[a] + water[b]) / max(w0[a] + w0[b], 1e-300)
-        if dry < 0.0:
-            dry = 0.0
-        elif dry > 1.0:
-            dry = 1.0
+        dry = pair_dryness(water, w0, ij[s, 0], ij[s, 1])
         f = dry if power == 1.0 else dry ** power
         out[s] = klam[s] * (1.0 + kdry * f) + krod[s]
 
