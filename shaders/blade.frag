@@ -5,6 +5,7 @@ in vec3 v_pos;
 in vec3 v_nrm;
 in vec3 v_col;      // vertex colour (linear)
 in vec3 v_tint;     // albedo multiplier
+in vec4 v_chroma;   // detail albedo: young chromaticity at the vertex, living weight
 in vec2 v_uv;
 in float v_scalar;
 
@@ -64,10 +65,7 @@ void main() {
 #endif
     vec3 albedo = t.rgb * v_tint;
 #elif LS_MODE == 2
-    vec3 t = texture(u_tex, v_uv).rgb;
-    float lum = dot(t, vec3(0.2126, 0.7152, 0.0722));
-    float mean = max(dot(u_tex_mean, vec3(0.2126, 0.7152, 0.0722)), 1e-4);
-    vec3 albedo = v_col * v_tint * clamp(lum / mean, 0.0, 3.0);
+    vec3 albedo = v_col * v_tint * photo_detail(texture(u_tex, v_uv).rgb, u_tex_mean, v_chroma);
 #else
     vec3 albedo = v_col * v_tint;
 #endif

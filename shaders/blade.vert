@@ -3,6 +3,7 @@ in vec3 in_pos;
 in vec3 in_nrm;
 in vec3 in_col;
 in vec3 in_tint;
+in vec4 in_chroma;
 in vec2 in_uv;
 in float in_scalar;
 
@@ -12,6 +13,7 @@ out vec3 v_pos;
 out vec3 v_nrm;
 out vec3 v_col;
 out vec3 v_tint;
+out vec4 v_chroma;
 out vec2 v_uv;
 out float v_scalar;
 
@@ -20,6 +22,7 @@ void main() {
     v_nrm = in_nrm;
     v_col = in_col;
     v_tint = in_tint;
+    v_chroma = in_chroma;
     v_uv = in_uv;
     v_scalar = in_scalar;
     gl_Position = u_viewproj * vec4(in_pos, 1.0);

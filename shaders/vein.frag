@@ -10,6 +10,7 @@ in float v_hd;
 in float v_target;
 in vec3 v_base;
 in vec3 v_tint;
+in vec4 v_chroma;
 in vec2 v_uv;
 flat in int v_order;
 
@@ -50,10 +51,8 @@ void main() {
     // rounded cross-section: bend the normal towards the sides
     vec3 N = normalize(normalize(v_nrm) * sqrt(max(1.0 - a * a, 0.0)) * 1.3 + normalize(v_side) * sign(v_v) * a);
 #if LS_TEX == 2
-    // detail: the vertex colour times the photo's brightness under the vein (as the blade)
-    vec3 t = texture(u_tex, v_uv).rgb;
-    float lum = dot(t, vec3(0.2126, 0.7152, 0.0722));
-    vec3 base = v_base * clamp(lum / max(dot(u_tex_mean, vec3(0.2126, 0.7152, 0.0722)), 1e-4), 0.0, 3.0);
+    // detail: the vertex colour times the photo's detail under the vein (as the blade)
+    vec3 base = v_base * photo_detail(texture(u_tex, v_uv).rgb, u_tex_mean, v_chroma);
 #elif LS_TEX
     vec4 t = texture(u_tex, v_uv);
 #if LS_CUTOUT

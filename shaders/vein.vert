@@ -7,6 +7,7 @@ in float in_hw;       // half width, metres
 in float in_v;        // -1 or +1
 in vec3 in_base;      // blade albedo under the vein (linear colour x tint)
 in vec3 in_tint;      // tint alone (multiplies the photo)
+in vec4 in_chroma;    // detail albedo: young chromaticity under the vein, living weight
 in vec2 in_uv;
 in float in_order;
 
@@ -26,6 +27,7 @@ out float v_hd;
 out float v_target;
 out vec3 v_base;
 out vec3 v_tint;
+out vec4 v_chroma;
 out vec2 v_uv;
 flat out int v_order;
 
@@ -51,6 +53,7 @@ void main() {
     v_v = in_v;
     v_base = in_base;
     v_tint = in_tint;
+    v_chroma = in_chroma;
     v_uv = in_uv;
     v_order = int(in_order + 0.5);
     gl_Position = u_viewproj * vec4(p, 1.0);

@@ -13,6 +13,9 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 
+#: A vertex's ``chroma`` without colour detail: the "detail" albedo takes the photo's luminance only.
+NO_CHROMA = np.array([1.0, 1.0, 1.0, 0.0], dtype=np.float32)
+
 #: Spring kinds used by the "springs" debug view.
 SPRING_SURFACE_T, SPRING_SURFACE_V, SPRING_LINK, SPRING_VEIN = 0, 1, 2, 3
 
@@ -39,6 +42,11 @@ class RenderMesh:
         The species photo (sRGB) with alpha = leaf mask.
     tint : (n, 3) float32 or None
         Linear multiplier applied to the albedo (photo or colours), e.g. to age the photo.
+    chroma : (n, 4) float32 or None
+        For the "detail" albedo (vertex colour × the photo's own detail): the young photo's
+        colour at the vertex (blurred as the vertex colour is) over its luminance, and the
+        weight, 0..1, with which a texel's own chromaticity replaces it (the living share of
+        the tissue). None: luminance detail only (:data:`NO_CHROMA` everywhere).
     vein_lines : list of (indices (p,) int, widths (p,) float metres, order int)
         Vein polylines through blade vertices; ``order`` 0 = main, 1 = lateral,
         2 = sublateral, 3+ = tertiary.
@@ -59,6 +67,7 @@ class RenderMesh:
     colours: np.ndarray | None = None
     texture_rgba: np.ndarray | None = None
     tint: np.ndarray | None = None
+    chroma: np.ndarray | None = None
     vein_lines: list = field(default_factory=list)
     springs: np.ndarray | None = None
     spring_kind: np.ndarray | None = None
@@ -93,6 +102,10 @@ def validate_mesh(mesh) -> None:
     _check("texcoords", (2,))
     _check("colours", (3,))
     _check("tint", (3,))
+    _check("chroma", (4,))
+    chroma = getattr(mesh, "chroma", None)
+    if chroma is not None and not np.all(np.isfinite(np.asarray(chroma, dtype=np.float64))):
+        raise LeafsimError("render mesh: chroma must be finite")
     for name, arr in (getattr(mesh, "scalars", None) or {}).items():
         if np.asarray(arr).shape != (n,):
             raise LeafsimError(f"render mesh: scalar field {name!r} must be ({n},)")

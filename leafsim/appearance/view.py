@@ -122,6 +122,24 @@ class LeafView:
             return rgb, None
         return rgb, (np.clip(change, 0.0, 64.0).astype(np.float32) if self.photo_tint else np.ones_like(rgb))
 
+    def chroma(self, state: State, params):
+        """(nT, 4) float32 for the "detail" albedo (:class:`~leafsim.appearance.mesh.RenderMesh`
+        ``chroma``), or None: photo species whose photo shows the young leaf get the photo's
+        young colour at each vertex over its luminance, weighted by the chlorophyll the tissue
+        keeps (now ÷ young, 0..1), so the renderer lays the photo's own fine hues on living
+        tissue and none on dead tissue, whose colour is the model's."""
+        pig = state.pigments
+        if not (self.photo_colour and self.pigments0 is not None and pig is not None and self.use_texture(params)):
+            return None
+        T = self.T
+        young = self.young_photo_colour()[T]
+        lum = young @ np.float32([0.2126, 0.7152, 0.0722])
+        out = np.empty((len(T), 4), np.float32)
+        out[:, :3] = young / np.maximum(lum, 1e-4)[:, None]
+        c0 = np.asarray(self.pigments0.chlorophyll, np.float64)[T]
+        out[:, 3] = np.clip(np.asarray(pig.chlorophyll, np.float64)[T] / np.maximum(c0, 1e-6), 0.0, 1.0)
+        return out
+
     def scalar_fields(self, state: State) -> dict:
         """Per layer-T vertex heat-map fields: ``mass`` per area [kg/m²] now, ``water`` (now / initial) and
         the pigment fields (relative to the summer content)."""
@@ -155,6 +173,7 @@ class LeafView:
             colours=colours,
             texture_rgba=self.photo_rgba if self.use_texture(params) else None,
             tint=tint,
+            chroma=self.chroma(state, params),
             vein_lines=veins,
             springs=remap[m.spring_ij].astype(np.int32),
             spring_kind=kind_map[m.spring_type],
@@ -169,6 +188,9 @@ class LeafView:
                "top_positions": state.particle_q[self.V]}
         if tint is not None:
             out["tint"] = tint
+        chroma = self.chroma(state, params)
+        if chroma is not None:
+            out["chroma"] = chroma
         return out
 
 

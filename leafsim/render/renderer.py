@@ -12,7 +12,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from leafsim.appearance.mesh import validate_mesh
+from leafsim.appearance.mesh import NO_CHROMA, validate_mesh
 from leafsim.base.errors import LeafsimError
 from leafsim.base.resources import shader_dir as default_shader_dir
 from leafsim.render.camera import look_at, orthographic
@@ -60,14 +60,22 @@ def _srgb(c) -> tuple:
     return tuple(float(x) for x in np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055))
 
 
+#: texels of the leaf this close to its mask's edge [px] mix the leaf with the photo's background
+#: (a pale or paper-coloured fringe): they take the colour of the nearest texel further in
+FRINGE_PX = 2.5
+
+
 def _dilate_texture(rgba: np.ndarray) -> np.ndarray:
-    """Copy the nearest leaf texel's colour into the masked-out area (no dark fringes)."""
+    """Copy the nearest clean leaf texel's colour into the masked-out area and over the leaf's
+    outermost ``FRINGE_PX`` (no dark, pale or background-tinted fringes); the mask is kept."""
     from scipy.ndimage import distance_transform_edt
 
     out = np.array(rgba, dtype=np.uint8, copy=True)
     outside = out[:, :, 3] < 128
     if outside.any() and not outside.all():
-        _, (iy, ix) = distance_transform_edt(outside, return_indices=True)
+        clean = distance_transform_edt(~outside) >= FRINGE_PX
+        source = clean if clean.any() else ~outside
+        _, (iy, ix) = distance_transform_edt(~source, return_indices=True)
         out[:, :, :3] = out[iy, ix, :3]
     return out
 
@@ -181,6 +189,8 @@ class Renderer:
         tint = getattr(mesh, "tint", None)
         self.colours = np.ascontiguousarray(colours, dtype=np.float32).copy()
         self.tint = np.ones((n, 3), np.float32) if tint is None else np.ascontiguousarray(tint, dtype=np.float32).copy()
+        chroma = getattr(mesh, "chroma", None)
+        self.chroma = np.tile(NO_CHROMA, (n, 1)) if chroma is None else np.ascontiguousarray(chroma, dtype=np.float32).copy()
         uv = getattr(mesh, "texcoords", None)
         self.has_uv = uv is not None
         uv = np.zeros((n, 2), np.float32) if uv is None else np.ascontiguousarray(uv, dtype=np.float32)
@@ -195,12 +205,14 @@ class Renderer:
         self.vbo_nrm = self._buf(self.nrm, dynamic=True)
         self.vbo_col = self._buf(self.colours, dynamic=True)
         self.vbo_tint = self._buf(self.tint, dynamic=True)
+        self.vbo_chroma = self._buf(self.chroma, dynamic=True)
         self.vbo_uv = self._buf(uv)
         self.vbo_scalar = self._buf(np.zeros(n, np.float32), dynamic=True)
         self.ibo_tri = self._buf(self.tri)
         self._specs["blade"] = ([
             (self.vbo_pos, "3f", "in_pos"), (self.vbo_nrm, "3f", "in_nrm"), (self.vbo_col, "3f", "in_col"),
-            (self.vbo_tint, "3f", "in_tint"), (self.vbo_uv, "2f", "in_uv"), (self.vbo_scalar, "1f", "in_scalar")],
+            (self.vbo_tint, "3f", "in_tint"), (self.vbo_chroma, "4f", "in_chroma"), (self.vbo_uv, "2f", "in_uv"),
+            (self.vbo_scalar, "1f", "in_scalar")],
             self.ibo_tri)
         self.vao_shadow = self._vao("shadow", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_uv, "2f", "in_uv")],
                                     self.ibo_tri)
@@ -230,13 +242,13 @@ class Renderer:
         self.veins = VeinRibbons(getattr(mesh, "vein_lines", None), n, uv if self.has_uv else None)
         if self.veins.count:
             self.vbo_vein_dyn = self._buf(self.veins.frame(self.pos, self.nrm), dynamic=True)
-            self.vbo_vein_base = self._buf(self.veins.base_colours(self.colours, self.tint), dynamic=True)
+            self.vbo_vein_base = self._buf(self.veins.base_colours(self.colours, self.tint, self.chroma), dynamic=True)
             self.vbo_vein_static = self._buf(self.veins.static)
             self.ibo_vein = self._buf(self.veins.indices)
             self._specs["vein"] = ([
                 (self.vbo_vein_dyn, "3f 3f 3f", "in_center", "in_side", "in_nrm"),
                 (self.vbo_vein_static, "1f 1f 2f 1f", "in_hw", "in_v", "in_uv", "in_order"),
-                (self.vbo_vein_base, "3f 3f", "in_base", "in_tint")], self.ibo_vein)
+                (self.vbo_vein_base, "3f 3f 4f", "in_base", "in_tint", "in_chroma")], self.ibo_vein)
         self._upload_texture(getattr(mesh, "texture_rgba", None))
         self._dirty_particles = True
         self._dirty_springs = True
@@ -275,7 +287,7 @@ class Renderer:
                 self.tex_mean = tuple(float(x) for x in lin.mean(axis=0))
 
     # --- per frame ------------------------------------------------------------------------
-    def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None) -> None:
+    def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None, chroma=None) -> None:
         """Write new per-frame data into the GL buffers.
 
         Parameters
@@ -290,6 +302,9 @@ class Renderer:
             Albedo multiplier per vertex.
         top_positions : (k, 3) float, optional
             Top-layer particles for the particle / spring views.
+        chroma : (n, 4) float, optional
+            The "detail" albedo's young chromaticity and living weight per vertex
+            (:class:`~leafsim.appearance.mesh.RenderMesh`).
         """
         if self.mesh is None:
             raise LeafsimError("renderer: update() before populate()")
@@ -310,6 +325,13 @@ class Renderer:
             self.tint[:] = tint
             self.vbo_tint.write(self.tint)
             recolour = True
+        if chroma is not None:
+            c = np.asarray(chroma, dtype=np.float32)
+            if c.shape != (self.n, 4):
+                raise LeafsimError(f"renderer: chroma must be ({self.n}, 4), got {c.shape}")
+            self.chroma[:] = c
+            self.vbo_chroma.write(self.chroma)
+            recolour = True
         if scalar is not None:
             for k, v in scalar.items():
                 v = np.asarray(v, dtype=np.float32)
@@ -322,7 +344,7 @@ class Renderer:
         if self.veins.count:
             self.vbo_vein_dyn.write(self.veins.frame(self.pos, self.nrm))
             if recolour:
-                self.vbo_vein_base.write(self.veins.base_colours(self.colours, self.tint))
+                self.vbo_vein_base.write(self.veins.base_colours(self.colours, self.tint, self.chroma))
         self._dirty_particles = self._dirty_springs = True
         self._geometry += 1
 

@@ -69,3 +69,37 @@ def test_red_cultivar_turns_red():
     purple tinge at most on a few per cent of the blade (measured 5 % at its most)."""
     red = _classes_while_drying("grapevine_red")
     assert _share(red, "red").max() > 0.5 and _share(red, "purple").max() < 0.1
+
+
+def test_photo_detail_follows_the_living_tissue():
+    """The "detail" albedo's chroma (the photo's own fine hues): the young photo species' young
+    leaf carries the photo's chromaticity at full weight; tissue that lost its chlorophyll
+    carries none; a drawn species and a species photographed senescent carry no chroma."""
+
+    sp = get_species("grapevine")
+    params = sp.params.with_overrides(COARSE)
+    _, _, model = build_leaf(sp, params, seed=0)
+    sim = Simulator(model, params, effects=("osmosis", "colour"), seed=0)
+    st = sim.state()
+    view = LeafView(model, species_photo_rgba(sp, params), st.pigments.copy(), photo_tint=False, photo_colour=sp.photo_colour)
+    c = view.chroma(st, params)
+    nT = int((model.particle_layer == LAYER_T).sum())
+    assert c.shape == (nT, 4) and np.isfinite(c).all()
+    assert np.allclose(c[:, :3] @ np.array([0.2126, 0.7152, 0.0722]), 1.0, atol=1e-3)
+    assert np.allclose(c[:, 3], 1.0)
+    mesh = view.mesh(st, params)
+    assert np.array_equal(mesh.chroma, c) and np.array_equal(view.update(st, params)["chroma"], c)
+    dead = st.copy()
+    dead.pigments.chlorophyll[:] = 0.5 * st.pigments.chlorophyll
+    assert np.allclose(view.chroma(dead, params)[:, 3], 0.5)
+    dead.pigments.chlorophyll[:] = 0.0
+    assert np.allclose(view.chroma(dead, params)[:, 3], 0.0)
+    assert view.chroma(st, params.with_overrides({"render.texture": False})) is None
+    for key in ("maple", "hornbeam"):  # drawn; photographed senescent
+        sp2 = get_species(key)
+        p2 = sp2.params.with_overrides(COARSE)
+        _, _, m2 = build_leaf(sp2, p2, seed=0)
+        s2 = Simulator(m2, p2, effects=("colour",), seed=0).state()
+        photo = species_photo_rgba(sp2, p2) if sp2.image is not None else None
+        v2 = LeafView(m2, photo, s2.pigments.copy(), photo_tint=False, photo_colour=sp2.photo_colour)
+        assert v2.chroma(s2, p2) is None and "chroma" not in v2.update(s2, p2)

@@ -356,3 +356,64 @@ def test_heat_range_ignores_outliers_and_the_bar_matches(off):
     for end in ends:
         d = np.abs(colours / np.maximum(colours.max(1, keepdims=True), 1e-6) - end / end.max()).max(1)
         assert (d < 0.25).mean() > 0.1
+
+
+def _srgb8(lin) -> np.ndarray:
+    return np.clip(255.0 * np.power(np.asarray(lin, float), 1 / 2.2) + 0.5, 0, 255).astype(np.uint8)
+
+
+def test_detail_albedo_lays_the_photos_own_hues_on_living_tissue(off):
+    """The "detail" albedo: the vertex colour (here one blurred mean for the whole leaf) times
+    the texel's luminance detail and, weighted by ``chroma``'s living share, the texel's own
+    chromaticity over the vertex's: stripes of two hues finer than nothing the mesh resolves
+    come back at weight 1, and at weight 0 (dead tissue; no chroma given) only their
+    brightness does."""
+    a, b = np.array([0.20, 0.30, 0.02]), np.array([0.04, 0.30, 0.16])
+    w = np.array([0.2126, 0.7152, 0.0722])
+    tex = np.zeros((64, 64, 4), np.uint8)
+    tex[..., 3] = 255
+    for k in range(8):
+        tex[:, 8 * k:8 * k + 8, :3] = _srgb8(a if k % 2 == 0 else b)
+    mean = 0.5 * (a + b)
+    mesh = synthetic_leaf(texture=tex)
+    n = mesh.vertex_count
+    mesh.colours = np.tile(mean.astype(np.float32), (n, 1))
+    chroma = np.tile(np.float32([*(mean / (mean @ w)), 1.0]), (n, 1))
+    cam = top_camera()
+    px_per_m = H / (2 * cam.distance * math.tan(math.radians(cam.fov) / 2))
+    cols = [int(W / 2 + (-A + (k + 0.5) / 8 * 2 * A) * px_per_m) for k in (2, 3, 4, 5)]
+
+    def stripes(m):
+        img = off.render_array(m, cam, RenderOptions(veins=False, shadows=False, albedo="detail")).astype(float)
+        px = img[H // 2 - 3:H // 2 + 4, cols].mean(axis=0)  # (4, 3): stripes a, b, a, b
+        return px[:, 0] - px[:, 2]  # red minus blue: high on a, low on b
+
+    mesh.chroma = chroma
+    live = stripes(mesh)
+    assert min(live[0], live[2]) > max(live[1], live[3]) + 40, live
+    dead = chroma.copy()
+    dead[:, 3] = 0.0
+    gone = stripes(RenderMesh(**{**mesh.__dict__, "chroma": dead}))
+    assert np.ptp(gone) < 6, gone
+    assert np.ptp(stripes(RenderMesh(**{**mesh.__dict__, "chroma": None}))) < 6
+    with pytest.raises(LeafsimError, match="chroma"):
+        off.render_array({"positions": mesh.positions, "chroma": chroma[:, :3]}, cam, RenderOptions(albedo="detail"))
+
+
+def test_texture_fringe_takes_the_colour_further_in():
+    """The photo's outermost leaf texels mix the leaf with its background (here a pink ring):
+    the texture the renderer uploads gives them the colour of the clean leaf further in, and
+    keeps the mask."""
+    from leafsim.render.renderer import _dilate_texture
+
+    tex = np.zeros((40, 40, 4), np.uint8)
+    yy, xx = np.mgrid[:40, :40]
+    r = np.hypot(yy - 19.5, xx - 19.5)
+    tex[r < 15] = (40, 120, 30, 255)
+    ring = (r < 15) & (r >= 14)
+    tex[ring, :3] = (230, 150, 160)
+    out = _dilate_texture(tex)
+    assert np.array_equal(out[..., 3], tex[..., 3])
+    assert (out[ring, :3] == (40, 120, 30)).all()
+    assert (out[r >= 15, :3] == (40, 120, 30)).all()  # outside: the nearest clean texel's colour
+    assert (out[r < 12, :3] == (40, 120, 30)).all()
