@@ -37,8 +37,44 @@ def load_photo_rgba(path, max_pixels: int | None = None, traced=None) -> np.ndar
         mask = cv2.bitwise_and(mask, cv2.bitwise_not(fit(traced.hole_mask)))
     if traced.petiole_mask is not None:
         band = cv2.dilate(fit(traced.petiole_mask), np.ones((5, 5), np.uint8))
-        rgb = cv2.inpaint(rgb, band, max(3.0, 0.01 * max(size)), cv2.INPAINT_TELEA)
+        smooth = cv2.inpaint(rgb, band, max(3.0, 0.01 * max(size)), cv2.INPAINT_TELEA)
+        k = size[0] / float(traced.image_size[0])  # full-photo pixels → texture pixels
+        rgb = mirrored_detail(rgb, smooth, band > 0, mask > 0, k * np.asarray(traced.base_px, float),
+                              k * np.asarray(traced.apex_px, float))
     return np.ascontiguousarray(np.dstack([rgb, mask]))
+
+
+def mirrored_detail(rgb: np.ndarray, smooth: np.ndarray, band: np.ndarray, blade: np.ndarray, base, apex) -> np.ndarray:
+    """``smooth`` (an inpainting of ``rgb`` over ``band``) with the fine detail of the blade
+    mirrored across the base → apex axis laid on the band: an inpainting is smooth over the
+    band's width, a blade is not (its finer veins, its grain), and a leaf is nearly symmetric
+    about its midrib, so the other half's detail is the likeliest. Detail is the high-pass of
+    ``rgb`` finer than the band's half-width; band pixels whose mirror image falls off the blade
+    or on the band keep the smooth fill, and the detail fades in over the band's edge pixels."""
+    import cv2
+
+    if not band.any():
+        return smooth
+    inside = cv2.distanceTransform(band.astype(np.uint8), cv2.DIST_L2, 5)
+    sigma = max(1.0, float(inside.max()))
+    h, w = band.shape
+    img = rgb.astype(np.float32)
+    clean = blade & ~band
+    num = cv2.GaussianBlur(np.where(clean[..., None], img, 0.0), (0, 0), sigma)
+    den = cv2.GaussianBlur(clean.astype(np.float32), (0, 0), sigma)
+    detail = np.where(clean[..., None], img - num / np.maximum(den[..., None], 1e-3), 0.0)
+    d = np.asarray(apex, float) - np.asarray(base, float)
+    d /= max(float(np.hypot(*d)), 1e-9)
+    ys, xs = np.nonzero(band)
+    p = np.stack([xs, ys], 1).astype(float) - base
+    q = base + 2.0 * (p @ d)[:, None] * d - p  # the reflection across the axis
+    mx, my = np.rint(q[:, 0]).astype(int), np.rint(q[:, 1]).astype(int)
+    ok = (mx >= 0) & (mx < w) & (my >= 0) & (my < h)
+    ok[ok] &= clean[my[ok], mx[ok]]
+    out = smooth.astype(np.float32)
+    fade = np.clip(inside[ys[ok], xs[ok]] / 2.0, 0.0, 1.0)[:, None]
+    out[ys[ok], xs[ok]] += fade * detail[my[ok], mx[ok]]
+    return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
 def species_photo_rgba(sp: Species, params: ParamSet | None = None) -> np.ndarray:
