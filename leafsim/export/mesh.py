@@ -172,12 +172,15 @@ class MeshSource:
         return out
 
     def photo_png(self) -> bytes | None:
-        """The photo (RGB, at most TEXTURE_MAX px a side) as PNG bytes, or None for vertex colours."""
+        """The photo (RGB, at most TEXTURE_MAX px a side; the blade's colour carried past its margin,
+        :func:`~leafsim.appearance.texture.clean_texture`) as PNG bytes, or None for vertex colours."""
         if self.texture != "photo":
             return None
         import cv2
 
-        rgba = np.asarray(self.view.photo_rgba)
+        from leafsim.appearance.texture import clean_texture
+
+        rgba = clean_texture(np.asarray(self.view.photo_rgba))  # no background fringe at the margin or past it
         h, w = rgba.shape[:2]
         f = min(1.0, TEXTURE_MAX / max(h, w))
         bgr = cv2.cvtColor(np.ascontiguousarray(rgba[:, :, :3]), cv2.COLOR_RGB2BGR)

@@ -13,6 +13,7 @@ import moderngl
 import numpy as np
 
 from leafsim.appearance.mesh import NO_CHROMA, validate_mesh
+from leafsim.appearance.texture import clean_texture
 from leafsim.base.errors import LeafsimError
 from leafsim.base.resources import shader_dir as default_shader_dir
 from leafsim.render.camera import look_at, orthographic
@@ -58,26 +59,6 @@ def _srgb(c) -> tuple:
     """Linear RGB -> display sRGB (0..1) tuple."""
     c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
     return tuple(float(x) for x in np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055))
-
-
-#: texels of the leaf this close to its mask's edge [px] mix the leaf with the photo's background
-#: (a pale or paper-coloured fringe): they take the colour of the nearest texel further in
-FRINGE_PX = 2.5
-
-
-def _dilate_texture(rgba: np.ndarray) -> np.ndarray:
-    """Copy the nearest clean leaf texel's colour into the masked-out area and over the leaf's
-    outermost ``FRINGE_PX`` (no dark, pale or background-tinted fringes); the mask is kept."""
-    from scipy.ndimage import distance_transform_edt
-
-    out = np.array(rgba, dtype=np.uint8, copy=True)
-    outside = out[:, :, 3] < 128
-    if outside.any() and not outside.all():
-        clean = distance_transform_edt(~outside) >= FRINGE_PX
-        source = clean if clean.any() else ~outside
-        _, (iy, ix) = distance_transform_edt(~source, return_indices=True)
-        out[:, :, :3] = out[iy, ix, :3]
-    return out
 
 
 class Renderer:
@@ -261,7 +242,7 @@ class Renderer:
         self.texture = None
         self.tex_mean = (0.2, 0.3, 0.1)
         if tex is not None:
-            rgba = _dilate_texture(tex)
+            rgba = clean_texture(tex)
             h, w = rgba.shape[:2]
             limit = min(int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 4096)), 4096)
             if max(h, w) > limit:
@@ -327,8 +308,8 @@ class Renderer:
             recolour = True
         if chroma is not None:
             c = np.asarray(chroma, dtype=np.float32)
-            if c.shape != (self.n, 4):
-                raise LeafsimError(f"renderer: chroma must be ({self.n}, 4), got {c.shape}")
+            if c.shape != (self.n, 4) or not np.all(np.isfinite(c)):
+                raise LeafsimError(f"renderer: chroma must be finite, ({self.n}, 4), got {c.shape}")
             self.chroma[:] = c
             self.vbo_chroma.write(self.chroma)
             recolour = True

@@ -290,3 +290,32 @@ def test_an_exported_glb_renders_like_the_app(tmp_path, frames):
     vein = np.abs(glb.astype(int) - blade_only).sum(-1) > 6
     assert vein.sum() > 300
     assert glb[vein].astype(float).mean() > blade_only[vein].astype(float).mean()  # lighter, not black
+
+
+def test_the_exported_photo_has_no_background_at_or_past_the_margin(leaf, tmp_path):
+    """The photo a mesh export ships is the renderer's clean texture: past the leaf's mask (where
+    a viewer's filtering and mipmaps reach at the margin) and over its outermost texels, the
+    colour of the blade further in, never the photo's paper or background."""
+    import cv2
+    from scipy.ndimage import distance_transform_edt
+
+    from leafsim.appearance.texture import FRINGE_PX, clean_texture
+    from leafsim.export.mesh import TEXTURE_MAX
+
+    model, params, view, states = leaf
+    export_mesh(model, states[-1], tmp_path / "oak.obj", params=params, view=view, texture="photo")
+    png = cv2.cvtColor(cv2.imread(str(tmp_path / "oak_photo.png")), cv2.COLOR_BGR2RGB)
+    photo = np.asarray(view.photo_rgba)
+    want = clean_texture(photo)[..., :3]
+    if max(photo.shape[:2]) > TEXTURE_MAX:
+        f = TEXTURE_MAX / max(photo.shape[:2])
+        want = cv2.resize(want, (round(photo.shape[1] * f), round(photo.shape[0] * f)), interpolation=cv2.INTER_AREA)
+        photo = cv2.resize(photo, want.shape[1::-1], interpolation=cv2.INTER_NEAREST)
+    assert png.shape == want.shape and np.abs(png.astype(int) - want).max() <= 1
+    leafy = photo[..., 3] >= 128
+    deep = distance_transform_edt(leafy) >= FRINGE_PX + 2
+    blade = np.median(photo[deep, :3], axis=0)
+    outside = ~leafy
+    # the background (the raw photo's pixels there) differs from the blade; the export does not
+    assert np.abs(np.median(photo[outside, :3], axis=0) - blade).sum() > 60
+    assert np.abs(np.median(png[outside], axis=0) - blade).sum() < 40

@@ -156,20 +156,29 @@ def test_petiole_lying_on_the_grapevine_is_inpainted_not_blade():
                                                        rgba.shape[1::-1], interpolation=cv2.INTER_NEAREST) > 0)
 
 
-def test_the_inpainted_petiole_band_carries_the_blades_detail():
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+def test_the_inpainted_petiole_band_carries_the_blades_detail(scale):
     """Under the grapevine's petiole the texture is no smooth smear: the blade's fine detail
     (high-pass lightness, σ 2 px), mirrored across the midrib, is as strong as around the band
-    (an inpainting alone left 0.26× of it), and it adds no mean colour."""
+    (an inpainting alone left 0.26× of it), it adds no mean colour, and it is the mirror
+    image's (the band's detail correlates with the detail across the axis) — also in a texture
+    downscaled to half the photo's size (``limits.image_pixels``)."""
     from leafsim.appearance import photo
+    from leafsim.pipeline import species_trace
 
     sp = get_species("grapevine")
-    t = trace_outline(sp.image, sp.params, base_px=sp.base_px, apex_px=sp.apex_px)
-    rgba = species_photo_rgba(sp, sp.params)
+    t = species_trace(sp, sp.params)
+    w, h = t.image_size
+    load = lambda: photo.load_photo_rgba(sp.image, int(scale * scale * w * h) + 1, t)  # noqa: E731
+    rgba = load()
+    k = rgba.shape[1] / w
+    assert abs(k - scale) < 0.01
     band = cv2.resize(cv2.dilate(t.petiole_mask, np.ones((5, 5), np.uint8)), rgba.shape[1::-1],
                       interpolation=cv2.INTER_NEAREST) > 0
     blade = rgba[..., 3] > 0
     core = (cv2.distanceTransform(band.astype(np.uint8), cv2.DIST_L2, 5) >= 2) & blade
-    ring = (cv2.dilate(band.astype(np.uint8), np.ones((41, 41), np.uint8)) > 0) & ~band & blade
+    e = 2 * int(20 * scale) + 1
+    ring = (cv2.dilate(band.astype(np.uint8), np.ones((e, e), np.uint8)) > 0) & ~band & blade
 
     def detail(img):
         L = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_RGB2GRAY).astype(float)
@@ -177,14 +186,24 @@ def test_the_inpainted_petiole_band_carries_the_blades_detail():
 
     L, hp = detail(rgba)
     assert 0.6 < hp[core].std() / hp[ring].std() < 2.5, (hp[core].std(), hp[ring].std())
-    smooth = photo.mirrored_detail  # the inpainting alone, for the mean colour
+    mirror = photo.mirrored_detail  # the inpainting alone, for the mean colour
     try:
         photo.mirrored_detail = lambda rgb, fill, *a: fill
-        L0, hp0 = detail(species_photo_rgba(sp, sp.params))
+        L0, hp0 = detail(load())
     finally:
-        photo.mirrored_detail = smooth
+        photo.mirrored_detail = mirror
     assert hp0[core].std() < 0.4 * hp[ring].std()
     assert abs(L[core].mean() - L0[core].mean()) < 2.0
+    # the detail is the mirror image's: reflect the band's pixels across base → apex
+    base, apex = k * np.asarray(t.base_px, float), k * np.asarray(t.apex_px, float)
+    d = (apex - base) / np.linalg.norm(apex - base)
+    ys, xs = np.nonzero(core)
+    p = np.stack([xs, ys], 1) - base
+    q = np.rint(base + 2.0 * (p @ d)[:, None] * d - p).astype(int)
+    ok = (q[:, 0] >= 0) & (q[:, 0] < rgba.shape[1]) & (q[:, 1] >= 0) & (q[:, 1] < rgba.shape[0])
+    ok[ok] &= blade[q[ok, 1], q[ok, 0]] & ~band[q[ok, 1], q[ok, 0]]
+    assert ok.mean() > 0.5
+    assert np.corrcoef((hp - hp0)[ys[ok], xs[ok]], hp[q[ok, 1], q[ok, 0]])[0, 1] > 0.7
 
 
 def test_mirrored_detail_reflects_across_the_axis():

@@ -391,6 +391,19 @@ def test_detail_albedo_lays_the_photos_own_hues_on_living_tissue(off):
     mesh.chroma = chroma
     live = stripes(mesh)
     assert min(live[0], live[2]) > max(live[1], live[3]) + 40, live
+    # at weight 1, with the vertex colour the texture's mean, the detail albedo is the texel
+    # itself: the same pixels as the photo drawn as albedo
+    detail = off.render_array(mesh, cam, RenderOptions(veins=False, shadows=False, albedo="detail")).astype(int)
+    photo = off.render_array(mesh, cam, RenderOptions(veins=False, shadows=False, albedo="texture")).astype(int)
+    rows = slice(H // 2 - 3, H // 2 + 4)
+    assert np.abs(detail[rows, cols] - photo[rows, cols]).max() <= 6, (detail[rows, cols], photo[rows, cols])
+    # the veins take the same detail: along the midrib (x = 0, the boundary of stripes 3 and 4)
+    # weight 1 and weight 0 draw it differently
+    with_v = off.render_array(mesh, cam, RenderOptions(shadows=False, albedo="detail")).astype(int)
+    no_ch = off.render_array(RenderMesh(**{**mesh.__dict__, "chroma": None}), cam,
+                             RenderOptions(shadows=False, albedo="detail")).astype(int)
+    mid = [int(H / 2 - (y - B) * px_per_m) for y in np.linspace(0.03, 0.07, 9)]
+    assert np.mean([np.abs(with_v[r, W // 2] - no_ch[r, W // 2]).sum() for r in mid]) > 10
     dead = chroma.copy()
     dead[:, 3] = 0.0
     gone = stripes(RenderMesh(**{**mesh.__dict__, "chroma": dead}))
@@ -398,22 +411,35 @@ def test_detail_albedo_lays_the_photos_own_hues_on_living_tissue(off):
     assert np.ptp(stripes(RenderMesh(**{**mesh.__dict__, "chroma": None}))) < 6
     with pytest.raises(LeafsimError, match="chroma"):
         off.render_array({"positions": mesh.positions, "chroma": chroma[:, :3]}, cam, RenderOptions(albedo="detail"))
+    with pytest.raises(LeafsimError, match="chroma"):
+        off.render_array({"positions": mesh.positions, "chroma": np.full_like(chroma, np.nan)}, cam, RenderOptions(albedo="detail"))
 
 
 def test_texture_fringe_takes_the_colour_further_in():
     """The photo's outermost leaf texels mix the leaf with its background (here a pink ring):
-    the texture the renderer uploads gives them the colour of the clean leaf further in, and
-    keeps the mask."""
-    from leafsim.render.renderer import _dilate_texture
+    the texture the renderer uploads gives them the colour of the clean leaf further in (here
+    a radial gradient: the colour just inside the fringe), keeps the mask, and leaves every
+    texel ``FRINGE_PX`` or more inside untouched."""
+    from leafsim.appearance.texture import FRINGE_PX, clean_texture
 
     tex = np.zeros((40, 40, 4), np.uint8)
     yy, xx = np.mgrid[:40, :40]
     r = np.hypot(yy - 19.5, xx - 19.5)
-    tex[r < 15] = (40, 120, 30, 255)
-    ring = (r < 15) & (r >= 14)
+    inside = r < 15
+    tex[inside, 3] = 255
+    tex[..., 1] = np.clip(60 + 8 * r, 0, 255).astype(np.uint8)  # green rises outwards
+    tex[..., 0], tex[..., 2] = 40, 30
+    ring = inside & (r >= 14)
     tex[ring, :3] = (230, 150, 160)
-    out = _dilate_texture(tex)
+    out = clean_texture(tex)
     assert np.array_equal(out[..., 3], tex[..., 3])
-    assert (out[ring, :3] == (40, 120, 30)).all()
-    assert (out[r >= 15, :3] == (40, 120, 30)).all()  # outside: the nearest clean texel's colour
-    assert (out[r < 12, :3] == (40, 120, 30)).all()
+    from scipy.ndimage import distance_transform_edt
+
+    depth = distance_transform_edt(inside)
+    deep = depth >= FRINGE_PX
+    assert np.array_equal(out[deep], tex[deep])  # no erosion past the fringe
+    fringe = inside & ~deep
+    assert fringe.sum() > ring.sum()  # the fringe is wider than the pink ring, and none of it is left
+    assert not (out[fringe, 0] > 100).any() and not (out[~inside, 0] > 100).any()
+    # a fringe texel takes a clean texel's colour from just inside it (green 60 + 8 r, r ≈ 12–13)
+    assert np.abs(out[ring, 1].astype(int) - int(60 + 8 * 12.5)).max() <= 12
