@@ -65,7 +65,7 @@ void main() {
 #endif
     vec3 albedo = t.rgb * v_tint;
 #elif LS_MODE == 2
-    vec3 albedo = v_col * v_tint * photo_detail(texture(u_tex, v_uv).rgb, u_tex_mean, v_chroma);
+    vec3 albedo = photo_detail(v_col * v_tint, texture(u_tex, v_uv).rgb, u_tex_mean, v_chroma);
 #else
     vec3 albedo = v_col * v_tint;
 #endif

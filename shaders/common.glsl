@@ -7,18 +7,20 @@ vec3 linear_to_srgb(vec3 c) {
     return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
 }
 
-// The "detail" albedo's factor for a photo texel t (linear): the texel's luminance over the
-// photo's mean (its own brightness, not the vertex's blurred one), times, where the tissue
-// still lives, the texel's chromaticity over the vertex's young chromaticity: chroma.rgb is
-// the photo's blurred colour at the vertex divided by its luminance, chroma.a the weight
-// (living share, 0 = luminance only), so the young leaf shows the photo's own fine hues and
-// dead tissue the model's colour.
-vec3 photo_detail(vec3 t, vec3 tex_mean, vec4 chroma) {
+// The "detail" albedo of a vertex colour `base` under photo texel t (linear): the texel's
+// luminance over the photo's mean (its own brightness, not the vertex's blurred one), and,
+// where the tissue still lives, the texel's chromaticity over the vertex's young chromaticity:
+// chroma.rgb is the photo's blurred colour at the vertex divided by its luminance, chroma.a the
+// weight (living share, 0 = luminance only). The chromaticity factor keeps the colour's
+// luminance, so it moves hues only (on a young vertex, whose colour is the young one, the
+// result is the texel itself); dead tissue shows the model's colour with the photo's brightness.
+vec3 photo_detail(vec3 base, vec3 t, vec3 tex_mean, vec4 chroma) {
     vec3 W = vec3(0.2126, 0.7152, 0.0722);
     float lum = dot(t, W);
     float f = clamp(lum / max(dot(tex_mean, W), 1e-4), 0.0, 3.0);
     vec3 ratio = clamp((t / max(lum, 1e-4)) / max(chroma.rgb, vec3(1e-4)), 0.25, 4.0);
-    return f * pow(ratio, vec3(clamp(chroma.a, 0.0, 1.0)));
+    vec3 c = base * pow(ratio, vec3(clamp(chroma.a, 0.0, 1.0)));
+    return f * c * (dot(base, W) / max(dot(c, W), 1e-6));
 }
 
 // Turbo colour map (polynomial fit by Ruofei Du of Google's turbo); returns sRGB.

@@ -52,7 +52,7 @@ void main() {
     vec3 N = normalize(normalize(v_nrm) * sqrt(max(1.0 - a * a, 0.0)) * 1.3 + normalize(v_side) * sign(v_v) * a);
 #if LS_TEX == 2
     // detail: the vertex colour times the photo's detail under the vein (as the blade)
-    vec3 base = v_base * photo_detail(texture(u_tex, v_uv).rgb, u_tex_mean, v_chroma);
+    vec3 base = photo_detail(v_base, texture(u_tex, v_uv).rgb, u_tex_mean, v_chroma);
 #elif LS_TEX
     vec4 t = texture(u_tex, v_uv);
 #if LS_CUTOUT
