@@ -19,8 +19,9 @@ vec3 photo_detail(vec3 base, vec3 t, vec3 tex_mean, vec4 chroma) {
     float lum = dot(t, W);
     float f = clamp(lum / max(dot(tex_mean, W), 1e-4), 0.0, 3.0);
     vec3 ratio = clamp((t / max(lum, 1e-4)) / max(chroma.rgb, vec3(1e-4)), 0.25, 4.0);
-    vec3 c = base * pow(ratio, vec3(clamp(chroma.a, 0.0, 1.0)));
-    return f * c * (dot(base, W) / max(dot(c, W), 1e-6));
+    vec3 b = max(base, vec3(0.0));
+    vec3 c = b * pow(ratio, vec3(clamp(chroma.a, 0.0, 1.0)));
+    return f * c * (dot(b, W) / max(dot(c, W), 1e-6));
 }
 
 // Turbo colour map (polynomial fit by Ruofei Du of Google's turbo); returns sRGB.

@@ -399,12 +399,15 @@ def test_detail_albedo_lays_the_photos_own_hues_on_living_tissue(off):
     assert np.abs(detail[rows, cols] - photo[rows, cols]).max() <= 6, (detail[rows, cols], photo[rows, cols])
     # on a vertex whose colour has left the young one (a red leaf that still holds chlorophyll)
     # the photo's hues move its hue, not its brightness: the stripes' luminance ratio is the
-    # texels' (1.08), not 2.0 as a plain per-channel factor gives
+    # texels' (1.10), not 2.0 as a plain per-channel factor gives; and the hue does move
     red = RenderMesh(**{**mesh.__dict__, "colours": np.tile(np.float32([0.4, 0.1, 0.05]), (n, 1))})
     img = off.render_array(red, cam, RenderOptions(veins=False, shadows=False, albedo="detail"))
     c = img[rows, cols].astype(float).mean(axis=0) / 255.0
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4) @ w
     assert abs((lin[0] + lin[2]) / (lin[1] + lin[3]) / ((a @ w) / (b @ w)) - 1.0) < 0.03, lin
+    rb = img[rows, cols].astype(float).mean(axis=0)
+    rb = rb[:, 0] - rb[:, 2]  # red minus blue: the yellower stripes a redder than the bluer b
+    assert min(rb[0], rb[2]) > max(rb[1], rb[3]) + 30, rb
     # the veins take the same detail: along the midrib (x = 0, the boundary of stripes 3 and 4)
     # weight 1 and weight 0 draw it differently
     with_v = off.render_array(mesh, cam, RenderOptions(shadows=False, albedo="detail")).astype(int)
