@@ -103,9 +103,10 @@ def validate_mesh(mesh) -> None:
     _check("colours", (3,))
     _check("tint", (3,))
     _check("chroma", (4,))
-    chroma = getattr(mesh, "chroma", None)
-    if chroma is not None and not np.all(np.isfinite(np.asarray(chroma, dtype=np.float64))):
-        raise LeafsimError("render mesh: chroma must be finite")
+    for name in ("colours", "tint", "chroma"):
+        a = getattr(mesh, name, None)
+        if a is not None and not np.all(np.isfinite(np.asarray(a, dtype=np.float64))):
+            raise LeafsimError(f"render mesh: {name} must be finite")
     for name, arr in (getattr(mesh, "scalars", None) or {}).items():
         if np.asarray(arr).shape != (n,):
             raise LeafsimError(f"render mesh: scalar field {name!r} must be ({n},)")

@@ -292,6 +292,12 @@ class Renderer:
         pos = np.asarray(positions)
         if pos.shape != (self.n, 3):
             raise LeafsimError(f"renderer: positions must be ({self.n}, 3), got {pos.shape}")
+        for name, a in (("colours", colours), ("tint", tint)):
+            if a is not None and (np.shape(a) != (self.n, 3) or not np.all(np.isfinite(a))):
+                raise LeafsimError(f"renderer: {name} must be finite, ({self.n}, 3), got {np.shape(a)}")
+        c = None if chroma is None else np.asarray(chroma, dtype=np.float32)
+        if c is not None and (c.shape != (self.n, 4) or not np.all(np.isfinite(c))):
+            raise LeafsimError(f"renderer: chroma must be finite, ({self.n}, 4), got {c.shape}")
         self.pos[:] = pos
         vertex_normals(self.pos, self.tri, self.nrm)
         self.vbo_pos.write(self.pos)
@@ -307,9 +313,6 @@ class Renderer:
             self.vbo_tint.write(self.tint)
             recolour = True
         if chroma is not None:
-            c = np.asarray(chroma, dtype=np.float32)
-            if c.shape != (self.n, 4) or not np.all(np.isfinite(c)):
-                raise LeafsimError(f"renderer: chroma must be finite, ({self.n}, 4), got {c.shape}")
             self.chroma[:] = c
             self.vbo_chroma.write(self.chroma)
             recolour = True

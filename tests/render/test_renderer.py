@@ -170,6 +170,20 @@ def test_unknown_view_and_option_raise(off, leaf):
         RenderOptions.coerce({"bogus": 1})
 
 
+def test_non_finite_colours_are_refused_in_one_line(off, leaf):
+    """A NaN colour or tint (a diverged pigment state) is refused naming the field, at
+    populate and at update, instead of drawing black or white blotches."""
+    bad = np.array(leaf.colours if leaf.colours is not None else np.zeros((leaf.vertex_count, 3)), np.float32)
+    bad[3, 1] = np.nan
+    with pytest.raises(LeafsimError, match="colours must be finite"):
+        off.render_array(RenderMesh(**{**leaf.__dict__, "colours": bad}), top_camera())
+    off.render_array(leaf, top_camera())
+    with pytest.raises(LeafsimError, match="tint must be finite"):
+        off.render_array({"positions": leaf.positions, "tint": np.full_like(bad, np.inf)}, top_camera())
+    with pytest.raises(LeafsimError, match="colours must be finite"):
+        off.render_array({"positions": leaf.positions, "colours": bad}, top_camera())
+
+
 def test_texture_path_shows_texture(off):
     tex = np.zeros((64, 64, 4), np.uint8)
     tex[:, :32] = (230, 30, 30, 255)  # left half red
