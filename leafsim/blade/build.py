@@ -26,7 +26,7 @@ from leafsim.blade.budget import check_mesh_budget
 from leafsim.blade.elements import Hinges, Springs, make_hinges, make_springs, t_edges
 from leafsim.blade.kernels import greedy_colour
 from leafsim.blade.masses import Masses, lump_masses
-from leafsim.blade.petiole import Petiole, add_petiole, petiole_hinge_rods
+from leafsim.blade.petiole import Petiole, add_petiole, petiole_hinge_rods, rod_sides
 from leafsim.blade.mesh import signed_areas, triangulate, vein_chains
 from leafsim.blade.sample import patch_field, sample_particles
 from leafsim.config.params import ParamSet
@@ -97,7 +97,7 @@ def build_blade(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int,
     H = replace(H, rod=np.where(on_stalk, stalk_rod, H.rod), vein=H.vein | on_stalk)
     vol_idx = np.column_stack([np.arange(nT, nT + m), tri]).astype(np.int64)
     vol_rest0 = 2.0 * tri_area * h  # 6 × tetra volume = det = h × 2A
-    M = lump_masses(P, tri, tri_area, S, E.n_T_springs, base, vp, vw, params)
+    M = lump_masses(P, tri, tri_area, S, E.n_T_springs, base, vp, vw, params, rod_sides(pet, len(P.pts)))
     model = _finalize(shape, P, tri, rest, S, H, vol_idx, vol_rest0, E.tri_edge, M, base, vp, vw, vo, remap, L, h, r, E.share)
     if pet is not None:
         model = _with_petiole(model, pet, veins)

@@ -24,13 +24,17 @@ class Masses:
     vein_width: np.ndarray  # (n,) [m], 0 off the veins
 
 
-def lump_masses(P: Points, tri, tri_area, S: Springs, nTs: int, base: int, vp, vw, params: ParamSet) -> Masses:
+def lump_masses(P: Points, tri, tri_area, S: Springs, nTs: int, base: int, vp, vw, params: ParamSet,
+                rod_sides: np.ndarray | None = None) -> Masses:
     """Fresh mass lumped by area: each layer carries half the blade's areal mass; a T particle
     stands for a third of its triangles' area, a V particle for its triangle.  The areal mass
     follows Jeong's graph-distance profile (τ from Dijkstra over the T springs, weighted per
     vein order) between ``mass.profile_min`` × and 1 × its peak, normalised so that the
     blade's mean dry mass per area is ``mass.lma``; vein particles add their rod (π w²/4 ×
-    length share × ``mass.vein_density``, minus the lamina it replaces).  Water = water
+    length share × ``mass.vein_density``, minus the lamina it replaces); where ``rod_sides``
+    names a particle's two side particles (the stalk's strip, :func:`~leafsim.blade.petiole.rod_sides`)
+    half of it stays on the particle and a quarter goes to either side (the rod's polar moment
+    of inertia M d²/8 over particles d/2 off its axis).  Water = water
     fraction × fresh mass, the rest is dry mass (cytosol)."""
     nT, m = len(P.pts), len(tri)
     wt = {0: params["mass.weight_main"], 1: params["mass.weight_lateral"], 2: params["mass.weight_sub"], 3: params["mass.weight_sub"]}
@@ -59,7 +63,14 @@ def lump_masses(P: Points, tri, tri_area, S: Springs, nTs: int, base: int, vp, v
         seg = np.linalg.norm(np.diff(pts[chain], axis=0), axis=1)
         share = 0.5 * (np.r_[seg, 0.0] + np.r_[0.0, seg])
         rod = params["mass.vein_density"] * 0.25 * np.pi * w * w - scale * prof_T[chain] * w
-        np.add.at(extra, chain, np.maximum(rod, 0.0) * share)
+        mass = np.maximum(rod, 0.0) * share
+        if rod_sides is not None:
+            sides = rod_sides[chain]
+            strip = (sides >= 0).all(1)
+            mass = np.where(strip, 0.5 * mass, mass)
+            np.add.at(extra, sides[strip, 0], 0.5 * mass[strip])
+            np.add.at(extra, sides[strip, 1], 0.5 * mass[strip])
+        np.add.at(extra, chain, mass)
         np.maximum.at(vein_width, chain, w)
     m0 += extra
     tau = np.concatenate([tau_T, tau_T[tri].mean(1)])

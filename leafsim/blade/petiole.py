@@ -7,7 +7,11 @@ as a strip of sections k = 0 … N: section 0 is the base particle and its two n
 contour (so the strip's first triangles share the blade's margin edges, and hinges across
 them carry bending moments from stalk to blade), each later section a centre particle with
 one particle ±d/2 to either side.  The centre row is a vein of order 0 of width d: its springs
-are rods (cross-section πd²/4) and it adds the rod's mass like any vein.  The strip's hinges
+are rods (cross-section πd²/4) and it adds the rod's mass, lumped as a half on the centre and a
+quarter on either side particle, so each section has the rod's mass M and its polar moment of
+inertia M d²/8 (all of it on the centre row left the side particles thousands of times lighter
+than the centre, held by the rod's stiff hinges: on meshes finer than the default the stalk
+went unstable within 30 frames of drying).  The strip's hinges
 across the stalk (the two crosswise edges of every section) share the rod's bending stiffness
 I/ℓ = (πd⁴/64)/s; the hinges along the centre row keep the strip from folding along its axis
 with the same weight, and so do its diagonals (else the strip folds along them); none of them
@@ -32,6 +36,9 @@ from leafsim.sim.model import KIND_PETIOLE
 
 #: largest turn [deg] away from straight down the midrib axis tried to keep the stalk off the blade
 MAX_TURN = 80.0
+#: a section of the strip that would overlap the blade narrows by SHRINK at a time, down to
+#: MIN_HALF_WIDTH of the stalk's d/2 (:func:`_strip_half_widths`)
+SHRINK, MIN_HALF_WIDTH = 0.8, 0.2
 
 
 @dataclass
@@ -87,12 +94,13 @@ def add_petiole(P: Points, tri: np.ndarray, remap: np.ndarray, base: int, shape:
     first = len(P.pts)
     new = []
     sections = [junction]
+    centres = root_xy + (ahead + np.arange(1, n_sec + 1)[:, None] * s) * d
+    half = _strip_half_widths(P, remap, junction, centres, nrm, 0.5 * diam)
     for k in range(1, n_sec + 1):
-        c = root_xy + (ahead + k * s) * d
         row = []
         for side in (1.0, 0.0, -1.0):
             row.append(first + len(new))
-            new.append(c + side * 0.5 * diam * nrm)
+            new.append(centres[k - 1] + side * half[k - 1] * nrm)
         sections.append(row)
     sections = np.array(sections, np.int64)
     pts = np.vstack([P.pts, np.array(new)])
@@ -110,6 +118,46 @@ def add_petiole(P: Points, tri: np.ndarray, remap: np.ndarray, base: int, shape:
     points = Points(pts, kinds, vord, P.vein_lists, P.vein_ord, P.vein_wid, P.n_contour)
     info = Petiole(chain, sections, math.pi * diam ** 4 / 64.0 / s / 2.0, diam, d, first, ahead)
     return (points, np.vstack([tri, ptri]), vp + [chain], vw + [np.full(len(chain), diam)], vo + [0], info)
+
+
+def _crosses(a: np.ndarray, b: np.ndarray, ring: np.ndarray) -> bool:
+    """Whether segment a–b properly crosses an edge of the closed polygon ``ring`` (touching
+    at an end does not count: the strip's first edges start on the outline)."""
+    c, d = ring, np.roll(ring, -1, axis=0)
+
+    def side(p, q, r):
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+
+    return bool(((side(a, b, c) * side(a, b, d) < 0) & (side(c, d, a) * side(c, d, b) < 0)).any())
+
+
+def _strip_half_widths(P: Points, remap, junction: list, centres: np.ndarray, nrm: np.ndarray, half: float) -> np.ndarray:
+    """Half-width of each section of the strip: d/2, or narrower (× ``SHRINK`` at a time, down to
+    ``MIN_HALF_WIDTH`` × d/2) where a side particle would lie on the blade or the strip's edges
+    would cross the blade's outline: a stalk in a basal notch narrower than it (maple's, on
+    meshes finer than the default, whose lobes' margins run down beside it).  A strip triangle
+    over a blade triangle across a shared margin edge is a hinge folded by π at rest, which
+    kicked the leaf apart at its first frame.  The rod's stiffness and mass keep the stalk's
+    diameter; only the strip that carries them is narrower there."""
+    out = np.full(len(centres), half)
+    ring = remap[:P.n_contour]
+    ring = ring[ring >= 0]
+    if len(ring) < 3:
+        return out
+    ring_xy = P.pts[ring]
+    prev_l, prev_r = P.pts[junction[0]], P.pts[junction[2]]
+    for k, c in enumerate(centres):
+        w = half
+        while True:
+            left, right = c + w * nrm, c - w * nrm
+            clash = (points_in_region(np.array([left, right]), ring_xy, []).any()
+                     or _crosses(prev_l, left, ring_xy) or _crosses(prev_r, right, ring_xy) or _crosses(left, right, ring_xy))
+            if not clash or w <= MIN_HALF_WIDTH * half:
+                break
+            w = max(SHRINK * w, MIN_HALF_WIDTH * half)
+        out[k] = w
+        prev_l, prev_r = left, right
+    return out
 
 
 def _junction(P: Points, remap, base: int, d, nrm, r: float, length: float) -> tuple[list, float]:
@@ -136,6 +184,18 @@ def _junction(P: Points, remap, base: int, d, nrm, r: float, length: float) -> t
                 left, right = (nb[0], nb[1]) if side[0] > 0 else (nb[1], nb[0])
                 return [left, root, right], ahead + 0.1 * r
     return [base, base, base], 0.0
+
+
+def rod_sides(info: Petiole | None, n: int) -> np.ndarray | None:
+    """(n, 2) per particle: the two side particles of its section when it is a centre particle
+    of the strip past the junction, else −1 (:func:`~leafsim.blade.masses.lump_masses` lumps the
+    rod's mass over them); None without a stalk."""
+    if info is None:
+        return None
+    out = np.full((n, 2), -1, np.int64)
+    sec = info.sections[1:]
+    out[sec[:, 1]] = sec[:, [0, 2]]
+    return out
 
 
 def petiole_hinge_rods(hinge_idx: np.ndarray, info: Petiole | None) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from helpers.synthetic import ellipse_shape, lobed_shape, synthetic_veins
-from leafsim.base.geometry import points_in_polygon
+from leafsim.base.geometry import LeafShape, points_in_polygon
 from leafsim.blade.build import build_blade
 from leafsim.config.params import ParamSet
 from leafsim.sim.model import KIND_PETIOLE, LAYER_T
@@ -189,3 +189,68 @@ def test_every_species_stalk_is_joined_to_the_blade_by_hinges():
         joined = st[h].any(1) & ((~st[h]) & (h != m.base_particle)).any(1)
         assert joined.sum() >= 4, key
         assert (m.hinge_rod[joined] > 0).any(), key
+
+
+
+def notched_shape(length: float = 0.12, width: float = 0.08, notch: float = 0.006, gap: float = 0.0015) -> LeafShape:
+    """An elliptic blade with a narrow basal notch (as maple's sinus): the base at the notch's
+    top (0, 0), its sides straight down to ± ``gap`` at ``notch`` below it, so within a few
+    millimetres of the base the notch is narrower than a 2 mm stalk."""
+    eps = math.asin(2.0 * gap / width)
+    t = np.linspace(-np.pi / 2 + eps, 1.5 * np.pi - eps, 400)
+    arc = np.column_stack([0.5 * width * np.cos(t), 0.5 * length * (1 + np.sin(t)) - notch])  # counter-clockwise
+    f = np.linspace(0.0, 1.0, 12)[1:-1, None]
+    up_left = arc[-1] * (1.0 - f)           # from the arc's end up the notch's left side to the base
+    down_right = arc[0] * f                 # from the base down its right side to the arc's start
+    poly = np.vstack([arc, up_left, [[0.0, 0.0]], down_right])
+    return LeafShape(contour=poly, base=np.zeros(2), apex=np.array([0.0, length - notch]), lobes=np.empty((0, 2)),
+                     length=length)
+
+
+def test_stalk_in_a_narrow_notch_narrows_instead_of_overlapping_the_blade():
+    """A stalk wider than the basal notch it leaves from: its strip narrows there (only there),
+    so no strip particle lies on the blade and no hinge is folded at rest.  Before, on maple
+    at meshes finer than the default, a strip triangle lay over a blade triangle across a
+    shared margin edge: a hinge folded by π at rest, which threw the stalk about at 14 m/s in
+    the first frames and stopped every run at 0.01 L (the watchdog)."""
+    from leafsim.sim.kernels.pbd import dihedral_angles
+
+    s = notched_shape()
+    d = 0.002
+    m = build_blade(s, synthetic_veins(s), ParamSet({"mesh.spacing": 0.01, "petiole.length": 0.03, "petiole.diameter": d}),
+                    seed=2)
+    r = m.particle_rest
+    stalk_T = m.particle_petiole & (m.particle_layer == LAYER_T)
+    assert not points_in_polygon(r[stalk_T, :2], s.contour).any()
+    assert np.abs(dihedral_angles(r, m.hinge_idx)).max() < 1e-9
+    a, b, c = r[m.tri_T[:, 0]], r[m.tri_T[:, 1]], r[m.tri_T[:, 2]]
+    assert (np.cross(b - a, c - a)[:, 2] > 0).all()
+    # sections: three stalk particles at one distance along the stalk; width = their spread
+    ids = np.flatnonzero(stalk_T & (m.particle_kind == KIND_PETIOLE))
+    along = np.round(-r[ids, 1], 9)
+    widths = {y: np.ptp(r[ids[along == y], 0]) for y in np.unique(along)}
+    ys = sorted(widths)
+    assert widths[ys[0]] < 0.9 * d          # narrowed in the notch
+    assert widths[ys[-1]] == pytest.approx(d, rel=1e-9)   # the stalk's own width once clear of it
+    assert all(widths[y] == pytest.approx(d, rel=1e-9) for y in ys if y > 0.008)
+
+
+def test_maple_on_a_finer_mesh_starts_at_rest():
+    """Maple at 0.0141 L (the accuracy study's reference mesh): no hinge folded at rest, and the
+    first frames move the tissue at millimetres per second at most, as on the default mesh
+    (with the folded hinges of before: 22 mm/s RMS, 0.35 m/s at 0.01 L)."""
+    from leafsim.config.species import get_species
+    from leafsim.pipeline import build_leaf
+    from leafsim.sim.kernels.pbd import dihedral_angles
+    from leafsim.sim.watchdog import momenta
+
+    sp = get_species("maple")
+    p = sp.params.with_overrides({"mesh.spacing": 0.0141, "dynamics.path": "own", "effects.colour": False})
+    m = build_leaf(sp, p, 0).model
+    assert np.abs(dihedral_angles(m.particle_rest, m.hinge_idx)).max() < 1e-9
+    sim = Simulator(m, p)
+    st = sim.state()
+    for _ in range(10):
+        sim.step(st)
+    mom = momenta(m.particle_cytosol + st.particle_water, st.particle_q, st.particle_qd)
+    assert mom["rms_internal_speed"] < 0.005
