@@ -182,6 +182,7 @@ def test_every_species_stalk_is_joined_to_the_blade_by_hinges():
     from leafsim.config.presets import QUALITY
     from leafsim.config.species import load_library
     from leafsim.pipeline import build_leaf
+    from leafsim.sim.kernels.pbd import dihedral_angles
 
     for key, sp in load_library().items():
         m = build_leaf(sp, sp.params.with_overrides(QUALITY["draft"]), 0).model
@@ -189,6 +190,8 @@ def test_every_species_stalk_is_joined_to_the_blade_by_hinges():
         joined = st[h].any(1) & ((~st[h]) & (h != m.base_particle)).any(1)
         assert joined.sum() >= 4, key
         assert (m.hinge_rod[joined] > 0).any(), key
+        # and nothing is folded at rest (a strip triangle over a blade triangle is a hinge at π)
+        assert np.abs(dihedral_angles(m.particle_rest, m.hinge_idx)).max() < 1e-9, key
 
 
 

@@ -99,8 +99,29 @@ def test_watchdog_names_the_parameter_of_a_blow_up():
     dog.check(st_)  # at rest: fine
     st_.particle_qd[:] = np.random.default_rng(0).normal(0, 5.0, st_.particle_qd.shape)  # 5 m/s of jitter
     st_.scalars[1] = 5
-    with pytest.raises(LeafsimError, match=r"unstable at frame 5.*shrink.sigma_surface_top = 0.9"):
+    with pytest.raises(LeafsimError, match=r"unstable at frame 5.*fastest .*L from the base.*shrink.sigma_surface_top = 0.9"):
         dog.check(st_)
+
+
+def test_watchdog_says_where_the_fastest_particle_is():
+    """The message places the fastest particle (against the leaf's mean motion): a stalk
+    particle thrown about is named as on the stalk, a margin particle as at the margin."""
+    from leafsim.sim.watchdog import where_fastest
+
+    s = ellipse_shape()
+    m = build_blade(s, synthetic_veins(s), ParamSet({"mesh.spacing": 0.05, "petiole.length": 0.02}), seed=1)
+    st_ = m.state()
+    st_.particle_qd[:] = 0.01  # the whole leaf moving: not a cause
+    i = int(np.flatnonzero(m.particle_petiole)[0])
+    st_.particle_qd[i] = [3.0, 0.0, 0.0]
+    assert where_fastest(m, st_).startswith("on the stalk")
+    st_.particle_qd[i] = 0.01
+    j = int(np.flatnonzero(~m.particle_petiole & (m.particle_margin_distance < 1e-9))[0])
+    st_.particle_qd[j] = [0.0, 0.0, 3.0]
+    w = where_fastest(m, st_)
+    assert w.startswith("at the margin")
+    far = float(np.linalg.norm(m.particle_rest[j, :2] - m.particle_rest[m.base_particle, :2])) / m.length
+    assert w.endswith(f"{far:.2f} L from the base")
 
 
 def test_watchdog_catches_energy_growing_without_a_source():
