@@ -196,13 +196,18 @@ class Watchdog:
 
 
 def where_fastest(model, state) -> str:
-    """Where the particle moving fastest against the leaf's mean motion lies, in words: on the
-    stalk, at the margin, on a vein or in the blade, and how far from the base (× L) — what
-    a blow-up's message needs to point at its cause (the stalk's, on maple's finer meshes)."""
+    """Where the particle moving fastest against the leaf's mean motion lies (or the first one
+    whose position or velocity is not finite), in words: on the stalk, at the margin, on a vein
+    or in the blade, and how far from the base (× L) — what a blow-up's message needs to point
+    at its cause (the stalk's, on maple's finer meshes)."""
     qd = state.particle_qd
     mass = model.particle_cytosol + state.particle_water
-    v = qd - (mass[:, None] * qd).sum(0) / max(float(mass.sum()), 1e-300)
-    i = int(np.argmax((v * v).sum(1)))
+    bad = ~np.isfinite(qd).all(1) | ~np.isfinite(state.particle_q).all(1)
+    if bad.any():  # a NaN has no speed: the first particle that has one is where it is
+        i = int(np.argmax(bad))
+    else:
+        v = qd - (mass[:, None] * qd).sum(0) / max(float(mass.sum()), 1e-300)
+        i = int(np.argmax((v * v).sum(1)))
     if model.particle_petiole is not None and model.particle_petiole[i]:
         part = "on the stalk"
     elif model.particle_margin_distance[i] < 2.0 * model.spacing:

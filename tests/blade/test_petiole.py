@@ -238,6 +238,30 @@ def test_stalk_in_a_narrow_notch_narrows_instead_of_overlapping_the_blade():
     assert all(widths[y] == pytest.approx(d, rel=1e-9) for y in ys if y > 0.008)
 
 
+def test_rod_mass_is_lumped_with_the_rod_s_polar_inertia(pair):
+    """Past the junction every section carries its rod as M/2 on the centre and M/4 on each
+    side: the same total, and the polar moment 2 (M/4)(d/2)² = M d²/8 of a round rod (all of it
+    on the centre row made the sides up to 1600× lighter than the centre, and the stalk went
+    unstable on fine meshes)."""
+    s, _, m = pair
+    # the same build with twice the vein density: the difference is the rods' mass alone (as
+    # lumped), the lamina's cancels
+    heavy = build_blade(s, synthetic_veins(s), ParamSet({**STALK, "mass.vein_density": 2 * 1100.0}), seed=3)
+    assert heavy.particle_count == m.particle_count
+    rod = heavy.particle_mass0 - m.particle_mass0
+    r = m.particle_rest
+    ids = np.flatnonzero(m.particle_petiole & (m.particle_layer == LAYER_T) & (m.particle_kind == KIND_PETIOLE))
+    centre = ids[m.particle_vein_order[ids] == 0]
+    sides = np.setdiff1d(ids, centre)
+    assert rod[centre].min() > 0
+    assert rod[sides].sum() == pytest.approx(rod[centre].sum(), rel=1e-9)
+    for c in centre:
+        near = sides[np.argsort(np.linalg.norm(r[sides, :2] - r[c, :2], axis=1))[:2]]
+        assert rod[near] == pytest.approx([0.5 * rod[c]] * 2, rel=1e-9)
+        assert 2 * rod[near[0]] * 0.001 ** 2 == pytest.approx(2 * rod[c] * 0.002 ** 2 / 8, rel=1e-9)  # M d²/8, M = 2 rod[c]
+
+
+@pytest.mark.slow
 def test_maple_on_a_finer_mesh_starts_at_rest():
     """Maple at 0.0141 L (the accuracy study's reference mesh): no hinge folded at rest, and the
     first frames move the tissue at millimetres per second at most, as on the default mesh

@@ -122,6 +122,9 @@ def test_watchdog_says_where_the_fastest_particle_is():
     assert w.startswith("at the margin")
     far = float(np.linalg.norm(m.particle_rest[j, :2] - m.particle_rest[m.base_particle, :2])) / m.length
     assert w.endswith(f"{far:.2f} L from the base")
+    k = int(np.flatnonzero(m.particle_petiole)[-1])
+    st_.particle_qd[k] = np.nan  # a NaN names its own particle, not particle 0
+    assert where_fastest(m, st_).startswith("on the stalk")
 
 
 def test_watchdog_catches_energy_growing_without_a_source():
