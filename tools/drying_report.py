@@ -31,11 +31,12 @@ from leafsim.sim.veinframe import vein_frame_curl
 DRY, SETTLE = 0.02, 1.15
 
 
-def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides: dict | None = None) -> dict:
+def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides: dict | None = None,
+        seed: int = 0) -> dict:
     sp = get_species(key)
     p = sp.params.with_overrides({**(overrides or {}), "dynamics.scene": scene})
-    shape, _, model = build_leaf(sp, p, 0)
-    run = Run(model, p, seed=0, name=key)
+    shape, _, model = build_leaf(sp, p, seed)
+    run = Run(model, p, seed=seed, name=key)
     st = run.state
     t0, t_dry = time.perf_counter(), None
 
@@ -52,7 +53,7 @@ def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides:
         st.particle_q[:] = leaf_frame(model, st)
         st.particle_q[:, 2] -= st.particle_q[model.particle_layer == 0, 2].min()
     f = Probe(shape).fields(model, st)
-    out = {"species": key, "scene": scene, "frames": st.frame, "seconds": round(secs, 1),
+    out = {"species": key, "scene": scene, **({"seed": seed} if seed else {}), "frames": st.frame, "seconds": round(secs, 1),
            "time_to_dry": None if t_dry is None else round(t_dry, 3), "water_left": round(f["water"], 4),
            "margin_lift": round(f["margin_lift"], 4), "area_3d": round(f["area_3d"], 4),
            "area_top": round(f["area_top"], 4), "inverted": shape_metrics(model, st)["inverted"],
@@ -60,7 +61,7 @@ def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides:
            **dried_shape(model, st),  # margin roll, midrib fold, wrinkles (leafsim.sim.curl)
            "particles": model.particle_count, "fresh_mass_g": round(1e3 * float(model.particle_mass0.sum()), 3)}
     if snap_dir is not None:
-        _pictures(sp, p, model, st, snap_dir / f"{key}_{scene}.png")
+        _pictures(sp, p, model, st, snap_dir / f"{key}_{scene}{f'_s{seed}' if seed else ''}.png")
     return out
 
 
@@ -150,6 +151,8 @@ def main():
                     help="where the pictures go (default docs/drying)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="a parameter over every species' own (experiments; repeatable)")
+    ap.add_argument("--seed", type=int, default=0, help="the leaf's seed (outline, veins, patches); pictures and "
+                    "rows of another seed than 0 are named KEY_SCENE_sN")
     a = ap.parse_args()
     if a.render:
         print(render(json.loads(Path(a.render).read_text())))
@@ -169,15 +172,15 @@ def main():
     print(f"{'species':16s} {'scene':7s} {'frames':>6s} {'t_dry':>6s} {'lift/L':>7s} {'3D':>6s} {'top':>6s} {'inv':>4s} {'s':>6s}")
     for k in keys:
         for sc in a.scenes.split(","):
-            r = dry(k, sc, a.max_time, snap, overrides)
+            r = dry(k, sc, a.max_time, snap, overrides, a.seed)
             rows.append(r)
             print(f"{k:16s} {sc:7s} {r['frames']:6d} {r['time_to_dry'] or float('nan'):6.2f} {r['margin_lift']:7.3f} "
                   f"{r['area_3d']:6.3f} {r['area_top']:6.3f} {r['inverted']:4d} {r['seconds']:6.1f}", flush=True)
     if a.json:
         old = {}
         if Path(a.json).is_file():  # keep the rows of species not rerun
-            old = {(r["species"], r["scene"]): r for r in json.loads(Path(a.json).read_text())}
-        old.update({(r["species"], r["scene"]): r for r in rows})
+            old = {(r["species"], r["scene"], r.get("seed", 0)): r for r in json.loads(Path(a.json).read_text())}
+        old.update({(r["species"], r["scene"], r.get("seed", 0)): r for r in rows})
         Path(a.json).write_text(json.dumps(list(old.values()), indent=1))
 
 

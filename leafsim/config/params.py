@@ -222,6 +222,8 @@ _f("shrink.sigma_surface_bottom", 0.15, 0.0, 3.0, "", "σ of surface springs in 
 _f("shrink.sigma_vein", 0.05, 0.0, 3.0, "", "σ of vein springs.", G, False)
 _f("shrink.alpha", 1.0, 0.1, 4.0, "", "Exponent α of (1 − v_rel) in the shrink law.", G, False)
 _f("shrink.curl_anisotropy", 0.6, 0.0, 1.0, "", "Anisotropy β of the bilayer curl relative to the local main/lateral vein direction: hinges that bend the blade across a vein curl × (1 + β), along it × (1 − β), so lobes cup about their own veins (0: isotropic).", G, False)
+_f("shrink.patchiness", 0.0, 0.0, 1.5, "", "Spread of the shrinkage within the blade: each spring's shrink and each hinge's bilayer curl × (1 + a z), z a seeded smooth random field (zero mean, unit spread) with correlation length shrink.patch_size, the same at any mesh spacing; patches that shrink less than their surroundings are pressed by them and the blade crumples and twists (dried leaves crumple from internal strain gradients whose origin is not known: Guo et al. 2025).  0 = the tissue shrinks alike everywhere.", G, False)
+_f("shrink.patch_size", 0.006, 0.001, 0.05, "m", "Correlation length of the shrinkage field of shrink.patchiness (the size of a patch that shrinks more or less than its surroundings).", G, False, log=True)
 _f("shrink.l_min", 0.5, 0.1, 1.0, "× l⁰", "Rest lengths never go below l_min · l⁰ (≥ 0.1: tissue cannot shrink to nothing; at 0 a leaf collapsed to a point and never came to rest).", G, False)
 
 # ---------------------------------------------------------------- dynamics (live)

@@ -73,7 +73,7 @@ class Simulator:
             self._osmosis.configure(params, dt=params["dynamics.dt"] * self.osmosis_every)
         if e["shrink"]:
             self._shrink = self._shrink or Shrink(self.model)
-            self._shrink.configure(params)
+            self._shrink.configure(params, self.seed)
         self.dynamic = e["pbd"] or e["gravity"]
         on_path = self.dynamic and self.model.path is not None and path_allowed(params)
         # after the drying path's hand-over the own mesh finishes with XPBD or, where the leaf is

@@ -23,6 +23,8 @@ CASES = {
     "negative_rest_sigma": (CHEAP | {"shrink.sigma_surface_top": 3.0, "shrink.sigma_surface_bottom": 2.5, "shrink.sigma_vein": 3.0,
                                      "shrink.l_min": 0.1, "osmosis.evaporation_top": 0.35, "osmosis.evaporation_bottom": 0.35}, 300, "ellipse"),
     "slivers": (CHEAP, 200, "slivers"),
+    "patchy_shrink_fast": (CHEAP | {"shrink.patchiness": 1.5, "shrink.patch_size": 0.004, "osmosis.evaporation_top": 35,
+                                    "osmosis.evaporation_bottom": 21, "dynamics.dt": 0.01}, 300, "lobed"),
     "fine_50k": ({"mesh.spacing": 0.004, "dynamics.dt": 0.01, "dynamics.substep_scaling": False,  # 40 large substeps: harder
                   "osmosis.evaporation_top": 1.4, "osmosis.evaporation_bottom": 0.7}, 6, "ellipse"),
     "10k_frames": ({"mesh.spacing": 0.1, "dynamics.dt": 0.004, "dynamics.substeps": 1}, 10000, "ellipse"),

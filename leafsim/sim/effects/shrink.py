@@ -15,11 +15,15 @@ from leafsim.sim.model import (
     Model,
     State,
 )
+from leafsim.sim.senescence import random_field
 from leafsim.sim.veinframe import hinge_alignment
 
 #: bilayer curvature gain κ = gain · Δε / h (prototype measured 1.3; Timoshenko equal layers 1.5)
 BILAYER_GAIN = 1.3
 
+
+#: salt of the shrinkage field's seed (shrink.patchiness), so it is not the senescence field
+PATCH_SALT = 0x5A71C4
 
 #: largest rest angle a bending hinge may ask for [rad]: a curvature the mesh cannot resolve
 #: (radius below a few edge lengths) is clamped instead of fighting the stretch constraints
@@ -40,7 +44,12 @@ class Shrink:
     So every constraint agrees with one shape whenever the bilayer curvature is developable;
     what remains is the physical frustration of a curvature that is not (cups), resolved by
     the energy, not by the solver's order (two layers and hinges each demanding their own
-    curl made the result depend on the iteration count)."""
+    curl made the result depend on the iteration count).
+
+    With ``shrink.patchiness`` a > 0 the blade's tissue shrinks unevenly: every spring's σ
+    and every hinge's bilayer angle × (1 + a z), z a seeded smooth random field of correlation
+    length ``shrink.patch_size`` (:meth:`_patches`); both layers and the curl follow the same
+    field, so each patch is a consistent shape of its own, incompatible with its neighbours."""
 
     def __init__(self, model: Model):
         self.model = model
@@ -57,19 +66,43 @@ class Shrink:
         self.hinge_align = hinge_alignment(model)
         self.hinge_curl = np.where(model.hinge_vein, 0.0, 1.0)
 
-    def configure(self, params):
+    def configure(self, params, seed: int = 0):
         t = self.model.spring_type
         sig = np.zeros(len(t))
         sig[t == SPRING_SURFACE] = params["shrink.sigma_surface_bottom"]
         sig[t == SPRING_VEIN] = params["shrink.sigma_vein"]
-        self.sigma = sig
+        spring_f, hinge_f = self._patches(float(params["shrink.patchiness"]), float(params["shrink.patch_size"]), seed)
+        self.sigma = sig * spring_f
         self.sig_top = params["shrink.sigma_surface_top"]
         self.sig_bot = params["shrink.sigma_surface_bottom"]
         self.alpha = params["shrink.alpha"]
         self.l_min = params["shrink.l_min"]
         self.setw = min(params["dynamics.plasticity"] * params["dynamics.dt"], 1.0)
         beta = params["shrink.curl_anisotropy"]
-        self.hinge_curl = np.where(self.model.hinge_vein, 0.0, 1.0 + beta * self.hinge_align)
+        self.hinge_curl = np.where(self.model.hinge_vein, 0.0, 1.0 + beta * self.hinge_align) * hinge_f
+
+    def _patches(self, a: float, size: float, seed: int) -> tuple:
+        """The shrinkage field of ``shrink.patchiness`` (class doc): per spring and per hinge the
+        factor 1 + a z at the midpoint of the spring and of the hinge's shared edge, ≥ 0; z the
+        seeded random field of :func:`leafsim.sim.senescence.random_field` over the blade's
+        rest positions (a function of position only, so every mesh of one leaf, the drying
+        path's too, shrinks with the same patches).  The stalk shrinks uniformly.  Cached per
+        (a, size, seed)."""
+        key = (a, size, int(seed))
+        if getattr(self, "_patch_key", None) == key:
+            return self._patch_f
+        m = self.model
+        if a <= 0.0:
+            f = (1.0, 1.0)
+        else:
+            blade = m.blade_particles
+            z = np.zeros(m.particle_count)
+            z[blade] = random_field(m.particle_rest[blade, :2], m.particle_area[blade], size, [int(seed), PATCH_SALT])
+            ij, h = m.spring_ij, m.hinge_idx
+            f = (np.clip(1.0 + a * 0.5 * (z[ij[:, 0]] + z[ij[:, 1]]), 0.0, None),
+                 np.clip(1.0 + a * 0.5 * (z[h[:, 2]] + z[h[:, 3]]), 0.0, None))
+        self._patch_key, self._patch_f = key, f
+        return f
 
     def apply(self, state: State):
         m = self.model
