@@ -104,6 +104,7 @@ def _pct(x) -> str:
 def render(rows: list) -> str:
     """The two markdown tables made from a report: README's (ground, with the free lift) and
     docs/drying/README.md's (both scenes), plus the ranges the text quotes."""
+    rows = [r for r in rows if not r.get("seed")]  # the tables are the seed-0 leaves'
     by = {(r["species"], r["scene"]): r for r in rows}
     keys = list(dict.fromkeys(r["species"] for r in rows))
     out = ["| species | top-down area kept (ground) | 3D area kept (ground) | margin lift / L, ground | "
@@ -151,8 +152,9 @@ def main():
                     help="where the pictures go (default docs/drying)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="a parameter over every species' own (experiments; repeatable)")
-    ap.add_argument("--seed", type=int, default=0, help="the leaf's seed (outline, veins, patches); pictures and "
-                    "rows of another seed than 0 are named KEY_SCENE_sN")
+    ap.add_argument("--seed", type=int, default=0, help="the leaf's seed (outline, veins, patches); pictures of "
+                    "another seed than 0 are named KEY_SCENE_sN.png and its rows carry a 'seed' field (--render "
+                    "tabulates seed 0 only)")
     a = ap.parse_args()
     if a.render:
         print(render(json.loads(Path(a.render).read_text())))

@@ -6,8 +6,10 @@ links), the bilayer's rest angles and the thickness volumes' loss — is multipl
 (1 + a · z(x)), with z a smooth seeded random field (zero mean, unit spread, correlation length
 ℓ; leafsim.sim.senescence.random_field, a function of the rest position only, so every mesh
 sees the same field).  Patches that shrink less than their surroundings are compressed by them:
-an incompatibility at a chosen scale, which a mesh either resolves as puckers or absorbs.  Not a
-model of real leaves (no mechanism of ours makes such a field); a probe of the resolution.
+an incompatibility at a chosen scale, which a mesh either resolves as puckers or absorbs.  A probe
+of the resolution; the model's own version is the parameter ``shrink.patchiness`` (its field
+differs: own seed and salt, normalised over the blade only, the stalk uniform, the length in
+metres; docs/drying/README.md).
 
     python tools/patchy_shrink.py SPECIES SPACING A ELL OUT.json [PICTURES_DIR]
     # e.g. maple 0.0199 0.5 0.05 out.json: ±50 % over 0.05 L on the default mesh
@@ -39,7 +41,9 @@ def _fields(model, a: float, ell_L: float, seed: int = 7) -> tuple:
     ij = model.spring_ij
     fs = np.clip(1.0 + a * 0.5 * (z[ij[:, 0]] + z[ij[:, 1]]), 0.0, None)
     h = model.hinge_idx
-    fh = np.clip(1.0 + a * 0.5 * (z[h[:, 0]] + z[h[:, 1]]), 0.0, None)  # the hinge's shared edge
+    # the hinge's two opposite vertices (c, d): their midpoint is near the shared edge's (the
+    # parameter shrink.patchiness takes the shared edge itself, columns 2 and 3)
+    fh = np.clip(1.0 + a * 0.5 * (z[h[:, 0]] + z[h[:, 1]]), 0.0, None)
     return fs, fh
 
 

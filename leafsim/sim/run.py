@@ -91,7 +91,7 @@ class Run:
     model : Model
     params : ParamSet (used to make the simulator unless ``simulator`` is given).
     effects : effect names to enable (default: the ``effects.*`` parameters).
-    seed : seeds the fresh leaf's colour variation.
+    seed : seeds the fresh leaf's colour variation and its shrinkage field (``shrink.patchiness``).
     state : continue this state (a checkpoint) instead of a fresh leaf.
     simulator : use this simulator (made for ``model``).
     watchdog : let the simulator stop a blow-up that produces no NaN.

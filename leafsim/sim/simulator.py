@@ -36,7 +36,8 @@ class Simulator:
     model : Model
     params : ParamSet — ``osmosis.*``, ``shrink.*``, ``dynamics.*``, ``colour.*`` and ``effects.*``.
     effects : optional iterable of effect names to enable (overrides ``effects.*``).
-    seed : seeds the per-leaf colour variation of the states this simulator makes.
+    seed : seeds the per-leaf colour variation of the states this simulator makes and the blade's
+        shrinkage field (``shrink.patchiness``).
     watchdog : check energy and momentum every few frames and raise LeafsimError on a
         blow-up that produces no NaN (see :mod:`leafsim.sim.watchdog`).
     """

@@ -1,5 +1,5 @@
 """``shrink.patchiness``: the blade's tissue shrinks unevenly, by a seeded smooth field of the
-rest position (docs/method.md §6).  Off by default; on, every spring's σ and every hinge's
+rest position (docs/method.md §4).  Off by default; on, every spring's σ and every hinge's
 bilayer curl are × (1 + a z) with z of zero mean and unit spread over the blade, the stalk
 uniform, the same field on every mesh of the leaf and a new one for every seed."""
 
@@ -10,7 +10,9 @@ from scipy.spatial import cKDTree
 from leafsim.config.species import get_species
 from leafsim.pipeline import build_leaf
 from leafsim.sim.effects.shrink import Shrink
-from leafsim.sim.model import SPRING_SURFACE
+from leafsim.sim.model import SPRING_SURFACE, SPRING_VEIN
+from leafsim.sim.simulator import Simulator
+from leafsim.sim.veinframe import hinge_alignment
 
 
 def _factors(spacing: float, patchiness: float, seed: int = 0, size: float = 0.01):
@@ -37,8 +39,35 @@ def coarse():
 
 
 def test_off_by_default_changes_nothing():
-    _, fs, fh = _factors(0.035, 0.0)
-    assert np.all(fs == 1.0) and np.all(fh == 1.0)
+    sp = get_species("maple")
+    p = sp.params.with_overrides({"mesh.spacing": 0.035})
+    assert p["shrink.patchiness"] == 0.0
+    model = build_leaf(sp, p, 0).model
+    sh = Shrink(model)
+    sh.configure(p, seed=3)
+    t = model.spring_type
+    want = np.where(t == SPRING_SURFACE, p["shrink.sigma_surface_bottom"], np.where(t == SPRING_VEIN, p["shrink.sigma_vein"], 0.0))
+    assert np.array_equal(sh.sigma, want)
+    curl = np.where(model.hinge_vein, 0.0, 1.0 + p["shrink.curl_anisotropy"] * hinge_alignment(model))
+    assert np.array_equal(sh.hinge_curl, curl)
+
+
+def test_the_simulator_and_its_drying_path_shrink_with_the_leafs_seed():
+    sp = get_species("maple")
+    p = sp.params.with_overrides({"shrink.patchiness": 0.8})  # the default mesh: it has a drying path
+    model = build_leaf(sp, p, 0).model
+    assert model.path is not None
+    sims = [Simulator(model, p, seed=s) for s in (0, 1)]
+    assert not np.array_equal(sims[0]._shrink.sigma, sims[1]._shrink.sigma)
+    for sim in sims:  # the coarse mesh of the drying path: the same seed, so the same patches
+        assert sim._path is not None and sim._path.sim.seed == sim.seed
+    assert not np.array_equal(sims[0]._path.sim._shrink.sigma, sims[1]._path.sim._shrink.sigma)
+    # one effect reconfigured with another seed takes the new field (the cache is per seed)
+    sh = Shrink(model)
+    sh.configure(p, seed=0)
+    first = sh.sigma.copy()
+    sh.configure(p, seed=1)
+    assert np.array_equal(sh.sigma, sims[1]._shrink.sigma) and not np.array_equal(sh.sigma, first)
 
 
 def test_the_field_has_the_asked_spread_on_the_blade_and_none_on_the_stalk(coarse):
