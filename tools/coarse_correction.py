@@ -9,7 +9,15 @@ path's prolongation P (coarse → own): minimise E(x + P δ) over δ, a Galerkin
 correction (the two-level idea of multigrid and MGPBD, on the energy), with a line search on E.
 The XPBD frames in between smooth the short wavelengths.
 
+``space=modes`` takes instead the span of the K softest vibration modes of the energy's Hessian
+at the correction (H v = λ M v, the lowest λ by shift-invert Lanczos; recomputed every
+``refresh`` corrections and between refreshes used as a Ritz basis with the current Hessian):
+the soft, nearly isometric bending modes, along which a step does not strain the membrane,
+where the prolongation's span does (a coarse mesh's bending interpolated onto the fine one
+stretches it: membrane locking).
+
     python tools/coarse_correction.py run maple OUT.pkl [every=32] [newton=3] [handover=0.15]
+    python tools/coarse_correction.py run maple OUT.pkl space=modes k=24 refresh=4
     python tools/own_phase_settings.py score REF.pkl OUT.pkl    # scored as that tool's runs
 """
 
@@ -35,8 +43,11 @@ from leafsim.sim.run import Run
 class CoarseCorrection:
     """Newton steps of the static energy in the span of P (n_f × n_c), for one model."""
 
-    def __init__(self, model, params, effects, P):
+    def __init__(self, model, params, effects, P, space="coarse", k=24, refresh=4):
         self.model = model
+        self.space, self.k, self.refresh = space, k, refresh
+        self.V = None
+        self.calls = 0
         self.dyn = Dynamics(model)
         self.dyn.configure(params.with_overrides({"dynamics.integrator": "static"}), effects)
         self.eq = self.dyn.equilibrium
@@ -65,26 +76,48 @@ class CoarseCorrection:
                 res0 = res
             K = sps.bsr_matrix((eq.data, eq.indices, eq.indptr), shape=(3 * n, 3 * n)).tocsr()
             H = K + eq._hessian_extra(diag, pairs, q, kc)
-            A = (self.P3T @ H @ self.P3).tocsc()
-            b = -(self.P3T @ grad.reshape(-1))
-            d = A.diagonal()
-            A = A + sps.diags(1e-8 * float(np.abs(d).mean()) + 1e-6 * np.abs(d), format="csc")
-            lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
-            step = (self.P3 @ lu.solve(b)).reshape(n, 3)
+            if self.space == "modes":
+                step = self._modal_step(H, grad, mass, it == 0)
+            else:
+                A = (self.P3T @ H @ self.P3).tocsc()
+                b = -(self.P3T @ grad.reshape(-1))
+                d = A.diagonal()
+                A = A + sps.diags(1e-8 * float(np.abs(d).mean()) + 1e-6 * np.abs(d), format="csc")
+                lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
+                step = (self.P3 @ lu.solve(b)).reshape(n, 3)
             slope = float((grad * step).sum())
             if not slope < 0.0:
                 break
             alpha = eq._line_search(q, step, slope, E, (Ee, Ex, Ec), rec, mass, pairs, radius, kc)
             pairs = eq._contacts(q, radius)
         state.particle_qd[:] = 0.0
+        self.calls += 1
         self.log.append((res0, it + 1, time.perf_counter() - t0))
+
+    def _modal_step(self, H, grad, mass, first: bool):
+        """The Newton step of the energy restricted to the span of the softest modes: with the
+        Ritz values of the current Hessian in that span, |λ| floored at 1e-6 of the largest
+        (a buckled state's negative curvature is stepped down, not up)."""
+        n3 = H.shape[0]
+        if first and (self.V is None or self.calls % self.refresh == 0):
+            m3 = np.repeat(mass, 3)
+            d = np.abs(H.diagonal())
+            sigma = -1e-9 * float((d / m3).mean())
+            _, self.V = spla.eigsh(H.tocsc(), k=self.k, M=sps.diags(m3, format="csc"), sigma=sigma, which="LM")
+        V = self.V
+        A = V.T @ (H @ V)
+        A = 0.5 * (A + A.T)
+        lam, U = np.linalg.eigh(A)
+        lam = np.maximum(np.abs(lam), 1e-6 * float(np.abs(lam).max()))
+        y = U @ ((U.T @ (V.T @ -grad.reshape(-1))) / lam)
+        return (V @ y).reshape(n3 // 3, 3)
 
 
 def run(species: str, out: str, args: list[str]) -> None:
-    opts = {"every": 32, "newton": 3, "handover": None}
+    opts = {"every": 32, "newton": 3, "handover": None, "space": "coarse", "k": 24, "refresh": 4}
     for a in args:
         k, _, v = a.partition("=")
-        opts[k] = float(v) if k == "handover" else int(v)
+        opts[k] = float(v) if k == "handover" else v if k == "space" else int(v)
     sp = get_species(species)
     over = {"effects.colour": False}
     if opts["handover"] is not None:
@@ -93,7 +126,7 @@ def run(species: str, out: str, args: list[str]) -> None:
     model = build_leaf(sp, base, 0).model
     probe = Probe(leaf_shape(sp, sp.params))
     r = Run(model, base, seed=0)
-    corr = CoarseCorrection(model, base, r.sim.effects, r.sim._path.P)
+    corr = CoarseCorrection(model, base, r.sim.effects, r.sim._path.P, opts["space"], opts["k"], opts["refresh"])
     t0 = time.process_time()
     n, handover, cpu_path, own = 0, None, float("nan"), 0
 
