@@ -114,10 +114,13 @@ class CoarseCorrection:
 
 
 def run(species: str, out: str, args: list[str]) -> None:
-    opts = {"every": 32, "newton": 3, "handover": None, "space": "coarse", "k": 24, "refresh": 4}
+    opts = {"every": 32, "newton": 3, "handover": None, "space": "coarse", "k": 24, "refresh": 4, "expand": None}
     for a in args:
         k, _, v = a.partition("=")
         opts[k] = float(v) if k == "handover" else v if k == "space" else int(v)
+    if opts["expand"] is not None:  # the line search's longest step, × the Newton step (the solver's: 64)
+        import leafsim.sim.equilibrium as equilibrium
+        equilibrium.EXPAND = float(opts["expand"])
     sp = get_species(species)
     over = {"effects.colour": False}
     if opts["handover"] is not None:
