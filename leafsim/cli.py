@@ -46,6 +46,8 @@ SEED_MAX = 2**63 - 1
 
 def _seed(text: str) -> int:
     try:
+        if not text.strip().isascii() or not text.strip().lstrip("+").isdigit():  # int() takes '1_0' and '٣'
+            raise ValueError(text)
         v = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a non-negative integer") from None
@@ -143,7 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     ac = sub.add_parser("accuracy", help="accuracy against cost: every solver setting against a converged reference")
     ac.add_argument("--species", default="maple", help="species to dry (default maple)")
     ac.add_argument("--config", default=None, metavar="FILE", help=CONFIG_HELP)
-    ac.add_argument("--seed", type=int, default=0, help="seed of the leaf (default 0)")
+    ac.add_argument("--seed", type=_seed, default=0, help="seed of the leaf (default 0)")
     ac.add_argument("--out", default=None, help="folder for accuracy.json, accuracy.md and accuracy_pareto.png")
     ac.add_argument("--quick", action="store_true", help="a coarse, fast-drying leaf and few settings (for tests)")
     ac.add_argument("--floor", type=int, default=0, metavar="K",

@@ -98,8 +98,14 @@ def trace_photo(path, params: ParamSet, base_px=None, apex_px=None):
 
 
 def species_trace(sp: Species, params: ParamSet | None = None):
-    """The species photo traced with its config's base and apex."""
-    return trace_photo(sp.image, params if params is not None else sp.params, sp.base_px, sp.apex_px)
+    """The species photo traced with its config's base and apex (a given point off the photo:
+    one line naming the species and its key)."""
+    from leafsim.outline.trace import HintError
+
+    try:
+        return trace_photo(sp.image, params if params is not None else sp.params, sp.base_px, sp.apex_px)
+    except HintError as e:
+        raise sp.error(e.key, f"{e.detail.replace('lies outside the photo', f'lies outside the leaf traced in {sp.image}: off the photo')}") from None
 
 
 def _check_given_ends(sp: Species, traced) -> None:

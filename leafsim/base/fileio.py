@@ -1,9 +1,10 @@
 """Safe file input and output.
 
 Output: a temporary file in the target folder, fsync, then os.replace — an interrupted export
-never leaves a half-written file — and only ever onto a regular file: a device, a named pipe,
-a socket or a folder at the target path is refused, never replaced (a symbolic link is written
-through to its regular target).  :func:`check_output` tells before any expensive work whether
+never leaves a half-written file — and only ever onto a writable regular file: a device, a named
+pipe, a socket, a folder, a symbolic link (which could point anywhere, another user's file or
+the input itself) or a read-only file at the target path is refused, never replaced or written
+through.  Folders on the way to the target may be links.  :func:`check_output` tells before any expensive work whether
 an output can be written (the folder exists and takes a file, the target is a regular file or
 nothing, the disk has room).
 
@@ -59,31 +60,39 @@ def _os_reason(e: OSError) -> str:
 
 
 def output_target(path: str | os.PathLike, what: str = "file") -> Path:
-    """The file ``path`` will be written as: symbolic links followed to their target; LeafsimError
-    when that exists and is not a regular file (it is never replaced), or the link is broken
-    into a missing folder or loops."""
+    """The file ``path`` will be written as; LeafsimError when something that is not a
+    writable regular file is there (it is never replaced): a folder, a device, a named pipe, a
+    socket, a symbolic link (live, broken or looping) or a file without write permission."""
     path = Path(path)
     try:
-        st = os.stat(path)
+        st = os.lstat(path)
     except FileNotFoundError:
-        st = None
+        return path
     except OSError as e:
         raise LeafsimError(f"{path}: cannot write {what} ({_os_reason(e)})") from None
-    if st is not None and not stat.S_ISREG(st.st_mode):
-        raise LeafsimError(f"{path}: cannot write {what} (it is {_kind(st.st_mode)}; only a regular file is ever replaced)")
-    if path.is_symlink():
+    if stat.S_ISLNK(st.st_mode):
         try:
-            return path.resolve(strict=False)
-        except (OSError, RuntimeError) as e:
-            raise LeafsimError(f"{path}: cannot write {what} ({_os_reason(e) if isinstance(e, OSError) else 'a loop of symbolic links'})") from None
+            os.stat(path)
+            kind = "a symbolic link"
+        except FileNotFoundError:
+            kind = "a broken symbolic link"
+        except OSError as e:
+            kind = _os_reason(e)
+        raise LeafsimError(f"{path}: cannot write {what} (it is {kind}; only a regular file is ever replaced, "
+                           "never written through a link)")
+    if not stat.S_ISREG(st.st_mode):
+        raise LeafsimError(f"{path}: cannot write {what} (it is {_kind(st.st_mode)}; only a regular file is ever replaced)")
+    if not st.st_mode & 0o222:
+        raise LeafsimError(f"{path}: cannot write {what} (the file is read-only; only a writable file is ever replaced)")
     return path
 
 
 def check_output(path: str | os.PathLike, what: str = "file", need_bytes: int = 0, folder: bool = False) -> Path:
     """Check an output before any work: its folder exists, is a folder and takes a new file (a
     probe file is made and removed: ``/proc`` and read-only mounts fail here, not after the
-    build); the target is a regular file or nothing (``folder=True``: a folder or nothing);
-    the disk has ``need_bytes`` + 1 MiB free.  Returns the path to write (links followed)."""
+    build); the target is a writable regular file or nothing (:func:`output_target`;
+    ``folder=True``: a folder or nothing); the disk has ``need_bytes`` + 1 MiB free.  Returns
+    the path to write."""
     path = Path(path)
     if folder:
         if path.exists() and not path.is_dir():
@@ -109,6 +118,22 @@ def check_output(path: str | os.PathLike, what: str = "file", need_bytes: int = 
         raise LeafsimError(f"{path}: cannot write {what} (only {free / 2**20:.1f} MiB free on its disk, "
                            f"{(need_bytes + MIN_FREE_BYTES) / 2**20:.1f} MiB needed)")
     return target
+
+
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """Whether two paths name one file (the same inode when both exist, else the same real path)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.realpath(a) == os.path.realpath(b)
+
+
+def not_an_input(path: str | os.PathLike, inputs, option: str) -> None:
+    """LeafsimError when the output ``path`` is one of the ``inputs`` (an outline drawn over the
+    photo it was traced from would replace the photo)."""
+    for src in inputs:
+        if src is not None and same_file(path, src):
+            raise LeafsimError(f"{option} {path}: that is the input {src} (expected another file; it would be replaced)")
 
 
 def regular_input(path: str | os.PathLike, what: str = "file", max_bytes: int = MAX_JSON_BYTES) -> Path:

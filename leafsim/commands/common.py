@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import check_output
+from leafsim.base.fileio import check_output, not_an_input
 from leafsim.config.params import PARAMS, ParamSet, parse_set_args
 from leafsim.config.presets import quality_overrides
 from leafsim.config.species import DEFAULT_SPECIES, Species, get_species
@@ -64,25 +64,26 @@ def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
     return sp, sp.params.with_overrides({**overrides(args), **extra}, where="--set")
 
 
-def png_output(option: str, path: str | None):
+def png_output(option: str, path: str | None, inputs=()):
     """Check a PNG output before any work (one line naming the option): a ``.png`` name (the
-    file holds PNG data, so another suffix would mislabel it), and a writable place that is a
-    regular file or nothing."""
+    file holds PNG data, so another suffix would mislabel it), a writable place that is a
+    regular file or nothing, and none of the command's ``inputs`` (photos it reads)."""
     if path is None:
         return None
     if Path(path).suffix.lower() != ".png":
         raise LeafsimError(f"{option} {path}: expected a .png file name (leafsim writes PNG pictures)")
+    not_an_input(path, inputs, option)
     return check_output(path, f"{option} picture")
 
 
 def stop_of(args, start: int = 0):
     """The :class:`~leafsim.sim.run.Stop` of ``--frames`` / ``--until`` (one line on a bad value).
     ``--until`` alone may run up to DRY_MAX_FRAMES frames, then fails naming the criterion."""
-    from leafsim.sim.run import DRY_END_FRACTION, DRY_MAX_FRAMES, Stop
+    from leafsim.sim.run import DRY_END_FRACTION, DRY_MAX_FRAMES, MAX_RUN_FRAMES, Stop
 
     frames, until = getattr(args, "frames", None), getattr(args, "until", None)
-    if frames is not None and frames < 0:
-        raise LeafsimError(f"--frames {frames}: expected a non-negative number of frames")
+    if frames is not None and not 0 <= frames <= MAX_RUN_FRAMES:
+        raise LeafsimError(f"--frames {frames}: expected a number of frames from 0 to {MAX_RUN_FRAMES}")
     if until is None:
         if frames is None:
             raise LeafsimError("give --frames N or --until dry (how long to simulate)")

@@ -8,7 +8,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import write_png_atomic
 from leafsim.commands.common import Progress, emit, png_output, ready_kernels, species_params
 from leafsim.compare.metrics import montage
-from leafsim.compare.run import DRY_LEFT, run_compare
+from leafsim.compare.run import DRY_LEFT, MAX_FRAMES, run_compare
 from leafsim.sim.run import Stop
 
 
@@ -20,8 +20,9 @@ def stage_arg(text: str | None):
         k = int(text)
     except ValueError:
         k = -1
-    if k < 0:
-        raise LeafsimError(f"--stage {text!r}: expected young, dried or a non-negative frame number")
+    if not 0 <= k <= MAX_FRAMES:
+        raise LeafsimError(f"--stage {text!r}: expected young, dried or a frame number from 0 to {MAX_FRAMES} "
+                           "(compare dries the leaf at most that far)")
     return k
 
 
@@ -30,8 +31,8 @@ def cmd_compare(args):
     if args.photo is not None and not Path(args.photo).is_file():
         raise LeafsimError(f"--photo {args.photo}: " + ("not a regular file (a folder, a device or a pipe), expected an image"
                                                           if Path(args.photo).exists() else "file not found"))
-    png_output("--out", args.out)
     sp, params = species_params(args, effects=True)
+    png_output("--out", args.out, (args.photo, sp.image, sp.senescent.image if sp.senescent is not None else None))
     if args.photo is None and sp.image is None:  # before the kernels compile (run_compare says the same)
         raise LeafsimError(f"species '{sp.key}' has no photo (drawn outline): give --photo IMAGE to compare with")
     ready_kernels()

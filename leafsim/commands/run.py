@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import signal
+import os
 import time
 from pathlib import Path
 
@@ -63,6 +64,13 @@ def check_run_args(args) -> Path | None:
         if not Path(args.stats).parent.exists():
             raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
         check_output(args.stats, "--stats file")
+        if out is not None:
+            mine = {os.path.realpath(out / n) for n in ("final.npz", CHECKPOINT)}
+            stats = os.path.realpath(args.stats)
+            if stats in mine or (args.every and Path(stats).parent == Path(os.path.realpath(out))
+                                 and Path(stats).name.startswith("frame_")):
+                raise LeafsimError(f"--stats {args.stats}: the run writes that file in --out {out} itself "
+                                   "(expected another path)")
     if args.checkpoint_every is None:
         args.checkpoint_every = CHECKPOINT_EVERY if out is not None else 0
     return out

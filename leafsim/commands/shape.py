@@ -16,7 +16,7 @@ from leafsim.pipeline import build_leaf, leaf_shape, species_veins
 
 
 def cmd_outline(args):
-    png_output("--out", args.out)
+    png_output("--out", args.out, (args.image,))
     params = ParamSet(parse_set_args(args.sets))
     traced = trace_outline(args.image, params)
     rep = outline_report(traced)
@@ -29,8 +29,8 @@ def cmd_outline(args):
 
 
 def cmd_veins(args):
-    png_output("--out", args.out)
     sp, params = species_params(args)
+    png_output("--out", args.out, (sp.image,))
     t0 = time.perf_counter()
     shape = leaf_shape(sp, params)
     graph = species_veins(sp, shape, params, args.seed)

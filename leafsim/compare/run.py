@@ -96,8 +96,13 @@ class _Leaf:
         self.td.release()
 
 
-def _reference(path, params, frame, length_m, base_px=None, apex_px=None):
-    traced = trace_photo(path, params, base_px, apex_px)
+def _reference(path, params, frame, length_m, base_px=None, apex_px=None, key: str = ""):
+    from leafsim.outline.trace import HintError
+
+    try:
+        traced = trace_photo(path, params, base_px, apex_px)
+    except HintError as e:  # name the config key it came from (senescent_photo.base_px)
+        raise LeafsimError(f"{path}: {key}{e.key} {e.detail}") from None
     refuse_non_leaf(traced)  # a cut leaf, the background or a rectangle would give a meaningless IoU
     return C.reference(traced, to_leaf_shape(traced, length_m), frame)
 
@@ -219,7 +224,7 @@ def _rows(leaf: _Leaf, own: C.Reference, stage, species_photo: bool) -> list[Row
                 if species_photo and sp.photo_stage == "senescent" else "")]
     if stage is None and species_photo and sp.senescent is not None:
         ref = own if sp.senescent.image == sp.image else _reference(sp.senescent.image, leaf.params, leaf.frame, sp.length_m,
-                                                                  sp.senescent.base_px, sp.senescent.apex_px)
+                                                                  sp.senescent.base_px, sp.senescent.apex_px, "senescent_photo.")
         _, _, best = _dry_run(leaf, None, ref)
         note = f"best of {best[2]} stages every {MATCH_EVERY} frames"
         if ref is own and sp.photo_stage == "senescent" and 0.3 < _kept(leaf, best[0]) < 1.0:

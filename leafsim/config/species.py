@@ -177,6 +177,8 @@ def _variants(path: Path, key: str, e: Any) -> dict:
         params = v.get("params", {})
         if not isinstance(params, dict):
             raise _err(path, key, f"variants.{name}.params", "expected an object of parameter values")
+        if not isinstance(e.get("params", {}), dict):
+            raise _err(path, key, "params", "expected an object of parameter values")
         base = {k: x for k, x in e.items() if k != "variants"}
         out[f"{key}_{name}"] = {**base, **{k: x for k, x in v.items() if k != "params"},
                                 "params": {**e.get("params", {}), **params}}

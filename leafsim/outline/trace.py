@@ -146,6 +146,40 @@ def _iou(poly: np.ndarray, mask: np.ndarray) -> float:
     return inter / union if union else 0.0
 
 
+#: given base / apex points may lie this far outside the photo, × its larger side (a base just
+#: past a cut edge); beyond it they are a typo, not a leaf's base
+HINT_SLACK = 0.1
+#: given base and apex closer than this [px] name no leaf axis
+HINT_MIN_PX = 5.0
+
+
+class HintError(LeafsimError):
+    """A given base / apex point that cannot be the leaf's (``key`` names which, ``detail``
+    says why without the photo's path: a species config names its own key)."""
+
+    def __init__(self, where: str, key: str, detail: str):
+        super().__init__(f"{where}: {key} {detail}")
+        self.key, self.detail = key, detail
+
+
+def _check_hints(where: str, w: int, h: int, base_px, apex_px) -> None:
+    """One line when a given ``base_px`` / ``apex_px`` cannot be the leaf's base and tip in a
+    ``w`` × ``h`` photo: far outside it, or the two (nearly) the same point."""
+    slack = HINT_SLACK * max(w, h)
+    pts = {}
+    for name, q in (("base_px", base_px), ("apex_px", apex_px)):
+        if q is None:
+            continue
+        q = np.asarray(q, float).reshape(2)
+        if not (np.isfinite(q).all() and -slack <= q[0] <= w - 1 + slack and -slack <= q[1] <= h - 1 + slack):
+            raise HintError(where, name, f"({q[0]:g}, {q[1]:g}) lies outside the photo ({w} × {h} px; expected a pixel "
+                                         "on the leaf's margin)")
+        pts[name] = q
+    if len(pts) == 2 and float(np.linalg.norm(pts["base_px"] - pts["apex_px"])) < HINT_MIN_PX:
+        raise HintError(where, "apex_px", f"lies {float(np.linalg.norm(pts['base_px'] - pts['apex_px'])):.3g} px from base_px "
+                                          "(expected the leaf's tip, away from its base)")
+
+
 def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = None,
                   base_px=None, apex_px=None) -> TracedOutline:
     """Trace the outline of the one leaf in the photo at ``path`` (with the leafness measures
@@ -166,6 +200,7 @@ def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = No
     where = str(path)
     full = load_image(path)
     h, w = full.shape[:2]
+    _check_hints(where, w, h, base_px, apex_px)
     img, f = working_image(full, int(p["limits.image_pixels"]))
     del full
     to_work = lambda q: None if q is None else (np.asarray(q, float).reshape(2) + 0.5) * f - 0.5  # noqa: E731

@@ -32,6 +32,7 @@ from leafsim.base.fileio import atomic_write_bytes, output_target, read_json
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
 from leafsim.scene.layout import leaf_dir
+from leafsim.sim.run import MAX_RUN_FRAMES
 
 _TOP_KEYS = {"name", "description", "seed", "config", "layout", "overview", "groups"}
 _GROUP_KEYS = {"name", "species", "count", "seed", "seeds", "params", "effects", "stop", "lod", "output"}
@@ -237,7 +238,7 @@ def _stop(w: _Where, s) -> dict:
     k = kinds[0]
     mf = w.int(s, "max_frames", DEFAULT_MAX_FRAMES, 1, None, "stop.")
     if k == "frames":
-        v = w.int(s, "frames", None, 0, None, "stop.")
+        v = w.int(s, "frames", None, 0, MAX_RUN_FRAMES, "stop.")
     elif k == "water_left":
         v = w.num(s, "water_left", None, 0.0, 1.0, "stop.")
     else:

@@ -223,11 +223,20 @@ def _fail(where: str, msg: str) -> LeafsimError:
     return LeafsimError(f"{where} {msg}")
 
 
+#: a loaded particle may hold this many times its fresh water (measured: never above 1.0)
+WATER_SLACK = 2.0
+#: a loaded state's springs lie within this range × their rest lengths, all but STRAIN_SHARE of them
+#: (a collapsed or scrambled position array does not; a crumpled leaf does)
+STRAIN_RANGE = (0.2, 5.0)
+STRAIN_SHARE = 0.01
+
+
 def check_state(state: State, model: Model, where: str, frame=None) -> None:
     """A loaded state must fit ``model`` before any kernel sees it: every array of the shape
     and dtype a fresh state of the model has, finite, and physical — particles within
     :data:`MAX_REACH` leaf lengths and :data:`MAX_SPEED`, water ≥ 0 and at most the fresh
-    leaf's total, rest lengths in (0, 2 l⁰], rest volumes within 10 × the fresh ones, hinge
+    leaf's total and no particle more than :data:`WATER_SLACK` × its own fresh water (water flows
+    down its potential, so a particle never holds more than when fresh), rest lengths in (0, 2 l⁰], rest volumes within 10 × the fresh ones, hinge
     rest angles within ±π, time and frame non-negative (the frame the record names).  Raises one LeafsimError line naming the array."""
     fresh = model.state()
     if (state.path is None) != (model.path is None):
@@ -256,9 +265,20 @@ def check_state(state: State, model: Model, where: str, frame=None) -> None:
     if w.sum() > model.particle_water0.sum() * (1 + 1e-6):
         raise _fail(where, f"array particle_water holds more water ({w.sum():.4g} kg) than the fresh leaf "
                            f"({model.particle_water0.sum():.4g} kg)")
+    over = w > WATER_SLACK * model.particle_water0 + 1e-12
+    if over.any():
+        i = int(np.argmax(w / np.maximum(model.particle_water0, 1e-300)))
+        raise _fail(where, f"array particle_water holds {w[i] / max(model.particle_water0[i], 1e-300):.3g} × particle {i}'s "
+                           f"fresh water (a particle holds at most its fresh, saturated water)")
     r = state.spring_rest / np.maximum(model.spring_rest0, 1e-300)
     if (r <= 0).any() or (r > 2.0).any():
         raise _fail(where, "array spring_rest holds rest lengths outside (0, 2] × their fresh lengths")
+    ij = model.spring_ij
+    ratio = np.linalg.norm(state.particle_q[ij[:, 0]] - state.particle_q[ij[:, 1]], axis=1) / np.maximum(state.spring_rest, 1e-300)
+    torn = float(np.mean((ratio < STRAIN_RANGE[0]) | (ratio > STRAIN_RANGE[1]))) if len(ratio) else 0.0
+    if torn > STRAIN_SHARE:
+        raise _fail(where, f"array particle_q does not form this leaf: {100 * torn:.3g} % of its springs are shorter than "
+                           f"{STRAIN_RANGE[0]:g} or longer than {STRAIN_RANGE[1]:g} × their rest lengths")
     if (np.abs(state.hinge_rest) > np.pi).any() or (np.abs(state.hinge_plastic) > np.pi).any():
         raise _fail(where, "array hinge_rest/hinge_plastic holds angles beyond ±π")
     t, k, tw = float(state.scalars[0]), float(state.scalars[1]), float(state.scalars[2])

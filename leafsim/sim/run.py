@@ -30,6 +30,9 @@ from leafsim.sim.stats import StatsStream, frame_stats
 DRY_END_FRACTION = 0.02
 #: ... within this many frames (a leaf that never dries, e.g. evaporation switched off)
 DRY_MAX_FRAMES = 200000
+#: the most frames a run may be asked for (--frames, a scene's stop.frames): 2·10⁴ simulated seconds
+#: at the default step, beyond any drying; a larger count is a typo, not a run
+MAX_RUN_FRAMES = 10_000_000
 #: a water or season criterion whose measure has not moved towards it in this many frames is
 #: taken as unreachable (evaporation or aging switched off by a parameter) instead of running
 #: on to ``max_frames``

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import atomic_write_bytes
+from leafsim.base.fileio import atomic_write_bytes, output_target
 from leafsim.sim.kernels.pbd import residual
 from leafsim.sim.model import LAYER_T, LAYER_V, Model, State
 
@@ -54,9 +54,11 @@ class StatsStream:
         try:
             if keep_until is not None:
                 self._keep(keep_until)
-                self.f = open(self.path, "a", encoding="utf-8")
-            else:
-                self.f = open(self.path, "w", encoding="utf-8")
+            # checked again now (the build ran since the command checked it): a regular file or
+            # nothing, never through a link (O_NOFOLLOW closes the gap to the open)
+            output_target(self.path, "statistics")
+            flags = os.O_WRONLY | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | (os.O_APPEND if keep_until is not None else os.O_TRUNC)
+            self.f = os.fdopen(os.open(self.path, flags, 0o666), "a" if keep_until is not None else "w", encoding="utf-8")
         except OSError as e:
             raise LeafsimError(f"--stats {self.path}: cannot write statistics ({e.strerror or e})") from None
 

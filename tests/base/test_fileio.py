@@ -33,8 +33,26 @@ def test_a_write_never_replaces_anything_but_a_regular_file(specials):
     assert (specials / "pipe.png").is_fifo() and (specials / "folder.png").is_dir()
     with pytest.raises(LeafsimError, match="a loop of symbolic links"):
         fileio.atomic_write_bytes(specials / "loop_a", b"new")
-    fileio.atomic_write_bytes(specials / "link.png", b"new")  # written through the link, which stays
-    assert (specials / "link.png").is_symlink() and (specials / "real.png").read_bytes() == b"new"
+    # a link is never written through (it could point at anything: the input, another user's file)
+    with pytest.raises(LeafsimError, match="it is a symbolic link; only a regular file is ever replaced, never written"):
+        fileio.atomic_write_bytes(specials / "link.png", b"new")
+    assert (specials / "link.png").is_symlink() and (specials / "real.png").read_bytes() == b"old"
+    (specials / "dangling.png").symlink_to(specials / "nowhere.png")
+    with pytest.raises(LeafsimError, match="it is a broken symbolic link"):
+        fileio.atomic_write_bytes(specials / "dangling.png", b"new")
+    assert not (specials / "nowhere.png").exists()
+    # nor is a read-only file replaced (os.replace needs only the folder's permission)
+    ro = specials / "ro.png"
+    ro.write_bytes(b"keep")
+    ro.chmod(0o444)
+    with pytest.raises(LeafsimError, match="the file is read-only"):
+        fileio.atomic_write_bytes(ro, b"new")
+    assert ro.read_bytes() == b"keep" and (ro.stat().st_mode & 0o777) == 0o444
+    # a folder on the way may be a link
+    (specials / "sub").mkdir()
+    (specials / "via").symlink_to(specials / "sub")
+    fileio.atomic_write_bytes(specials / "via" / "x.png", b"new")
+    assert (specials / "sub" / "x.png").read_bytes() == b"new"
     assert not list(specials.glob(".*.tmp"))
 
 

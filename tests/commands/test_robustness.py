@@ -122,6 +122,9 @@ def test_errors_name_their_real_cause(tmp_path):
     ("negative water", "negative water"),
     ("nan", "NaN or infinite"),
     ("too much water", "more water"),
+    ("all the water in one particle", "fresh water (a particle holds at most"),
+    ("collapsed positions", "particle_q does not form this leaf"),
+    ("scrambled positions", "particle_q does not form this leaf"),
     ("truncated file", "cannot read checkpoint"),
     ("time beyond the frames", "more than frame × the longest Δt"),
     ("negative leaf factor", "pigment array leaf"),
@@ -145,6 +148,14 @@ def test_a_damaged_checkpoint_is_refused_before_any_kernel(tmp_path, damage, nee
             d["state_particle_qd"][3, 1] = np.nan
         elif damage == "too much water":
             d["state_particle_water"] = d["state_particle_water"] * 3
+        elif damage == "all the water in one particle":
+            w = d["state_particle_water"]
+            d["state_particle_water"] = np.zeros_like(w)
+            d["state_particle_water"][0] = w.sum()
+        elif damage == "collapsed positions":
+            d["state_particle_q"] = np.zeros_like(d["state_particle_q"])
+        elif damage == "scrambled positions":
+            d["state_particle_q"] = d["state_particle_q"] + np.random.default_rng(0).normal(0.0, 0.05, d["state_particle_q"].shape)
         elif damage == "time beyond the frames":
             d["state_scalars"] = d["state_scalars"].copy()
             d["state_scalars"][0] = 1e9
@@ -250,3 +261,50 @@ def test_incomplete_or_absurd_solver_records_are_refused(tmp_path):
             d["carry_equilibrium_history_time"] = np.array(0.5)
         np.savez(ck, **d)
         one_line(*run_cli("run", *static, "--frames", "8", "--out", out, "--checkpoint-every", "2", "--resume"), needle)
+
+
+def test_outputs_never_replace_inputs_links_or_read_only_files(tmp_path):
+    photo = tmp_path / "leaf.png"
+    photo.write_bytes(Path("images/quercus_01.png").read_bytes())
+    before = photo.read_bytes()
+    one_line(*run_cli("outline", photo, "--out", photo), "that is the input")
+    (tmp_path / "link.png").symlink_to(photo)
+    one_line(*run_cli("outline", photo, "--out", tmp_path / "link.png"), "that is the input")
+    (tmp_path / "other.png").symlink_to(tmp_path / "precious.txt")
+    one_line(*run_cli("outline", photo, "--out", tmp_path / "other.png"), "broken symbolic link")
+    assert photo.read_bytes() == before and not (tmp_path / "precious.txt").exists()
+    ro = tmp_path / "ro.png"
+    ro.write_bytes(b"keep")
+    ro.chmod(0o444)
+    one_line(*run_cli("outline", photo, "--out", ro), "read-only")
+    assert ro.read_bytes() == b"keep"
+    out = tmp_path / "run"
+    out.mkdir()
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--out", out, "--stats", out / "final.npz"), "--stats", "writes that file")
+
+
+def test_bad_counts_seeds_and_config_shapes_are_one_line(tmp_path):
+    one_line(*run_cli("run", *OAK, "--frames", "99999999999999999999"), "--frames", "from 0 to")
+    one_line(*run_cli("compare", *OAK, "--stage", "99999999999999999999"), "--stage", "frame number from 0 to")
+    one_line(*run_cli("build", *OAK, "--set", "veins.main.kappa=1_0"), "veins.main.kappa", "expected a number")
+    code, out, err = run_cli("build", *OAK, "--seed", "1_0")
+    assert code == 2 and "expected a non-negative integer" in err
+    code, out, err = run_cli("accuracy", "--quick", "--json", "--seed", "-1", "--groups", "mesh")
+    assert code == 2 and "internal error" not in err and "expected a non-negative integer" in err
+    cfg = json.loads(Path("configs/leaves.json").read_text())
+    cfg["species"]["grapevine"]["params"] = [1, 2]  # grapevine has variants: they merge its params
+    p = tmp_path / "c.json"
+    p.write_text(json.dumps(cfg))
+    one_line(*run_cli("species", "--config", p), "species 'grapevine', key 'params'", "expected an object")
+    oak = {"species": {"oak": json.loads(Path("configs/leaves.json").read_text())["species"]["oak"]}}
+    oak["species"]["oak"]["image"] = str(Path(oak["species"]["oak"]["image"]).resolve())
+    oak["species"]["oak"].pop("senescent_photo", None)
+    oak["species"]["oak"]["base_px"] = [1e300, 1e300]
+    p.write_text(json.dumps(oak))
+    one_line(*run_cli("build", "--config", p, *OAK), "key 'base_px'", "off the photo")
+    oak["species"]["oak"]["base_px"] = [1e6, 1e6]  # hung in the petiole search before
+    p.write_text(json.dumps(oak))
+    one_line(*run_cli("build", "--config", p, *OAK), "key 'base_px'", "off the photo")
+    oak["species"]["oak"]["base_px"] = oak["species"]["oak"]["apex_px"]
+    p.write_text(json.dumps(oak))
+    one_line(*run_cli("build", "--config", p, *OAK), "key 'apex_px'", "from base_px")
