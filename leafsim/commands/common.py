@@ -42,6 +42,8 @@ def effects_overrides(spec: str | None) -> dict:
         return {}
     known = sorted(k.split(".", 1)[1] for k in PARAMS if k.startswith("effects."))
     wanted = {e.strip() for e in spec.split(",") if e.strip()}
+    if not wanted:  # an empty list would silently switch every effect off
+        raise LeafsimError(f"--effects {spec!r}: expected a comma-separated list of {', '.join(known)}")
     bad = wanted - set(known)
     if bad:
         raise LeafsimError(f"--effects: unknown effect '{sorted(bad)[0]}' (expected a comma-separated list of {', '.join(known)})")

@@ -18,13 +18,15 @@ from leafsim.sim.run import Run, Stop
 def _check(args) -> str:
     check_output(args.out, "mesh")  # a folder, a device or an unwritable place: now, not after the drying
     fmt = format_of(args.out, args.format)
-    if args.frames is None and args.until is None:
-        args.frames = 0  # the fresh leaf
-    stop_of(args)
     if args.every < 0:
         raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
     if args.every and fmt in ("obj", "ply"):
         raise LeafsimError(f"--every needs --format glb or gltf ({fmt} holds one static shape)")
+    if args.frames is None and args.until is None:
+        if args.every:  # key frames of a run that does not run: an animation without a key
+            raise LeafsimError(f"--every {args.every} needs --frames N or --until dry (how long the animated drying runs)")
+        args.frames = 0  # the fresh leaf
+    stop_of(args)
     folder = Path(args.out).parent
     if not folder.is_dir():
         raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")

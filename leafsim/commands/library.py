@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+from leafsim.base.errors import LeafsimError
 from leafsim.commands.common import emit
 from leafsim.config.params import PARAMS, ParamSet, markdown_table
 from leafsim.config.presets import quality_of, quality_table
@@ -24,6 +25,8 @@ def _quality_measured(m: dict) -> str:
 
 
 def cmd_params(args):
+    if args.markdown and getattr(args, "json", False):
+        raise LeafsimError("--markdown and --json: expected one of them (a Markdown table or one JSON object)")
     if args.markdown:
         print(markdown_table())
         return

@@ -60,6 +60,8 @@ def check_run_args(args) -> Path | None:
             if args.every:
                 for f in sorted(out.glob("frame_*.png")):
                     output_target(f, "PNG frame")
+    if args.stats is not None and not args.stats.strip():
+        raise LeafsimError("--stats '': expected a file name for the per-frame statistics")
     if args.stats:
         if not Path(args.stats).parent.exists():
             raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")

@@ -6,6 +6,7 @@ import json
 import time
 
 from leafsim.appearance.draw2d import draw_veins
+from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import write_png_atomic
 from leafsim.commands.common import emit, png_output, species_params, warn
 from leafsim.config.params import ParamSet, parse_set_args
@@ -17,7 +18,11 @@ from leafsim.pipeline import build_leaf, leaf_shape, species_veins
 
 def cmd_outline(args):
     png_output("--out", args.out, (args.image,))
-    params = ParamSet(parse_set_args(args.sets))
+    sets = parse_set_args(args.sets)
+    other = sorted(k for k in sets if not (k.startswith("outline.") or k == "limits.image_pixels"))
+    if other:  # tracing reads no other parameter: it would be ignored silently
+        raise LeafsimError(f"--set {other[0]}: outline traces the photo only (expected outline.* or limits.image_pixels)")
+    params = ParamSet(sets)
     traced = trace_outline(args.image, params)
     rep = outline_report(traced)
     for problem in rep["leafness"]["problems"]:  # reported, never silent (build and compare refuse them)

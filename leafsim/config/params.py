@@ -213,7 +213,7 @@ _f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the i
 _f("osmosis.g_min", 4.0, 0.1, 50.0, "mmol/(m²·s)", "Minimum (cuticular) leaf conductance to water vapour after the stomata have shut, both sides together per leaf area (Duursma et al. 2019 compile 1–11 for our genera); used when environment.drive = weather.", G, False, log=True)
 _f("osmosis.g_stomata", 60.0, 0.0, 1000.0, "mmol/(m²·s)", "Stomatal conductance of the detached leaf while its stomata are open (environment.drive = weather); they shut as the tissue loses water (osmosis.stomata_*_rwc).", G, False)
 _f("osmosis.stomata_top", 0.0, 0.0, 1.0, "", "Share of the stomatal conductance on the top (adaxial) surface: 0 = hypostomatous (the trees here), 0.5 = amphistomatous.", G, False)
-_f("osmosis.stomata_open_rwc", 0.97, 0.0, 1.0, "", "Relative water content above which the stomata are fully open (weather drive).", G, False)
+_f("osmosis.stomata_open_rwc", 0.97, 0.0, 1.0, "", "Relative water content above which the stomata are fully open (weather drive); a value below osmosis.stomata_closed_rwc counts as that one (they then shut at once).", G, False)
 _f("osmosis.stomata_closed_rwc", 0.85, 0.0, 1.0, "", "Relative water content below which the stomata are shut and only the cuticle loses water (weather drive); linear between the two.", G, False)
 
 # ---------------------------------------------------------------- environment (live)

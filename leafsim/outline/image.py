@@ -3,8 +3,11 @@ working copy downscaled to the pixel limit, and the mask morphology helpers."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import sys
+import tempfile
 
 import cv2
 import numpy as np
@@ -23,7 +26,8 @@ MAX_DECODE_PIXELS = 150_000_000
 
 
 def _header_size(data: np.ndarray) -> tuple[int, int] | None:
-    """(width, height) a PNG's or JPEG's header claims, before decoding; None for other kinds."""
+    """(width, height) the header of a PNG, JPEG, TIFF, BMP, WebP or PNM file claims, before
+    decoding; None when it cannot be read there (another kind, or a header out of reach)."""
     b = data[:1 << 21].tobytes()  # the frame header follows the metadata segments (EXIF ≤ 64 kB each)
     if b[:8] == b"\x89PNG\r\n\x1a\n" and b[12:16] == b"IHDR":
         return int.from_bytes(b[16:20], "big"), int.from_bytes(b[20:24], "big")
@@ -38,7 +42,48 @@ def _header_size(data: np.ndarray) -> tuple[int, int] | None:
             if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
                 return int.from_bytes(b[i + 7:i + 9], "big"), int.from_bytes(b[i + 5:i + 7], "big")
             i += 2 + seg
+        return None
+    if b[:2] == b"BM" and len(b) >= 26:
+        return abs(int.from_bytes(b[18:22], "little", signed=True)), abs(int.from_bytes(b[22:26], "little", signed=True))
+    if b[:4] in (b"II*\x00", b"MM\x00*"):
+        return _tiff_size(b, "little" if b[:2] == b"II" else "big")
+    if b[:4] == b"RIFF" and b[8:12] == b"WEBP" and len(b) >= 30:
+        kind = b[12:16]
+        if kind == b"VP8 ":
+            return int.from_bytes(b[26:28], "little") & 0x3FFF, int.from_bytes(b[28:30], "little") & 0x3FFF
+        if kind == b"VP8L":
+            v = int.from_bytes(b[21:25], "little")
+            return (v & 0x3FFF) + 1, ((v >> 14) & 0x3FFF) + 1
+        if kind == b"VP8X":
+            return int.from_bytes(b[24:27], "little") + 1, int.from_bytes(b[27:30], "little") + 1
+        return None
+    if len(b) > 2 and b[:1] == b"P" and b[1:2] in b"123456":
+        words = []
+        for line in b[2:4096].split(b"\n"):
+            words += line.split(b"#")[0].split()
+            if len(words) >= 2:
+                try:
+                    return int(words[0]), int(words[1])
+                except ValueError:
+                    return None
     return None
+
+
+def _tiff_size(b: bytes, order: str) -> tuple[int, int] | None:
+    """Width and height of a TIFF's first image (tags 256 and 257 of its first IFD)."""
+    off = int.from_bytes(b[4:8], order)
+    if off + 2 > len(b):
+        return None
+    n = int.from_bytes(b[off:off + 2], order)
+    size = {}
+    for k in range(n):
+        e = off + 2 + 12 * k
+        if e + 12 > len(b):
+            return None
+        tag, typ = int.from_bytes(b[e:e + 2], order), int.from_bytes(b[e + 2:e + 4], order)
+        if tag in (256, 257):
+            size[tag] = int.from_bytes(b[e + 8:e + 10], order) if typ == 3 else int.from_bytes(b[e + 8:e + 12], order)
+    return (size[256], size[257]) if len(size) == 2 else None
 
 
 def _quiet_opencv() -> None:
@@ -47,6 +92,29 @@ def _quiet_opencv() -> None:
         cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     except AttributeError:
         pass
+
+
+@contextlib.contextmanager
+def _decoder_stderr():
+    """Catch what the image libraries write on the process's stderr while they decode (libpng's
+    "PNG input buffer is incomplete", libjpeg's warnings): leafsim says one line instead. Yields
+    a list that holds the caught lines afterwards."""
+    said: list[str] = []
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no real stderr (an embedding host)
+        yield said
+        return
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield said
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            said += [ln.strip() for ln in tmp.read(4096).decode("utf-8", "replace").splitlines() if ln.strip()]
 
 
 def load_image(path: str | os.PathLike) -> np.ndarray:
@@ -65,16 +133,21 @@ def load_image(path: str | os.PathLike) -> np.ndarray:
     if data.size == 0:
         raise LeafsimError(f"{where}: cannot read image (empty file)")
     size = _header_size(data)
-    if size is not None and size[0] * size[1] > MAX_DECODE_PIXELS:
+    if size is None:  # decoding first would meet no pixel limit (a 20 000² TIFF of 1 MB took 1.7 GB)
+        raise LeafsimError(f"{where}: cannot read image (its size is not in a PNG, JPEG, TIFF, BMP, WebP or PNM "
+                           "header: another kind of file, or a damaged one)")
+    if size[0] * size[1] > MAX_DECODE_PIXELS:
         raise LeafsimError(f"{where}: cannot read image ({size[0]}×{size[1]} pixels, more than "
                            f"{MAX_DECODE_PIXELS // 1_000_000} million: expected a photo of one leaf)")
     _quiet_opencv()
     try:
-        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        with _decoder_stderr() as said:
+            img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     except cv2.error as exc:  # OpenCV's own limits (pixels, memory)
         raise LeafsimError(f"{where}: cannot read image (OpenCV: {str(exc).strip().splitlines()[-1][:80]})") from None
     if img is None:
-        raise LeafsimError(f"{where}: cannot read image (not a PNG/JPEG/TIFF/BMP image or corrupt data)")
+        why = f"{said[0][:80]}" if said else "not a PNG/JPEG/TIFF/BMP/WebP image or corrupt data"
+        raise LeafsimError(f"{where}: cannot read image ({why})")
     if img.size == 0 or img.shape[0] == 0 or img.shape[1] == 0:
         raise LeafsimError(f"{where}: cannot read image (image has no pixels)")
     if img.dtype != np.uint8:

@@ -308,3 +308,41 @@ def test_bad_counts_seeds_and_config_shapes_are_one_line(tmp_path):
     oak["species"]["oak"]["base_px"] = oak["species"]["oak"]["apex_px"]
     p.write_text(json.dumps(oak))
     one_line(*run_cli("build", "--config", p, *OAK), "key 'apex_px'", "from base_px")
+
+
+def test_options_that_would_be_ignored_or_silently_empty_are_refused(tmp_path):
+    one_line(*run_cli("params", "--json", "--markdown"), "--markdown and --json")
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--effects", ""), "--effects", "expected a comma-separated list")
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--stats", ""), "--stats ''")
+    one_line(*run_cli("export", *OAK, "--every", "2", "--out", tmp_path / "x.glb"), "--every 2 needs --frames N or --until dry")
+    one_line(*run_cli("outline", "images/quercus_01.png", "--set", "veins.main.kappa=4"), "--set veins.main.kappa",
+             "outline.* or limits.image_pixels")
+    assert not list(tmp_path.iterdir())
+
+
+def test_images_are_sized_from_their_header_and_decoders_stay_quiet(tmp_path):
+    img = np.full((120, 160, 3), 230, np.uint8)
+    cv2.ellipse(img, (80, 60), (50, 30), 0, 0, 360, (40, 120, 50), -1)
+    for ext in ("tif", "bmp", "webp", "ppm"):
+        cv2.imwrite(str(tmp_path / f"leaf.{ext}"), img)
+        code, out, err = run_cli("outline", tmp_path / f"leaf.{ext}", "--json")
+        assert code == 0 and json.loads(out)["points"] > 0, (ext, err)
+    tif = bytearray((tmp_path / "leaf.tif").read_bytes())  # its header claims 20 000 × 20 000 pixels
+    order = "little" if tif[:2] == b"II" else "big"
+    off = int.from_bytes(tif[4:8], order)
+    for k in range(int.from_bytes(tif[off:off + 2], order)):
+        e = off + 2 + 12 * k
+        if int.from_bytes(tif[e:e + 2], order) in (256, 257):
+            n = 2 if int.from_bytes(tif[e + 2:e + 4], order) == 3 else 4
+            tif[e + 8:e + 8 + n] = (20000).to_bytes(n, order)
+    (tmp_path / "huge.tif").write_bytes(bytes(tif))
+    one_line(*run_cli("outline", tmp_path / "huge.tif"), "20000×20000 pixels, more than 150 million")
+    (tmp_path / "x.dat").write_bytes(b"neither a picture nor anything else" * 10)
+    one_line(*run_cli("outline", tmp_path / "x.dat"), "its size is not in a PNG, JPEG")
+    png = Path("images/quercus_01.png").read_bytes()
+    (tmp_path / "cut.png").write_bytes(png[: len(png) // 2])
+    # run in a child: libpng writes on the process's own stderr, which redirect_stderr does not catch
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "leafsim", "outline", str(tmp_path / "cut.png")], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1 and "cannot read image" in r.stderr, r.stderr
