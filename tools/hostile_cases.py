@@ -120,6 +120,31 @@ def cases(tmp: Path):
     yield "--species ''", ["build", "--species", ""], False
     yield "--species mapel", ["build", "--species", "mapel"], False
     yield "--set dynamics.dt=nan", ["build", *OAK, "--set", "dynamics.dt=nan"], False
+    (tmp / "precious.txt").write_text("keep")
+    (tmp / "link.png").symlink_to(tmp / "precious.txt")
+    (tmp / "dangling.png").symlink_to(tmp / "nowhere.txt")
+    (tmp / "ro.png").write_text("keep")
+    (tmp / "ro.png").chmod(0o444)
+    shutil.copy(ROOT / "images" / "quercus_01.png", tmp / "photo.png")
+    yield "outline --out <symbolic link to another file>", ["outline", "images/quercus_01.png", "--out", tmp / "link.png"], False
+    yield "outline --out <broken symbolic link>", ["outline", "images/quercus_01.png", "--out", tmp / "dangling.png"], False
+    yield "outline --out <read-only file>", ["outline", "images/quercus_01.png", "--out", tmp / "ro.png"], False
+    yield "outline photo.png --out photo.png", ["outline", tmp / "photo.png", "--out", tmp / "photo.png"], False
+    oak = json.loads((ROOT / "configs" / "leaves.json").read_text())["species"]["oak"]
+    oak["image"] = str(ROOT / oak["image"])
+    oak.pop("senescent_photo", None)
+    for name, bp in (("base_px [1e6, 1e6]", [1e6, 1e6]), ("base_px [1e300, 1e300]", [1e300, 1e300])):
+        (tmp / "bp.json").write_text(json.dumps({"species": {"oak": {**oak, "base_px": bp}}}))
+        yield f"build, species {name}", ["build", "--config", tmp / "bp.json", *OAK], False
+    grape = json.loads((ROOT / "configs" / "leaves.json").read_text())
+    grape["species"]["grapevine"]["params"] = [1, 2]
+    (tmp / "pl.json").write_text(json.dumps(grape))
+    yield "species with params [1, 2] and variants", ["species", "--config", tmp / "pl.json"], False
+    yield "run --frames 99999999999999999999", ["run", *OAK, "--frames", "99999999999999999999"], False
+    yield "compare --stage 99999999999999999999", ["compare", *OAK, "--stage", "99999999999999999999"], False
+    yield "accuracy --seed -1", ["accuracy", "--quick", "--seed", "-1"], False
+    yield "--set veins.main.kappa=1_0", ["build", *OAK, "--set", "veins.main.kappa=1_0"], False
+    yield "run --effects ''", ["run", *OAK, "--frames", "2", "--effects", ""], False
     yield "runaway: sigma_surface_bottom=3, l_min=0.1", ["run", "--species", "maple", "--quality", "draft", "--frames", "1000",
                                                         "--set", "shrink.sigma_surface_bottom=3", "--set", "shrink.l_min=0.1", "--json"], False
 
@@ -132,7 +157,10 @@ def checkpoint_cases(tmp: Path):
     for name, damage in (("shortened positions", lambda d: d.update(state_particle_q=d["state_particle_q"][:-5])),
                          ("float32 state", lambda d: d.update(state_particle_q=d["state_particle_q"].astype(np.float32))),
                          ("negative water", lambda d: d.update(state_particle_water=-d["state_particle_water"])),
-                         ("NaN velocity", lambda d: d["state_particle_qd"].__setitem__((0, 0), np.nan))):
+                         ("NaN velocity", lambda d: d["state_particle_qd"].__setitem__((0, 0), np.nan)),
+                         ("all the water in one particle", lambda d: d.update(state_particle_water=np.where(
+                             np.arange(len(d["state_particle_water"])) == 0, d["state_particle_water"].sum(), 0.0))),
+                         ("every particle at the origin", lambda d: d.update(state_particle_q=np.zeros_like(d["state_particle_q"])))):
         d = {k: v.copy() for k, v in base.items()}
         damage(d)
         folder = tmp / f"ck_{name.replace(' ', '_')}"
@@ -191,7 +219,7 @@ def main() -> None:
         for gen in (cases(tmp), checkpoint_cases(tmp)):
             for name, args, ok in gen:
                 code, msg, secs = run(args, ROOT, ok if callable(ok) else None)
-                msg = msg.replace(str(tmp), "TMP").replace("|", "\\|")
+                msg = msg.replace(str(tmp), "TMP").replace(str(ROOT) + "/", "").replace("|", "\\|")
                 print(f"| {name} | {code} | {msg[:400]} | {verdict(code, msg, ok)} ({secs:.0f} s) |", flush=True)
         what, v = orphan_case(tmp)
         print(f"| kill -9 of `leafsim scene --workers 2` | – | {what} | {v} |")
