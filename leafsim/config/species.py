@@ -211,6 +211,14 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
     if stage not in ("young", "senescent"):
         raise _err(path, key, "photo_stage", f"expected 'young' or 'senescent' (what the photo shows), got {_show(stage)}")
     senescent = _reference(path, key, e["senescent_photo"]) if e.get("senescent_photo") is not None else None
+    base_px, apex_px = _pair(path, key, "base_px", e.get("base_px")), _pair(path, key, "apex_px", e.get("apex_px"))
+    if senescent is not None and image is not None and senescent.image == image:
+        # the same photo is traced once, with the entry's base and apex: different ones would be ignored
+        for k, mine in (("base_px", base_px), ("apex_px", apex_px)):
+            theirs = getattr(senescent, k)
+            if theirs is not None and (mine is None or not np.allclose(np.asarray(mine, float), theirs)):
+                raise _err(path, key, f"senescent_photo.{k}", f"{tuple(float(v) for v in theirs)} differs from the entry's "
+                           f"{k} {None if mine is None else tuple(float(v) for v in mine)} for the same photo (expected the same point, or none)")
 
     outline_pts, smooth, teeth = _outline(path, key, e["outline"]) if "outline" in e else (None, 0, None)
     if image is None and outline_pts is None:
@@ -238,8 +246,8 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
         latin=str(e.get("latin", "")),
         length_m=float(length),
         image=image,
-        base_px=_pair(path, key, "base_px", e.get("base_px")),
-        apex_px=_pair(path, key, "apex_px", e.get("apex_px")),
+        base_px=base_px,
+        apex_px=apex_px,
         outline_points=outline_pts,
         outline_smooth=smooth,
         teeth=teeth,

@@ -130,6 +130,13 @@ def test_photo_base_far_outside_the_leaf(capsys, tmp_path):
     bad(capsys, ["veins", "--config", str(p), "--species", "oak"], "species 'oak', key 'base_px'", "outside the leaf traced in")
 
 
+def test_senescent_photo_of_the_same_image_with_another_base(capsys, tmp_path):
+    def edit(e):
+        e["senescent_photo"] = {"image": e["image"], "base_px": [1e6, 1e6]}
+    p = config(tmp_path, "hornbeam", edit)
+    bad(capsys, ["species", "--config", str(p)], "species 'hornbeam', key 'senescent_photo.base_px'", "differs from the entry's base_px")
+
+
 def test_photo_target_outside_the_leaf(capsys, tmp_path):
     p = config(tmp_path, "oak", _set("targets", [[0, 1], [2.5, 0.4]]))
     bad(capsys, ["veins", "--config", str(p), "--species", "oak"], "species 'oak', key 'targets': target 1")
