@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import signal
 import sys
 
@@ -44,6 +45,13 @@ CONFIG_HELP = "species config file (default: the shipped configs/leaves.json; se
 SEED_MAX = 2**63 - 1
 
 
+def _int(text: str) -> int:
+    """An integer option as ASCII digits (``int()`` also takes ``1_0`` and other scripts' digits)."""
+    if not re.fullmatch(r"\s*[+-]?[0-9]+\s*", text):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer")
+    return int(text)
+
+
 def _seed(text: str) -> int:
     try:
         if not text.strip().isascii() or not text.strip().lstrip("+").isdigit():  # int() takes '1_0' and '٣'
@@ -70,7 +78,7 @@ def _common(p: argparse.ArgumentParser, seed=True):
 def add_stop_options(p: argparse.ArgumentParser, frames_default=None, frames_help="simulate N frames") -> None:
     """``--frames N`` and ``--until dry|water=F|season=S`` (one of them; with both, the run stops
     at whichever comes first)."""
-    p.add_argument("--frames", type=int, default=frames_default, metavar="N", help=frames_help)
+    p.add_argument("--frames", type=_int, default=frames_default, metavar="N", help=frames_help)
     p.add_argument("--until", default=None, metavar="WHEN",
                    help="stop when the leaf is dry (water left ≤ 2 %%, as the GUI's \"Dry to end\"), at water=F "
                         "(a fraction of the fresh leaf's water) or at season=S (the colour clock); with --frames, "
@@ -84,12 +92,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     g = sub.add_parser("gui", help="interactive application (default)")
     _common(g)
-    g.add_argument("--frames", type=int, default=None, metavar="N",
+    g.add_argument("--frames", type=_int, default=None, metavar="N",
                    help="simulate to frame N as fast as possible, draw it and exit (scripted screenshots: the same "
                         "picture on any machine)")
     g.add_argument("--until", default=None, metavar="dry",
                    help="dry the leaf to the end as fast as possible (the 'Dry to end' button), draw it and exit")
-    g.add_argument("--window-frames", type=int, default=None, metavar="N",
+    g.add_argument("--window-frames", type=_int, default=None, metavar="N",
                    help="exit after N window frames drawn with the leaf, playing (timing the window)")
     g.add_argument("--screenshot", default=None, help="save the final window to this PNG (with --frames or --window-frames)")
     g.add_argument("--play", action="store_true", help="start with the simulation playing")
@@ -124,8 +132,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--effects", default=None, help="comma-separated effects to enable (others off), e.g. osmosis,shrink,pbd")
     r.add_argument("--stats", default=None, help="write per-frame statistics (JSON lines) here")
     r.add_argument("--out", default=None, help="folder for final positions (.npz) and PNG frames")
-    r.add_argument("--every", type=int, default=0, help="render a PNG frame every K frames into --out")
-    r.add_argument("--checkpoint-every", type=int, default=None, metavar="K",
+    r.add_argument("--every", type=_int, default=0, help="render a PNG frame every K frames into --out")
+    r.add_argument("--checkpoint-every", type=_int, default=None, metavar="K",
                    help=f"save the whole state to OUT/{CHECKPOINT} every K frames (default {CHECKPOINT_EVERY} with --out; 0 = never)")
     r.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out (same command otherwise)")
     r.add_argument("--json", action="store_true", help=JSON_HELP)
@@ -148,7 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--seed", type=_seed, default=0, help="seed of the leaf (default 0)")
     ac.add_argument("--out", default=None, help="folder for accuracy.json, accuracy.md and accuracy_pareto.png")
     ac.add_argument("--quick", action="store_true", help="a coarse, fast-drying leaf and few settings (for tests)")
-    ac.add_argument("--floor", type=int, default=0, metavar="K",
+    ac.add_argument("--floor", type=_int, default=0, metavar="K",
                     help="also dry the default setting K times from start positions perturbed by 1 µm: the "
                          "sensitivity floor below which no error is resolved")
     ac.add_argument("--floor-reference", action="store_true", help="measure the floor on the reference too (slow)")
@@ -168,14 +176,14 @@ def _scene_export_parsers(sub) -> None:
     sc = sub.add_parser("scene", help="simulate a scene file of many leaves in parallel")
     sc.add_argument("scene", help="scene JSON (see configs/scenes/ and docs/scenes.md)")
     sc.add_argument("--out", default=None, help="output folder (default out/SCENE_NAME)")
-    sc.add_argument("--workers", type=int, default=None, help="local worker processes (default: the CPU count)")
+    sc.add_argument("--workers", type=_int, default=None, help="local worker processes (default: the CPU count)")
     sc.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this Dask scheduler, e.g. tcp://host:8786")
     sc.add_argument("--json", action="store_true", help=JSON_HELP)
 
     ex = sub.add_parser("export", help="simulate one leaf and write it as a mesh (glTF, OBJ, PLY)")
     _common(ex)
     add_stop_options(ex, frames_help="simulate N frames first (default without --until: 0, the fresh leaf)")
-    ex.add_argument("--every", type=int, default=0, help="glTF: a morph-target key frame every K frames (the drying animation)")
+    ex.add_argument("--every", type=_int, default=0, help="glTF: a morph-target key frame every K frames (the drying animation)")
     ex.add_argument("--format", default=None, choices=["glb", "gltf", "obj", "ply"], help="default: from the --out suffix")
     ex.add_argument("--out", required=True, help="output file")
     ex.add_argument("--layers", default="shell", choices=["shell", "mid"], help="closed thin shell from both layers, or the mid-surface with thickness")

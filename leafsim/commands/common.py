@@ -9,7 +9,7 @@ from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output, not_an_input
-from leafsim.config.params import PARAMS, ParamSet, parse_set_args
+from leafsim.config.params import NUMBER, PARAMS, ParamSet, parse_set_args
 from leafsim.config.presets import quality_overrides
 from leafsim.config.species import DEFAULT_SPECIES, Species, get_species
 from leafsim.interactive.eta import DryingEta, duration
@@ -66,6 +66,11 @@ def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
     return sp, sp.params.with_overrides({**overrides(args), **extra}, where="--set")
 
 
+def species_inputs(sp) -> tuple:
+    """The files a species' run reads: its config and photos (outputs must not be one of them)."""
+    return (sp.config, sp.image, sp.senescent.image if sp.senescent is not None else None)
+
+
 def png_output(option: str, path: str | None, inputs=()):
     """Check a PNG output before any work (one line naming the option): a ``.png`` name (the
     file holds PNG data, so another suffix would mislabel it), a writable place that is a
@@ -96,7 +101,7 @@ def stop_of(args, start: int = 0):
         water, season = DRY_END_FRACTION, None
     elif kind in ("water", "season") and value:
         try:
-            v = float(value)
+            v = float(value) if NUMBER.fullmatch(value.strip()) else float("nan")  # not '0.9_9', not '٠.٥'
         except ValueError:
             v = float("nan")
         if not (v == v and (0.0 <= v <= 1.0 if kind == "water" else 0.0 <= v <= 10.0)):

@@ -8,14 +8,16 @@ from pathlib import Path
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import check_output, output_target
-from leafsim.commands.common import Progress, emit, ready_kernels, species_params, stop_of
+from leafsim.base.fileio import check_output, not_an_input, output_target
+from leafsim.commands.common import Progress, emit, ready_kernels, species_inputs, species_params, stop_of
 from leafsim.export.mesh import export_mesh, format_of
 from leafsim.pipeline import build_leaf
 from leafsim.sim.run import Run, Stop
 
 
 def _check(args) -> str:
+    if not str(args.out).strip():
+        raise LeafsimError("--out '': expected a mesh file name (.glb, .gltf, .obj or .ply)")
     check_output(args.out, "mesh")  # a folder, a device or an unwritable place: now, not after the drying
     fmt = format_of(args.out, args.format)
     if args.every < 0:
@@ -31,12 +33,21 @@ def _check(args) -> str:
     if not folder.is_dir():
         raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")
     # the files written beside the mesh, checked now too (a folder named x.bin failed after the drying)
-    out = Path(args.out)
-    side = {"gltf": [(out.with_suffix(".bin"), "glTF buffer")],
-            "obj": [(out.with_suffix(".mtl"), "material"), (out.with_name(out.stem + "_photo.png"), "texture")]}
-    for path, what in side.get(fmt, []):
+    for path, what in _side_files(args.out, fmt):
         output_target(path, what)
     return fmt
+
+
+def _side_files(out, fmt: str) -> list:
+    """(path, what) of the files written beside the mesh ``out``."""
+    out = Path(out)
+    return {"gltf": [(out.with_suffix(".bin"), "glTF buffer")],
+            "obj": [(out.with_suffix(".mtl"), "material"), (out.with_name(out.stem + "_photo.png"), "texture")]}.get(fmt, [])
+
+
+def _written(out, fmt: str) -> list:
+    """Every file an export to ``out`` writes."""
+    return [Path(out), *(p for p, _ in _side_files(out, fmt))]
 
 
 def key_frames(run: Run, stop: Stop | int, every: int, progress: Progress | None = None) -> list:
@@ -62,6 +73,8 @@ def key_frames(run: Run, stop: Stop | int, every: int, progress: Progress | None
 def cmd_export(args):
     fmt = _check(args)
     sp, params = species_params(args, effects=True)
+    for path in _written(args.out, fmt):
+        not_an_input(path, species_inputs(sp), "--out")
     if args.texture == "photo" and sp.image is None:
         raise LeafsimError(f"--texture photo: species '{sp.key}' has no photo (drawn outline)")
     ready_kernels()

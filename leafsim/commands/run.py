@@ -14,10 +14,10 @@ import numpy as np
 
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import check_output, output_target, remove_stale_temps
+from leafsim.base.fileio import check_output, not_an_input, output_target, remove_stale_temps
 from leafsim.base.signals import DeferredSignals, Interrupted
 from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
-from leafsim.commands.common import Progress, emit, ready_kernels, species_params, stop_of
+from leafsim.commands.common import Progress, emit, ready_kernels, species_inputs, species_params, stop_of
 from leafsim.pipeline import build_leaf
 from leafsim.render.sequence import FrameWriter
 from leafsim.sim.checkpoint import check_meta, load_carry, load_checkpoint, save_checkpoint
@@ -38,6 +38,8 @@ def check_run_args(args) -> Path | None:
         raise LeafsimError(f"--checkpoint-every {args.checkpoint_every}: expected a non-negative frame interval")
     if (args.checkpoint_every or args.resume) and not args.out:
         raise LeafsimError(f"{'--resume' if args.resume else '--checkpoint-every'} needs --out DIR (the checkpoint lives there)")
+    if args.out is not None and not args.out.strip():
+        raise LeafsimError("--out '': expected a folder name for the run's files")
     out = Path(args.out) if args.out else None
     if out is not None:
         if out.is_symlink() and not out.exists():
@@ -141,6 +143,9 @@ def cmd_run(args):
     out = check_run_args(args)
     t0 = time.perf_counter()
     sp, params = species_params(args, effects=True)
+    for path, option in ((args.stats, "--stats"), *(((out / n), "--out") for n in ("final.npz", CHECKPOINT) if out is not None)):
+        if path is not None:
+            not_an_input(path, species_inputs(sp), option)
     # what a checkpoint must have been made with to be resumed by this command
     meta = {"species": sp.key, "config": str(Path(args.config).resolve()) if args.config else None,
             "seed": args.seed, "params": params.to_dict()}

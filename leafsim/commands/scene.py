@@ -6,11 +6,14 @@ import os
 import sys
 from pathlib import Path
 
+from leafsim.base.errors import LeafsimError
 from leafsim.commands.common import emit, ready_kernels
 from leafsim.scene.run import load_scene, run_scene
 
 
 def cmd_scene(args):
+    if args.out is not None and not args.out.strip():
+        raise LeafsimError("--out '': expected a folder name for the scene's files (or leave --out out)")
     scene = load_scene(args.scene)
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem

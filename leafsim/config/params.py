@@ -25,7 +25,7 @@ from leafsim.base.errors import LeafsimError
 
 #: a number as the command line and the GUI write it (ASCII digits, an optional fraction and
 #: exponent; inf and nan parse, to be refused as not finite)
-_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf(?:inity)?|nan)", re.IGNORECASE)
+NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf(?:inity)?|nan)", re.IGNORECASE)
 
 
 @dataclass(frozen=True)
@@ -77,7 +77,7 @@ class Param:
         # numbers
         if isinstance(value, bool):
             raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
-        if isinstance(value, str) and not _NUMBER.fullmatch(value.strip()):
+        if isinstance(value, str) and not NUMBER.fullmatch(value.strip()):
             # float() also takes '1_0' and non-ASCII digits: a typo, not a number
             raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
         try:

@@ -45,8 +45,8 @@ def _header_size(data: np.ndarray) -> tuple[int, int] | None:
         return None
     if b[:2] == b"BM" and len(b) >= 26:
         return abs(int.from_bytes(b[18:22], "little", signed=True)), abs(int.from_bytes(b[22:26], "little", signed=True))
-    if b[:4] in (b"II*\x00", b"MM\x00*"):
-        return _tiff_size(b, "little" if b[:2] == b"II" else "big")
+    if b[:4] in (b"II*\x00", b"MM\x00*"):  # its directory may sit anywhere, often at the end
+        return _tiff_size(data, "little" if b[:2] == b"II" else "big")
     if b[:4] == b"RIFF" and b[8:12] == b"WEBP" and len(b) >= 30:
         kind = b[12:16]
         if kind == b"VP8 ":
@@ -69,21 +69,25 @@ def _header_size(data: np.ndarray) -> tuple[int, int] | None:
     return None
 
 
-def _tiff_size(b: bytes, order: str) -> tuple[int, int] | None:
-    """Width and height of a TIFF's first image (tags 256 and 257 of its first IFD)."""
-    off = int.from_bytes(b[4:8], order)
-    if off + 2 > len(b):
+def _tiff_size(data: np.ndarray, order: str) -> tuple[int, int] | None:
+    """Width and height of a TIFF's first image (tags 256 and 257 of its first IFD), read where
+    the header points, anywhere in the file."""
+    def num(at: int, n: int) -> int | None:
+        return int.from_bytes(data[at:at + n].tobytes(), order) if 0 <= at and at + n <= data.size else None
+
+    off = num(4, 4)
+    count = None if off is None else num(off, 2)
+    if count is None:
         return None
-    n = int.from_bytes(b[off:off + 2], order)
     size = {}
-    for k in range(n):
+    for k in range(count):
         e = off + 2 + 12 * k
-        if e + 12 > len(b):
+        tag, typ = num(e, 2), num(e + 2, 2)
+        if tag is None or typ is None:
             return None
-        tag, typ = int.from_bytes(b[e:e + 2], order), int.from_bytes(b[e + 2:e + 4], order)
         if tag in (256, 257):
-            size[tag] = int.from_bytes(b[e + 8:e + 10], order) if typ == 3 else int.from_bytes(b[e + 8:e + 12], order)
-    return (size[256], size[257]) if len(size) == 2 else None
+            size[tag] = num(e + 8, 2) if typ == 3 else num(e + 8, 4)
+    return (size[256], size[257]) if len(size) == 2 and None not in size.values() else None
 
 
 def _quiet_opencv() -> None:

@@ -28,7 +28,7 @@ from typing import Callable
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import atomic_write_bytes, output_target, read_json
+from leafsim.base.fileio import atomic_write_bytes, not_an_input, output_target, read_json
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
 from leafsim.scene.layout import leaf_dir
@@ -45,6 +45,8 @@ _LAYOUT_KEYS = {"floor": {"kind", "size", "cell", "clearance"},
                 "row": {"kind", "gap"}}
 _NAME = re.compile(r"^[A-Za-z0-9_-]{1,40}$")
 DEFAULT_MAX_FRAMES = 100_000
+#: seeds are non-negative integers below 2**63, as on the command line (numpy's generators take them as-is)
+SEED_MAX = 2**63 - 1
 #: the most leaves one scene may hold, and what setting up each one costs before any
 #: simulation (measured: a million leaves took 2.4 GB and 94 CPU s just to set up)
 MAX_SCENE_LEAVES = 10_000
@@ -138,7 +140,7 @@ def load_scene(path) -> Scene:
     data = _read_json(path)
     w = _Where(path)
     w.keys(data, _TOP_KEYS, "a scene")
-    seed = w.int(data, "seed", 0, 0)
+    seed = w.int(data, "seed", 0, 0, SEED_MAX)
     config = data.get("config")
     if config is not None and not isinstance(config, str):
         raise w.err("config", "expected the path of a species config (relative to the scene file)")
@@ -221,10 +223,11 @@ def _seeds(w: _Where, g: dict, count: int) -> list[int]:
         s = g["seeds"]
         if "seed" in g:
             raise w.err("seeds", "give either 'seed' (the first of count consecutive seeds) or 'seeds', not both")
-        if not isinstance(s, list) or len(s) != count or any(isinstance(x, bool) or not isinstance(x, int) or x < 0 for x in s):
-            raise w.err("seeds", f"expected a list of {count} non-negative integers (one per leaf)")
+        if not isinstance(s, list) or len(s) != count or any(isinstance(x, bool) or not isinstance(x, int) or not 0 <= x <= SEED_MAX
+                                                             for x in s):
+            raise w.err("seeds", f"expected a list of {count} integers in [0, 2**63-1] (one per leaf)")
         return list(s)
-    first = w.int(g, "seed", 0, 0)
+    first = w.int(g, "seed", 0, 0, SEED_MAX - count + 1)
     return list(range(first, first + count))
 
 
@@ -390,6 +393,7 @@ def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None,
     for name, what in (("placement.json", "placement"), ("summary.json", "summary"), ("run.json", "run report"),
                        ("overview.png", "overview")):
         output_target(out / name, what)
+        not_an_input(out / name, (scene.path,), "--out")  # a scene file kept in its own output folder
     t0 = time.perf_counter()
     todo = [j for j in scene.jobs if not is_done(j, out)]
     results = []

@@ -70,8 +70,9 @@ class StatsStream:
                     st = json.loads(line)
                 except ValueError:
                     break  # a line cut by a kill
-                if not isinstance(st, dict) or st.get("frame", frame + 1) > frame:
-                    break
+                k = st.get("frame") if isinstance(st, dict) else None
+                if isinstance(k, bool) or not isinstance(k, int) or k > frame:
+                    break  # not a line of ours (a frame that is no integer): kept no further
                 kept.append(line + "\n")
         atomic_write_bytes(self.path, "".join(kept).encode(), "statistics")
 

@@ -281,6 +281,19 @@ def test_outputs_never_replace_inputs_links_or_read_only_files(tmp_path):
     out = tmp_path / "run"
     out.mkdir()
     one_line(*run_cli("run", *OAK, "--frames", "2", "--out", out, "--stats", out / "final.npz"), "--stats", "writes that file")
+    # nor the species' config or photo
+    oak = json.loads(Path("configs/leaves.json").read_text())["species"]["oak"]
+    oak["image"] = str(photo)
+    oak.pop("senescent_photo", None)
+    cfg = tmp_path / "c.json"
+    cfg.write_text(json.dumps({"species": {"oak": oak}}))
+    one_line(*run_cli("run", "--config", cfg, *OAK, "--frames", "2", "--stats", cfg), "--stats", "that is the input")
+    one_line(*run_cli("export", "--config", cfg, *OAK, "--format", "glb", "--out", photo), "--out", "that is the input")
+    (tmp_path / "q.bin").write_bytes(photo.read_bytes())
+    oak["image"] = str(tmp_path / "q.bin")
+    cfg.write_text(json.dumps({"species": {"oak": oak}}))
+    one_line(*run_cli("export", "--config", cfg, *OAK, "--out", tmp_path / "q.gltf"), "--out", "that is the input", "q.bin")
+    assert photo.read_bytes() == before and (tmp_path / "q.bin").read_bytes() == before
 
 
 def test_bad_counts_seeds_and_config_shapes_are_one_line(tmp_path):
@@ -312,6 +325,9 @@ def test_bad_counts_seeds_and_config_shapes_are_one_line(tmp_path):
 
 def test_options_that_would_be_ignored_or_silently_empty_are_refused(tmp_path):
     one_line(*run_cli("params", "--json", "--markdown"), "--markdown and --json")
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--out", ""), "--out ''")
+    one_line(*run_cli("export", *OAK, "--out", ""), "--out ''")
+    one_line(*run_cli("run", *OAK, "--frames", "1_0"), "--frames", "expected an integer")
     one_line(*run_cli("run", *OAK, "--frames", "2", "--effects", ""), "--effects", "expected a comma-separated list")
     one_line(*run_cli("run", *OAK, "--frames", "2", "--stats", ""), "--stats ''")
     one_line(*run_cli("export", *OAK, "--every", "2", "--out", tmp_path / "x.glb"), "--every 2 needs --frames N or --until dry")
@@ -327,6 +343,10 @@ def test_images_are_sized_from_their_header_and_decoders_stay_quiet(tmp_path):
         cv2.imwrite(str(tmp_path / f"leaf.{ext}"), img)
         code, out, err = run_cli("outline", tmp_path / f"leaf.{ext}", "--json")
         assert code == 0 and json.loads(out)["points"] > 0, (ext, err)
+    big = cv2.resize(img, (1200, 1000))  # uncompressed, 3.6 MB: its directory lies past the first 2 MiB
+    cv2.imwrite(str(tmp_path / "big.tif"), big, [cv2.IMWRITE_TIFF_COMPRESSION, 1])
+    code, out, err = run_cli("outline", tmp_path / "big.tif", "--json")
+    assert code == 0 and json.loads(out)["points"] > 0, err
     tif = bytearray((tmp_path / "leaf.tif").read_bytes())  # its header claims 20 000 × 20 000 pixels
     order = "little" if tif[:2] == b"II" else "big"
     off = int.from_bytes(tif[4:8], order)
