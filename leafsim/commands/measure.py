@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import check_output
+from leafsim.base.fileio import check_output, output_target
 from leafsim.commands.common import emit, ready_kernels
 from leafsim.measure.accuracy import GROUPS, markdown, study, write_report
 from leafsim.measure.bench import main as bench_main
@@ -19,6 +19,11 @@ def cmd_accuracy(args):
         raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
     if out is not None:
         check_output(out, "--out folder", folder=True)
+        # the report's files, checked before the study (a read-only picture failed after it,
+        # leaving the other two written)
+        names = ("limit.json", "limit.md", "limit_front.png") if args.limit else ("accuracy.json", "accuracy.md", "accuracy_pareto.png")
+        for name in names:
+            output_target(out / name, "report")
     if args.floor < 0:
         raise LeafsimError(f"--floor {args.floor}: expected a count ≥ 0")
     if args.limit:

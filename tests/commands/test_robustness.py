@@ -328,6 +328,15 @@ def test_options_that_would_be_ignored_or_silently_empty_are_refused(tmp_path):
     one_line(*run_cli("run", *OAK, "--frames", "2", "--out", ""), "--out ''")
     one_line(*run_cli("export", *OAK, "--out", ""), "--out ''")
     one_line(*run_cli("run", *OAK, "--frames", "1_0"), "--frames", "expected an integer")
+    acc = tmp_path / "acc"
+    acc.mkdir()
+    (acc / "accuracy_pareto.png").write_bytes(b"keep")
+    (acc / "accuracy_pareto.png").chmod(0o444)  # found before the study, not after writing the other two
+    one_line(*run_cli("accuracy", "--quick", "--groups", "mesh", "--out", acc), "accuracy_pareto.png", "read-only")
+    assert sorted(p.name for p in acc.iterdir()) == ["accuracy_pareto.png"]
+    (acc / "accuracy_pareto.png").chmod(0o644)
+    (acc / "accuracy_pareto.png").unlink()
+    acc.rmdir()
     one_line(*run_cli("run", *OAK, "--frames", "2", "--effects", ""), "--effects", "expected a comma-separated list")
     one_line(*run_cli("run", *OAK, "--frames", "2", "--stats", ""), "--stats ''")
     one_line(*run_cli("export", *OAK, "--every", "2", "--out", tmp_path / "x.glb"), "--every 2 needs --frames N or --until dry")
