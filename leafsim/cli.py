@@ -47,8 +47,8 @@ SEED_MAX = 2**63 - 1
 
 def _int(text: str) -> int:
     """An integer option as ASCII digits (``int()`` also takes ``1_0`` and other scripts' digits)."""
-    if not re.fullmatch(r"\s*[+-]?[0-9]+\s*", text):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer")
+    if not re.fullmatch(r"\s*[+-]?[0-9]{1,30}\s*", text):  # beyond 30 digits nothing is meant
+        raise argparse.ArgumentTypeError(f"{text[:24]!r}{'…' if len(text) > 24 else ''}: expected an integer")
     return int(text)
 
 

@@ -27,10 +27,12 @@ from leafsim.base.errors import LeafsimError
 
 
 def _public_mode() -> int:
-    """The mode a plain open() would give (0o666 minus the umask); mkstemp makes 0o600."""
+    """The mode a plain open() would give (0o666 minus the umask; mkstemp makes 0o600), writable
+    by its owner whatever the umask, so leafsim can replace its own file later (a checkpoint,
+    a re-run scene)."""
     mask = os.umask(0)
     os.umask(mask)
-    return 0o666 & ~mask
+    return (0o666 & ~mask) | stat.S_IWUSR
 
 
 #: the largest JSON file (species config, scene, parameter set) read [bytes]
@@ -82,7 +84,8 @@ def output_target(path: str | os.PathLike, what: str = "file") -> Path:
                            "never written through a link)")
     if not stat.S_ISREG(st.st_mode):
         raise LeafsimError(f"{path}: cannot write {what} (it is {_kind(st.st_mode)}; only a regular file is ever replaced)")
-    if not st.st_mode & 0o222:
+    if not st.st_mode & 0o222 or (os.geteuid() != 0 and not os.access(path, os.W_OK)):
+        # a rename needs only the folder's permission: the file's own is checked here (root by its mode bits)
         raise LeafsimError(f"{path}: cannot write {what} (the file is read-only; only a writable file is ever replaced)")
     return path
 

@@ -16,9 +16,10 @@ def stage_arg(text: str | None):
     """``--stage``: young, dried or a frame number."""
     if text is None or text in ("young", "dried"):
         return text
-    k = int(text) if text.strip().isascii() and text.strip().isdigit() else -1  # int() takes '1_0' and '٣' too
+    t = text.strip().lstrip("+")
+    k = int(t) if t.isascii() and t.isdigit() and len(t) <= 9 else -1  # int() takes '1_0' and '٣' too
     if not 0 <= k <= MAX_FRAMES:
-        raise LeafsimError(f"--stage {text!r}: expected young, dried or a frame number from 0 to {MAX_FRAMES} "
+        raise LeafsimError(f"--stage {text[:24]!r}{'…' if len(text) > 24 else ''}: expected young, dried or a frame number from 0 to {MAX_FRAMES} "
                            "(compare dries the leaf at most that far)")
     return k
 

@@ -12,6 +12,8 @@ from leafsim.measure.bench import main as bench_main
 
 
 def cmd_accuracy(args):
+    if args.out is not None and not args.out.strip():
+        raise LeafsimError("--out '': expected a folder name for the report")
     out = Path(args.out) if args.out else None
     if out is not None and out.exists() and not out.is_dir():
         raise LeafsimError(f"--out {out}: exists and is not a folder")

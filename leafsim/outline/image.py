@@ -8,6 +8,7 @@ import math
 import os
 import sys
 import tempfile
+import threading
 
 import cv2
 import numpy as np
@@ -31,16 +32,17 @@ def _header_size(data: np.ndarray) -> tuple[int, int] | None:
     b = data[:1 << 21].tobytes()  # the frame header follows the metadata segments (EXIF ≤ 64 kB each)
     if b[:8] == b"\x89PNG\r\n\x1a\n" and b[12:16] == b"IHDR":
         return int.from_bytes(b[16:20], "big"), int.from_bytes(b[20:24], "big")
-    if b[:2] == b"\xff\xd8":
-        i = 2
-        while i + 9 <= len(b) and b[i] == 0xFF:
-            while i + 1 < len(b) and b[i + 1] == 0xFF:  # fill bytes before a marker
+    if b[:2] == b"\xff\xd8":  # the frame header follows the metadata segments, however long they are
+        i, n = 2, data.size
+        while i + 9 <= n and data[i] == 0xFF:
+            while i + 1 < n and data[i + 1] == 0xFF:  # fill bytes before a marker
                 i += 1
-            if i + 9 > len(b):
+            if i + 9 > n:
                 break
-            marker, seg = b[i + 1], int.from_bytes(b[i + 2:i + 4], "big")
+            head = data[i:i + 9].tobytes()
+            marker, seg = head[1], int.from_bytes(head[2:4], "big")
             if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
-                return int.from_bytes(b[i + 7:i + 9], "big"), int.from_bytes(b[i + 5:i + 7], "big")
+                return int.from_bytes(head[7:9], "big"), int.from_bytes(head[5:7], "big")
             i += 2 + seg
         return None
     if b[:2] == b"BM" and len(b) >= 26:
@@ -98,27 +100,43 @@ def _quiet_opencv() -> None:
         pass
 
 
+_STDERR_LOCK = threading.Lock()
+
+
 @contextlib.contextmanager
 def _decoder_stderr():
     """Catch what the image libraries write on the process's stderr while they decode (libpng's
     "PNG input buffer is incomplete", libjpeg's warnings): leafsim says one line instead. Yields
     a list that holds the caught lines afterwards."""
     said: list[str] = []
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):  # no real stderr (an embedding host)
+    # fd 2 is the whole process's: only the main thread (a command) redirects it, one at a time;
+    # a worker thread (the window's builds, a Dask worker) decodes without catching
+    if threading.current_thread() is not threading.main_thread() or not _STDERR_LOCK.acquire(blocking=False):
         yield said
         return
-    with tempfile.TemporaryFile() as tmp:
-        os.dup2(tmp.fileno(), 2)
+    saved = tmp = None
+    try:
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+            tmp = tempfile.TemporaryFile()
+            os.dup2(tmp.fileno(), 2)
+        except (OSError, ValueError, AttributeError):  # no real stderr, no temporary folder: no catching
+            if saved is not None:
+                os.close(saved)
+            saved = None
         try:
             yield said
         finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            tmp.seek(0)
-            said += [ln.strip() for ln in tmp.read(4096).decode("utf-8", "replace").splitlines() if ln.strip()]
+            if saved is not None:
+                os.dup2(saved, 2)
+                os.close(saved)
+                tmp.seek(0)
+                said += [ln.strip() for ln in tmp.read(4096).decode("utf-8", "replace").splitlines() if ln.strip()]
+    finally:
+        if tmp is not None:
+            tmp.close()
+        _STDERR_LOCK.release()
 
 
 def load_image(path: str | os.PathLike) -> np.ndarray:
@@ -137,7 +155,7 @@ def load_image(path: str | os.PathLike) -> np.ndarray:
     if data.size == 0:
         raise LeafsimError(f"{where}: cannot read image (empty file)")
     size = _header_size(data)
-    if size is None:  # decoding first would meet no pixel limit (a 20 000² TIFF of 1 MB took 1.7 GB)
+    if size is None:  # decoding first would meet no pixel limit (a 20 000² TIFF of 1.2 MB took 1.7 GB)
         raise LeafsimError(f"{where}: cannot read image (its size is not in a PNG, JPEG, TIFF, BMP, WebP or PNM "
                            "header: another kind of file, or a damaged one)")
     if size[0] * size[1] > MAX_DECODE_PIXELS:
