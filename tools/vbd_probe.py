@@ -49,6 +49,7 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from leafsim.base.errors import LeafsimError
 from leafsim.config.species import get_species
 from leafsim.pipeline import build_leaf
 from leafsim.sim.effects.dynamics import effective_substeps
@@ -448,11 +449,14 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--species", default="oak")
     ap.add_argument("--meshes", default="0.028,0.0199,0.0141")
-    ap.add_argument("--steps", default="substep,fixed40,frame")
+    ap.add_argument("--steps", default="substep,fixed40,frame", help="comma-separated: substep, fixed40, frame")
     ap.add_argument("--cap", type=int, default=3000)
     ap.add_argument("--rho", default="0.9")
     ap.add_argument("--global-solves", action="store_true", help="also Newton with AMG-PCG and with a sparse LU")
     a = ap.parse_args()
+    bad = set(a.steps.split(",")) - {"substep", "fixed40", "frame"}
+    if bad:
+        ap.error(f"--steps: unknown {', '.join(sorted(bad))} (expected substep, fixed40, frame)")
     print("| mesh (× L) | particles | h | solver | error after 2 / 6 sweeps | sweeps to 1e-1 | 1e-2 | 1e-3 | error after "
           "300 → 1000 → the last sweep | ms / sweep |")
     print("|---|---|---|---|---|---|---|---|---|---|")
@@ -481,4 +485,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except LeafsimError as err:  # an unknown species or an out-of-range mesh: one line, not a traceback
+        raise SystemExit(f"vbd_probe: {err}")
