@@ -110,9 +110,17 @@ def species_trace(sp: Species, params: ParamSet | None = None):
 
 def _check_given_ends(sp: Species, traced) -> None:
     """``base_px`` / ``apex_px`` of a photo species must lie on (or inside) the traced leaf."""
+    check_given_ends(traced, sp.image, {"base_px": sp.base_px, "apex_px": sp.apex_px}, sp.error)
+
+
+def check_given_ends(traced, image, ends: dict, error) -> None:
+    """Given leaf ends (``ends``: config key → photo pixel or None) must lie on or inside the leaf
+    traced in ``image`` (within ``OUTLINE_END_TOLERANCE`` × its size outside it): a point on the
+    background or on another leaf would set a wrong leaf axis.  ``error(key, message)`` makes
+    the one-line error that names where the key came from."""
     c = traced.contour_px
     size = float(np.ptp(c, axis=0).max())
-    for name, given in (("base_px", sp.base_px), ("apex_px", sp.apex_px)):
+    for name, given in ends.items():
         if given is None:
             continue
         q = np.asarray(given, float).reshape(1, 2)
@@ -120,8 +128,8 @@ def _check_given_ends(sp: Species, traced) -> None:
             continue
         d = float(distance_to_polygon(q, c)[0])
         if d > OUTLINE_END_TOLERANCE * size:
-            raise sp.error(name, f"({q[0, 0]:.6g}, {q[0, 1]:.6g}) lies {d:.4g} px outside the leaf traced in {sp.image} "
-                                 f"({traced.image_size[0]}×{traced.image_size[1]} px; expected a pixel on its margin)")
+            raise error(name, f"({q[0, 0]:.6g}, {q[0, 1]:.6g}) lies {d:.4g} px outside the leaf traced in {image} "
+                              f"({traced.image_size[0]}×{traced.image_size[1]} px; expected a pixel on its margin)")
 
 
 def species_veins(sp: Species, shape: LeafShape, params: ParamSet, seed: int) -> VeinGraph:

@@ -25,7 +25,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.resources import display_path
 from leafsim.compare import metrics as C
 from leafsim.outline.trace import refuse_non_leaf, to_leaf_shape
-from leafsim.pipeline import build_leaf, photo_veins, trace_photo
+from leafsim.pipeline import build_leaf, check_given_ends, photo_veins, trace_photo
 from leafsim.render.topdown import TopDown
 from leafsim.sim.run import NotReached, Run
 from leafsim.sim.simulator import Simulator
@@ -96,13 +96,19 @@ class _Leaf:
         self.td.release()
 
 
-def _reference(path, params, frame, length_m, base_px=None, apex_px=None, key: str = ""):
+def _reference(path, params, frame, length_m, base_px=None, apex_px=None, key: str = "", error=None):
+    """The traced reference photo at ``path``; given ends off the photo, or off the leaf traced
+    there, are one line naming ``key`` + the end (``error(key, message)`` makes it, e.g. the
+    species' config error)."""
     from leafsim.outline.trace import HintError
 
     try:
         traced = trace_photo(path, params, base_px, apex_px)
     except HintError as e:  # name the config key it came from (senescent_photo.base_px)
         raise LeafsimError(f"{path}: {key}{e.key} {e.detail}") from None
+    # a given end on the background (or another leaf) would match the wrong leaf axis
+    error = error or (lambda name, msg: LeafsimError(f"{key}{name} {msg}"))
+    check_given_ends(traced, path, {"base_px": base_px, "apex_px": apex_px}, lambda name, msg: error(key + name, msg))
     refuse_non_leaf(traced)  # a cut leaf, the background or a rectangle would give a meaningless IoU
     return C.reference(traced, to_leaf_shape(traced, length_m), frame)
 
@@ -224,7 +230,8 @@ def _rows(leaf: _Leaf, own: C.Reference, stage, species_photo: bool) -> list[Row
                 if species_photo and sp.photo_stage == "senescent" else "")]
     if stage is None and species_photo and sp.senescent is not None:
         ref = own if sp.senescent.image == sp.image else _reference(sp.senescent.image, leaf.params, leaf.frame, sp.length_m,
-                                                                  sp.senescent.base_px, sp.senescent.apex_px, "senescent_photo.")
+                                                                  sp.senescent.base_px, sp.senescent.apex_px, "senescent_photo.",
+                                                                  sp.error)
         _, _, best = _dry_run(leaf, None, ref)
         note = f"best of {best[2]} stages every {MATCH_EVERY} frames"
         if ref is own and sp.photo_stage == "senescent" and 0.3 < _kept(leaf, best[0]) < 1.0:

@@ -389,3 +389,23 @@ def test_images_are_sized_from_their_header_and_decoders_stay_quiet(tmp_path):
     import sys
     r = subprocess.run([sys.executable, "-m", "leafsim", "outline", str(tmp_path / "cut.png")], capture_output=True, text=True)
     assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1 and "cannot read image" in r.stderr, r.stderr
+
+
+def test_a_senescent_photos_given_end_on_its_background_is_refused(tmp_path):
+    """``senescent_photo.base_px`` on the background of the senescent image set a wrong leaf axis
+    and compared the wrong shape (IoU 0.44) before: it is checked against the leaf traced there,
+    as the species photo's own ends are, in one line naming the key."""
+    import cv2
+
+    from helpers.leafimg import photo
+
+    img, _ = photo(400, colour=(40, 120, 150))
+    cv2.imwrite(str(tmp_path / "leaf.png"), img)
+    cv2.imwrite(str(tmp_path / "old.png"), img)
+    entry = {"name": "test leaf", "latin": "Folium testis", "description": "synthetic", "image": "leaf.png",
+             "length_m": 0.06, "senescent_photo": {"image": "old.png", "base_px": [5, 5]},
+             "targets": "auto", "main_origin": "base", "params": {"mesh.spacing": 0.06}}
+    cfg = tmp_path / "leaves.json"
+    cfg.write_text(json.dumps({"species": {"t": entry}}))
+    one_line(*run_cli("compare", "--config", cfg, "--species", "t"), "senescent_photo.base_px", "outside the leaf traced",
+             "old.png")
