@@ -156,26 +156,49 @@ class SimWorker:
         name_thread("leafsim-sim")
         lower_priority()
         t_next = time.perf_counter()
-        while True:
-            with self._cond:
-                while not self._wanted():
-                    self._cond.wait(0.25)
-                    self._apply_params()  # parameters change while paused too
-                if self._stop:
-                    return
-                reset = self._reset_wanted > self.epoch
-            if reset:
-                with self._step_lock:
-                    self._reset_locked(self.simulator.state())
-                continue
-            with self._cond:
-                free = (self._playing or self._dry) and self.error is None
-                if not free:
-                    self._steps -= 1
-                speed = None if self._dry else self._speed
-                last_single = not free and self._steps == 0
-            self._step_once(publish_now=last_single)
-            t_next = self._pace(speed, t_next) if free else time.perf_counter()
+        while t_next is not None:
+            try:
+                t_next = self._turn(t_next)
+            except Exception as e:  # the thread must survive anything: the UI shows it
+                self._failed(e)
+                t_next = time.perf_counter()
+
+    def _turn(self, t_next: float) -> float | None:
+        """One request served (a step, a reset); None when asked to stop."""
+        with self._cond:
+            while not self._wanted():
+                self._cond.wait(0.25)
+                self._apply_params()  # parameters change while paused too
+            if self._stop:
+                return None
+            reset = self._reset_wanted > self.epoch
+        if reset:
+            with self._step_lock:
+                self._reset_locked(self.simulator.state())
+            return t_next
+        with self._cond:
+            free = (self._playing or self._dry) and self.error is None
+            if not free:
+                self._steps -= 1
+            speed = None if self._dry else self._speed
+            last_single = not free and self._steps == 0
+        self._step_once(publish_now=last_single)
+        return self._pace(speed, t_next) if free else time.perf_counter()
+
+    def _failed(self, e: Exception) -> None:
+        """Something besides a step failed (applying parameters, a reset, a snapshot): the run
+        stops with an error, as after a failed step, instead of the thread ending silently
+        (the window showed "playing" while nothing moved)."""
+        with self._cond:
+            if self.error is None:
+                self.error = (f"simulation failed ({type(e).__name__}: {e}) at frame {self.run.state.frame}: "
+                              "press Reset or change the parameters")
+            self._reset_wanted = min(self._reset_wanted, self.epoch)  # a reset that failed is not retried
+            self._dry = self._playing = False
+        try:
+            self._publish({})
+        except Exception:  # the UI reads the error from the worker itself (Playback.take_snapshot)
+            pass
 
     def _pace(self, speed: float | None, t_next: float) -> float:
         """Sleep so that simulated time advances at ``speed`` s per wall second."""
