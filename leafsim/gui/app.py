@@ -29,9 +29,10 @@ import numpy as np
 from imgui_bundle import hello_imgui, imgui, immapp
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import write_png_atomic
+from leafsim.base.fileio import not_an_input, write_png_atomic
+from leafsim.base.resources import default_config
 from leafsim.export.mesh import export_mesh
-from leafsim.gui.exports import ensure_folder, free_path, new_take
+from leafsim.gui.exports import ensure_folder, free_path, new_take, user_path
 from leafsim.gui.fonts import load_ui_font
 from leafsim.gui.layout import BACKGROUND, LEFT_W, PANEL_BG, RIGHT_W, STATUS_H, fixed_flags, window_rects
 from leafsim.gui.panels.controls import ControlsPanel
@@ -550,6 +551,9 @@ class LeafApp:
     def export_mesh(self) -> Path:
         """The current snapshot as ``<species>_frame_NNNNN.glb`` in the export folder."""
         s = self.session
+        if s.state is not None and not np.isfinite(s.state.particle_q).all():
+            raise LeafsimError(f"Export mesh: the simulation diverged (positions NaN/Inf at frame {s.frame}); "
+                               "expected a finite leaf: press Reset")
         path = free_path(self._export_folder(), f"{s.species_key}_frame_{s.frame:05d}", ".glb")
         rep = export_mesh(s.model, s.state.copy(), path, params=s.sim_params, view=s.view, veins=True)
         tri = sum(m["triangles"] for m in rep["meshes"].values())
@@ -557,13 +561,19 @@ class LeafApp:
         return path
 
     def save_preset(self) -> None:
-        p = self.session.save_params(self.preset_path)
+        """Save params: a regular file is replaced (atomically), anything else refused; never
+        the species' config or photo it was built from."""
+        path = user_path(self.preset_path, "preset JSON", "JSON file")
+        sp = self.session.species
+        not_an_input(path, (sp.config or default_config(), sp.image), "preset JSON")
+        p = self.session.save_params(path)
         self.status.info("preset", f"saved parameters to {p}", path=p)
 
     def load_preset(self) -> None:
-        self.session.load_params(self.preset_path, rebuild=True)
+        path = user_path(self.preset_path, "preset JSON", "JSON file")
+        self.session.load_params(path, rebuild=True)
         self.dirty = True
-        self.status.info("preset", f"loaded {self.preset_path}", path=self.preset_path)
+        self.status.info("preset", f"loaded {path}", path=path)
 
     def set_params(self, changes: dict) -> None:
         self.session.set_params(self.session.params.with_overrides(changes))

@@ -9,6 +9,7 @@ from __future__ import annotations
 from imgui_bundle import imgui
 
 from leafsim.appearance.view import PIGMENT_VIEWS
+from leafsim.gui.status import printable
 
 LEFT_W, RIGHT_W, STATUS_H = 380, 330, 34
 BACKGROUND = (0.80, 0.84, 0.88)
@@ -32,9 +33,9 @@ def fixed_flags():
 
 
 def tip(text: str) -> None:
-    """A tooltip for the last item."""
+    """A tooltip for the last item (a path in it may hold bytes that are not UTF-8)."""
     if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
-        imgui.set_tooltip(text)
+        imgui.set_tooltip(printable(text))
 
 
 def window_rects():

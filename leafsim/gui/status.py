@@ -5,15 +5,36 @@ message replaces the topic's old one, so a failed save replaces "saved ..." and 
 take replaces "recording ...".  A message may carry a ``holds()`` condition (dropped as soon
 as it is false: "recording" while recording, "diverged" until Reset) and information expires
 after ``INFO_SECONDS``; errors stay until dismissed or replaced by their topic's next message.
+Every text is kept as one line the window can draw (:func:`one_line`): a multi-line reason
+(numba's errors) would be cut by the bar's fixed height, and a path that is not UTF-8 would
+stop imgui from drawing the bar at all.
 """
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass, field
 from typing import Callable
 
 INFO_SECONDS = 12.0
+
+
+def printable(text) -> str:
+    """``text`` as imgui can draw it: bytes of a path that are not UTF-8 (kept by Python as
+    lone surrogates, e.g. from ``Path.cwd()`` in such a folder) shown as ``\\xNN``."""
+    text = str(text)
+    if not any("\ud800" <= c <= "\udfff" for c in text):
+        return text
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # a surrogate that no undecodable byte gives
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
+def one_line(text) -> str:
+    """:func:`printable` ``text`` with its line breaks (and the blanks around them) made one space."""
+    return re.sub(r"\s*[\r\n]+\s*", " ", printable(text)).strip()
 
 
 @dataclass
@@ -35,10 +56,10 @@ class Status:
 
     def info(self, topic: str, text: str, path=None, holds=None, seconds: float | None = INFO_SECONDS) -> None:
         exp = None if (seconds is None or holds is not None) else time.monotonic() + seconds
-        self._msgs[topic] = Message(topic, text, "info", None if path is None else str(path), holds, exp)
+        self._msgs[topic] = Message(topic, one_line(text), "info", None if path is None else str(path), holds, exp)
 
     def error(self, topic: str, text: str, path=None, holds=None) -> None:
-        self._msgs[topic] = Message(topic, text, "error", None if path is None else str(path), holds)
+        self._msgs[topic] = Message(topic, one_line(text), "error", None if path is None else str(path), holds)
 
     def clear(self, topic: str, level: str | None = None) -> None:
         m = self._msgs.get(topic)

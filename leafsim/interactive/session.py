@@ -37,6 +37,17 @@ from leafsim.interactive.history import history_record
 from leafsim.interactive.playback import Playback
 from leafsim.sim.run import Run
 
+#: seeds are non-negative integers up to 2**63-1, as on the command line (leafsim.cli.SEED_MAX)
+SEED_MAX = 2**63 - 1
+
+
+def check_seed(seed, where: str = "seed") -> int:
+    """``seed`` as an int; LeafsimError naming ``where`` unless it is an integer in [0, 2**63-1]."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) <= SEED_MAX:
+        shown = repr(seed) if len(repr(seed)) <= 24 else repr(seed)[:20] + "…"
+        raise LeafsimError(f"{where} {shown}: expected a non-negative integer up to 2**63-1")
+    return int(seed)
+
 
 class Session:
     """One leaf being simulated, plus what the GUI needs to show it.
@@ -228,8 +239,8 @@ class Session:
         return self.pending_rebuild
 
     def set_seed(self, seed: int) -> bool:
-        """Stage a new seed (needs a rebuild)."""
-        self.seed = int(seed)
+        """Stage a new seed (needs a rebuild); LeafsimError unless it is in [0, 2**63-1]."""
+        self.seed = check_seed(seed)
         return self.pending_rebuild
 
     def user_changes(self) -> dict:
@@ -269,8 +280,10 @@ class Session:
 
     def read_params(self, path) -> tuple[str, int, ParamSet]:
         """Parse and validate a parameter-set file without touching the session
-        (:func:`leafsim.config.presets_io.read_param_set`)."""
-        return read_param_set(path, self.species_key, self.seed, self.config, self.species.params)
+        (:func:`leafsim.config.presets_io.read_param_set`); its seed must be one the command
+        line takes (in [0, 2**63-1]: a larger one would not fit the seed field)."""
+        species, seed, params = read_param_set(path, self.species_key, self.seed, self.config, self.species.params)
+        return species, check_seed(seed, f"{path}: 'seed'"), params
 
     def load_params(self, path, rebuild: bool = False) -> bool:
         """Load a parameter set (see :meth:`read_params`); on any error the session is unchanged.

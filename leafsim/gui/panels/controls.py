@@ -4,13 +4,29 @@ one declaration (:mod:`leafsim.gui.widgets`)."""
 
 from __future__ import annotations
 
+import math
+
 from imgui_bundle import imgui
 
+from leafsim.base.errors import LeafsimError
 from leafsim.config.params import ParamSet
 from leafsim.config.presets import quality_of, quality_table
 from leafsim.gui.layout import ALBEDOS, COMPARES, SCALES, VIEWS, tip
+from leafsim.gui.status import printable
 from leafsim.gui.widgets import params_panel
-from leafsim.interactive.session import species_keys
+from leafsim.interactive.session import check_seed, species_keys
+
+
+def path_field(label: str, value: str) -> str:
+    """A text field holding a path: shown drawable (bytes that are not UTF-8 as ``\\xNN``)
+    and replaced only when the user edits it (an untouched path keeps its real bytes)."""
+    ch, text = imgui.input_text(label, printable(value))
+    return text if ch else value
+
+
+def finite_or(new: float, old: float) -> float:
+    """``new`` unless the user typed something that is not a finite number into a slider."""
+    return float(new) if math.isfinite(new) else old
 
 
 class ControlsPanel:
@@ -18,6 +34,7 @@ class ControlsPanel:
         self.app = app
         self._species_keys: list[str] | None = None
         self._quality: dict | None = None
+        self._seed_text, self._seed_shown = "", None
 
     def draw(self) -> None:
         app = self.app
@@ -49,9 +66,7 @@ class ControlsPanel:
         if imgui.button("species defaults"):
             app.guard(app.species_defaults, topic="species")
         tip("Every parameter back to this species' own values (your changes and --set overrides dropped)")
-        ch, seed = imgui.input_int("seed", s.seed)
-        if ch and seed >= 0:
-            s.set_seed(seed)
+        self.seed_row()
         self.quality_row()
         pending = s.pending_rebuild and not s.building
         if pending:
@@ -63,6 +78,27 @@ class ControlsPanel:
             imgui.pop_style_color(2)
         imgui.same_line()
         imgui.text_colored((0.85, 0.45, 0.05, 1.0), "changes staged" if pending else "")
+
+    def seed_row(self) -> None:
+        """The seed as text: any seed the command line takes (up to 2**63-1, beyond an int
+        field's 32 bits); what is not one is an error in the status bar, the staged seed kept."""
+        app = self.app
+        s = app.session
+        if self._seed_shown != s.seed:  # changed elsewhere (a loaded preset)
+            self._seed_text, self._seed_shown = str(s.seed), s.seed
+        ch, text = imgui.input_text("seed", self._seed_text, imgui.InputTextFlags_.chars_decimal)
+        if not ch:
+            return
+        self._seed_text = text
+        try:
+            if not (text.strip().isascii() and text.strip().isdigit()):
+                raise LeafsimError(f"seed {text.strip()!r}: expected a non-negative integer up to 2**63-1")
+            s.set_seed(check_seed(int(text.strip())))
+        except LeafsimError as e:
+            app.fail(str(e), "seed")
+            return
+        self._seed_shown = s.seed
+        app.status.clear("seed")
 
     def quality_row(self) -> None:
         """Quality levels from the accuracy study's front; the tooltip shows each one's measured
@@ -107,8 +143,9 @@ class ControlsPanel:
         imgui.same_line()
         imgui.begin_disabled(app.speed_fast)
         imgui.set_next_item_width(110)
-        ch2, app.speed = imgui.slider_float("sim s / s###speed", app.speed, 0.001, 2.0, "%.3g",
-                                            imgui.SliderFlags_.logarithmic | imgui.SliderFlags_.always_clamp)
+        ch2, speed = imgui.slider_float("sim s / s###speed", app.speed, 0.001, 2.0, "%.3g",
+                                        imgui.SliderFlags_.logarithmic | imgui.SliderFlags_.always_clamp)
+        app.speed = finite_or(speed, app.speed)
         imgui.end_disabled()
         tip("Simulated seconds per wall-clock second (a full drying is a few simulated seconds)")
         if ch or ch2:
@@ -149,11 +186,13 @@ class ControlsPanel:
         tip("Show the species photo over the leaf where the fresh leaf lay: overlay (opacity) or blink")
         imgui.same_line()
         imgui.set_next_item_width(-1)
-        _, app.photo_alpha = imgui.slider_float("###photo alpha", app.photo_alpha, 0.0, 1.0, "opacity %.2f")
+        _, alpha = imgui.slider_float("###photo alpha", app.photo_alpha, 0.0, 1.0, "opacity %.2f",
+                                      imgui.SliderFlags_.always_clamp)
+        app.photo_alpha = finite_or(alpha, app.photo_alpha)
 
     def export_rows(self) -> None:
         app = self.app
-        _, app.export_dir = imgui.input_text("export folder", app.export_dir)
+        app.export_dir = path_field("export folder", app.export_dir)
         tip(f"{app.export_dir}\n(created when missing; every recorded take gets its own take_NNN folder)")
         if imgui.button("Export frame"):
             app.request_export()
@@ -168,7 +207,7 @@ class ControlsPanel:
         _, app.record_every = imgui.input_int("every", app.record_every, 0)
         tip("Record a frame every this many simulation frames")
         app.record_every = max(1, app.record_every)
-        _, app.preset_path = imgui.input_text("preset JSON", app.preset_path)
+        app.preset_path = path_field("preset JSON", app.preset_path)
         tip(app.preset_path)
         if imgui.button("Save params"):
             app.guard(app.save_preset, topic="preset")

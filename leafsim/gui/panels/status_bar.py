@@ -6,6 +6,7 @@ from __future__ import annotations
 from imgui_bundle import imgui
 
 from leafsim.gui.layout import tip
+from leafsim.gui.status import printable
 from leafsim.interactive.builder import WARM_TEXT
 from leafsim.interactive.eta import duration
 
@@ -33,7 +34,7 @@ class StatusBar:
                 imgui.same_line()
             if m.path:
                 if imgui.small_button("copy path###copy"):
-                    imgui.set_clipboard_text(m.path)
+                    imgui.set_clipboard_text(printable(m.path))
                 tip(f"Copy {m.path}")
                 imgui.same_line()
             more = f"  (+{len(msgs) - 1})" if len(msgs) > 1 else ""
