@@ -29,7 +29,7 @@ from leafsim.base.geometry import (
 )
 from leafsim.blade.budget import check_mesh_budget
 from leafsim.blade.build import build_blade
-from leafsim.config.params import ParamSet
+from leafsim.config.params import ParamSet, as_params, check_seed, show
 from leafsim.config.species import Species
 from leafsim.outline.drawn import drawn_contour
 from leafsim.outline.trace import refuse_non_leaf, to_leaf_shape, trace_outline
@@ -208,7 +208,12 @@ def build_leaf(sp: Species, params: ParamSet, seed: int, report=None) -> BuiltLe
     blade Model.
 
     ``report(fraction, text)`` is called before each stage (progress bars; it may raise to
-    cancel a build between stages)."""
+    cancel a build between stages).  A species that is not a :class:`Species`, params that are
+    not a :class:`ParamSet` or a seed outside [0, 2**63-1] is one LeafsimError line."""
+    if not isinstance(sp, Species):
+        raise LeafsimError(f"build_leaf: species {show(sp)} ({type(sp).__name__}): expected a Species, e.g. get_species('oak')")
+    params = as_params(params, "build_leaf")
+    seed = check_seed(seed, "build_leaf")
     report = report or (lambda p, t: None)
     report(0.02, "outline: tracing the leaf contour")
     shape = leaf_shape(sp, params)

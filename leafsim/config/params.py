@@ -393,6 +393,9 @@ def unknown_key_message(key: str, where: str = "") -> str:
 
 def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     """Flatten nested dicts ``{"veins": {"main": {"kappa": 5}}}`` to dotted keys."""
+    if not isinstance(tree, Mapping):  # a list of pairs or a 'KEY=VALUE' string
+        raise LeafsimError(f"parameter values {show(tree)}: expected a mapping of parameter names to values, "
+                           f"e.g. {{'mesh.spacing': 0.03}}")
     out: dict[str, Any] = {}
     for k, v in tree.items():
         key = f"{prefix}.{k}" if prefix else str(k)
@@ -456,6 +459,32 @@ class ParamSet(Mapping[str, Any]):
 
     def __repr__(self) -> str:
         return f"ParamSet({self.changed()!r})"
+
+
+def as_params(params: Any, where: str) -> ParamSet:
+    """``params`` as given to a library entry point (``build_leaf``, ``Run``, ``export_mesh``): a
+    :class:`ParamSet`, else one LeafsimError line.  A plain dict is refused rather than filled
+    up with the declared defaults, which would silently drop the species' own values."""
+    if isinstance(params, ParamSet):
+        return params
+    raise LeafsimError(f"{where}: params {show(params)} ({type(params).__name__}): expected a ParamSet, e.g. "
+                       f"sp.params or sp.params.with_overrides({{...}}) for sp = get_species(...)")
+
+
+#: seeds are non-negative integers below 2**63 (numpy's generators take them as-is; a
+#: checkpoint's record keeps them), as ``--seed`` and a scene's seeds take them
+SEED_MAX = 2**63 - 1
+
+
+def check_seed(seed: Any, where: str) -> int:
+    """``seed`` as a Python int in [0, :data:`SEED_MAX`], else one LeafsimError line (a float,
+    a string, a bool or a negative number reached numpy's generators, which raised a bare
+    TypeError or ValueError, or was truncated silently)."""
+    import numbers
+
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= int(seed) <= SEED_MAX:
+        raise LeafsimError(f"{where}: seed = {show(seed)}: expected an integer in [0, 2**63-1]")
+    return int(seed)
 
 
 def parse_set_args(items: Iterable[str]) -> dict[str, Any]:

@@ -11,6 +11,7 @@ Photo coordinates (``base_px``, ``apex_px``) are pixels of the photo.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -140,6 +141,8 @@ def _pair(path, sp, key, value):
 
 def load_library(path: str | Path | None = None) -> dict[str, Species]:
     """Load and validate every species of a config file."""
+    if path is not None and not isinstance(path, (str, os.PathLike)):
+        raise LeafsimError(f"species config {path!r}: expected a file path (str or Path)")
     path = Path(path) if path is not None else default_config()
     data = read_json(path, "species config")
     if not isinstance(data, dict) or not isinstance(data.get("species"), dict) or not data["species"]:
@@ -334,6 +337,8 @@ def get_species(name: str, path: str | Path | None = None) -> Species:
     import difflib
 
     lib = load_library(path)
+    if not isinstance(name, str) and name is not None:
+        raise LeafsimError(f"species name {name!r}: expected a string (known: {', '.join(sorted(lib))})")
     if name not in lib:
         close = difflib.get_close_matches(name, list(lib), n=1, cutoff=0.6) if name else []
         hint = f"did you mean '{close[0]}'? " if close else ""

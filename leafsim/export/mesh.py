@@ -19,6 +19,7 @@ Example
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,6 +27,7 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes
+from leafsim.sim.checkpoint import check_state, model_fingerprint
 from leafsim.sim.frame import _unit, blade_frame
 from leafsim.sim.model import Model, State
 
@@ -144,6 +146,19 @@ class MeshSource:
             raise LeafsimError(f"export: layers {layers!r}: expected one of {', '.join(LAYERS)}")
         if texture not in TEXTURES:
             raise LeafsimError(f"export: texture {texture!r}: expected one of {', '.join(TEXTURES)}")
+        if view is not None:  # another build's view indexed this model's particles with its own
+            if not isinstance(view, LeafView):
+                raise LeafsimError(f"export: view is a {type(view).__name__}, expected a LeafView(model, photo_rgba) "
+                                   "or None")
+            if view.model is not model and model_fingerprint(view.model) != model_fingerprint(model):
+                raise LeafsimError("export: view was made for another model (expected LeafView(model, ...) of the model "
+                                   "exported)")
+            photo = view.photo_rgba
+            if photo is not None and not (isinstance(photo, np.ndarray) and photo.ndim == 3 and photo.shape[2] == 4
+                                          and photo.dtype == np.uint8 and min(photo.shape[:2]) > 0):
+                got = f"{photo.dtype} {photo.shape}" if isinstance(photo, np.ndarray) else type(photo).__name__
+                raise LeafsimError(f"export: the view's photo_rgba is {got}, expected an (H, W, 4) uint8 photo "
+                                   "(species_photo_rgba) or None")
         self.model, self.params = model, params
         self.view = view if view is not None else LeafView(model)
         if texture == "photo" and self.view.photo_rgba is None:
@@ -221,19 +236,43 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
 
     Returns a summary: format, path, files written, vertex and triangle counts per mesh, targets.
     """
-    from leafsim.config.params import ParamSet
+    from leafsim.config.params import ParamSet, as_params
 
-    states = [states] if isinstance(states, State) else list(states)
+    # every argument checked before anything is computed or written: a state of another model
+    # ended in an IndexError, or (a larger one) wrote a file of that leaf's positions on this
+    # one's triangles; NaN positions or colours were written into the file
+    if not isinstance(path, (str, os.PathLike)):
+        raise LeafsimError(f"export: path {path!r:.60}: expected a file name (str or Path) ending in .glb, .gltf, .obj or .ply")
+    if not isinstance(model, Model):
+        hint = " (pass leaf.model, the model of build_leaf's result)" if hasattr(model, "model") else ""
+        raise LeafsimError(f"export: model is a {type(model).__name__}, expected a Model{hint}")
+    if isinstance(states, State):
+        states = [states]
+    elif isinstance(states, (list, tuple)) or (hasattr(states, "__iter__") and not isinstance(states, (str, bytes, dict))):
+        states = list(states)
+    else:
+        raise LeafsimError(f"export: states is a {type(states).__name__}, expected a State or a list of States")
     if not states:
         raise LeafsimError("export: no state to write")
+    for k, s in enumerate(states):
+        check_state(s, model, f"export: state {k}", physical=False)
+    params = as_params(params, "export") if params is not None else ParamSet()
+    if times is not None:
+        try:
+            times = [float(t) for t in times]
+        except (TypeError, ValueError):
+            raise LeafsimError(f"export: times {times!r:.60}: expected one number [s] per state") from None
+        if len(times) != len(states) or not all(np.isfinite(times)):
+            raise LeafsimError(f"export: times: expected {len(states)} finite key times [s], one per state, got "
+                               f"{len(times)}{' (not all finite)' if not all(np.isfinite(times)) else ''}")
     fmt = format_of(path, format)
     if fmt in ("obj", "ply") and len(states) > 1:
         raise LeafsimError(f"{path}: {fmt.upper()} holds one static shape; use glb or gltf for the drying animation")
     if fmt == "ply" and texture == "photo":
         raise LeafsimError(f"{path}: PLY carries vertex colours, not a photo texture (use --texture colours)")
-    src = MeshSource(model, params if params is not None else ParamSet(), view, layers, veins, texture)
+    src = MeshSource(model, params, view, layers, veins, texture)
     frames = [src.surfaces(s) for s in states]
-    times = [s.time for s in states] if times is None else [float(t) for t in times]
+    times = [s.time for s in states] if times is None else times
     if fmt in ("glb", "gltf"):
         from leafsim.export.gltf import write_gltf
 

@@ -231,17 +231,22 @@ STRAIN_RANGE = (0.2, 5.0)
 STRAIN_SHARE = 0.01
 
 
-def check_state(state: State, model: Model, where: str, frame=None) -> None:
+def check_state(state: State, model: Model, where: str, frame=None, physical: bool = True) -> None:
     """A loaded state must fit ``model`` before any kernel sees it: every array of the shape
     and dtype a fresh state of the model has, finite, and physical — particles within
     :data:`MAX_REACH` leaf lengths and :data:`MAX_SPEED`, water ≥ 0 and at most the fresh
     leaf's total and no particle more than :data:`WATER_SLACK` × its own fresh water (water flows
     down its potential, so a particle never holds more than when fresh), rest lengths in (0, 2 l⁰], rest volumes within 10 × the fresh ones, hinge
-    rest angles within ±π, time and frame non-negative (the frame the record names).  Raises one LeafsimError line naming the array."""
+    rest angles within ±π, time and frame non-negative (the frame the record names).  Raises one LeafsimError line naming the array.
+
+    ``physical=False`` (a state to draw or export, not to step): only the arrays' shapes, dtypes
+    and finiteness, the time and the pigments; the drying-path mesh's state is not looked at."""
+    if not isinstance(state, State):
+        raise _fail(where, f"is a {type(state).__name__}, expected a leafsim.sim.model.State (e.g. run.state)")
     fresh = model.state()
-    if (state.path is None) != (model.path is None):
+    if physical and (state.path is None) != (model.path is None):
         raise _fail(where, "the drying-path mesh's state " + ("is missing" if state.path is None else "belongs to no path mesh"))
-    if state.path is not None:
+    if physical and state.path is not None:
         check_state(state.path, model.path, f"{where} (drying-path mesh)")
     for f in fields(State):
         if f.name in ("pigments", "path"):
@@ -252,6 +257,13 @@ def check_state(state: State, model: Model, where: str, frame=None) -> None:
             raise _fail(where, f"array {f.name} is {got}, expected {ref.dtype} {ref.shape} for this model")
         if not np.isfinite(a).all():
             raise _fail(where, f"array {f.name} holds NaN or infinite values")
+    if physical:
+        _check_physical(state, model, where, frame)
+    _check_pigments(state, model, where)
+
+
+def _check_physical(state: State, model: Model, where: str, frame) -> None:
+    """:func:`check_state`'s physical bounds (the arrays' shapes and finiteness checked)."""
     far = np.linalg.norm(state.particle_q - model.particle_rest.mean(0), axis=1).max()
     if far > MAX_REACH * model.length:
         raise _fail(where, f"array particle_q holds a particle {far:.3g} m from the leaf (more than {MAX_REACH:g} leaf lengths)")
@@ -289,7 +301,12 @@ def check_state(state: State, model: Model, where: str, frame=None) -> None:
                            f"({PARAMS['dynamics.dt'].hi:g} s)")
     if not (0.0 <= tw <= 1e18):
         raise _fail(where, f"array scalars holds weather time {tw:g} s, expected [0, 1e18] s")
+
+
+def _check_pigments(state: State, model: Model, where: str) -> None:
     pig = state.pigments
+    if pig is not None and not isinstance(pig, PigmentState):
+        raise _fail(where, f"pigments are a {type(pig).__name__}, expected a PigmentState or None")
     if pig is not None:
         n = model.particle_count
         for name in _PIGMENT_ARRAYS:
@@ -303,5 +320,5 @@ def check_state(state: State, model: Model, where: str, frame=None) -> None:
                     or (np.abs(a) > MAX_PIGMENT).any()):
                 raise _fail(where, f"pigment array {name} holds NaN, infinite, negative or huge values "
                                    f"(pigment contents are fractions of a summer content, at most {MAX_PIGMENT:g})")
-        if not np.isfinite(pig.age):
+        if not isinstance(pig.age, (int, float, np.floating)) or not np.isfinite(pig.age):
             raise _fail(where, "pigment age is not a finite number")

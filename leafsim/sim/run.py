@@ -14,13 +14,14 @@ Example
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.config.params import ParamSet
+from leafsim.config.params import ParamSet, as_params, check_seed, show
 from leafsim.sim.model import Model, State
 from leafsim.sim.simulator import Simulator
 from leafsim.sim.stats import StatsStream, frame_stats
@@ -59,6 +60,27 @@ class Stop:
     season: float | None = None
     max_frames: int | None = None
 
+    def __post_init__(self):
+        """Each criterion checked where it is made, as ``--frames`` and ``--until`` are: NaN frames
+        never held (the run went on for ever), ``water_left`` > 1 held before the first frame and
+        a string failed deep in the loop; with no criterion at all the run stopped after 2 000
+        frames blaming a season clock nobody asked for."""
+        if self.frames is None and self.water_left is None and self.season is None:
+            raise LeafsimError("Stop: no criterion: give frames, water_left or season (max_frames is only the budget)")
+        for name, hi in (("frames", MAX_RUN_FRAMES), ("max_frames", None)):
+            v = getattr(self, name)
+            if v is not None:
+                object.__setattr__(self, name, _count(name, v, hi))
+        for name, hi, what in (("water_left", 1.0, "a fraction of the fresh leaf's water in [0, 1]"),
+                               ("season", 1e12, "a season clock value ≥ 0")):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and 0.0 <= float(v) <= hi
+            if not ok:
+                raise LeafsimError(f"Stop: {name} = {show(v)}: expected {what}")
+            object.__setattr__(self, name, float(v))
+
     def reached(self, run: "Run") -> bool:
         s = run.state
         if self.frames is not None and s.frame >= self.frames:
@@ -86,6 +108,13 @@ class Stop:
         return ", ".join(parts) or "no criterion"
 
 
+def _count(name: str, v, hi: int | None) -> int:
+    if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 0 or (hi is not None and v > hi):
+        upto = f" up to {hi:,}" if hi is not None else ""
+        raise LeafsimError(f"Stop: {name} = {show(v)}: expected a whole number of frames ≥ 0{upto}")
+    return int(v)
+
+
 class Run:
     """One leaf simulated by one :class:`Simulator`.
 
@@ -95,7 +124,8 @@ class Run:
     params : ParamSet (used to make the simulator unless ``simulator`` is given).
     effects : effect names to enable (default: the ``effects.*`` parameters).
     seed : seeds the fresh leaf's colour variation and its shrinkage field (``shrink.patchiness``).
-    state : continue this state (a checkpoint) instead of a fresh leaf.
+    state : continue this state (a checkpoint) instead of a fresh leaf; checked against ``model`` as a
+        loaded checkpoint is (:func:`leafsim.sim.checkpoint.check_state`).
     simulator : use this simulator (made for ``model``).
     watchdog : let the simulator stop a blow-up that produces no NaN.
     name : prefix of error messages (the species key, a scene leaf's name).
@@ -109,10 +139,20 @@ class Run:
     def __init__(self, model: Model, params: ParamSet | None = None, effects=None, seed: int = 0,
                  state: State | None = None, simulator: Simulator | None = None, watchdog: bool = True,
                  name: str = ""):
+        # checked here, before any kernel sees them: a state of another model, or with arrays of
+        # the wrong shape, aborted the interpreter (double free, segfault)
+        if not isinstance(model, Model):
+            hint = " (pass leaf.model, the model of build_leaf's result)" if hasattr(model, "model") else ""
+            raise LeafsimError(f"Run: model {show(model)} ({type(model).__name__}): expected a Model{hint}")
         if simulator is None:
-            if params is None:
-                raise ValueError("Run needs params or a simulator")
+            params, seed = as_params(params, "Run"), check_seed(seed, "Run")
             simulator = Simulator(model, params, effects, seed=seed, watchdog=watchdog)
+        elif not isinstance(simulator, Simulator) or simulator.model is not model:
+            raise LeafsimError("Run: simulator: expected a Simulator made for this model (Simulator(model, params))")
+        if state is not None:
+            from leafsim.sim.checkpoint import check_state
+
+            check_state(state, model, "Run: state")
         self.model = model
         self.sim = simulator
         self.state = simulator.state() if state is None else state
@@ -156,6 +196,8 @@ class Run:
         A frame that leaves NaN/Inf in the state is yielded (its statistics can still be
         written), then :class:`Diverged` is raised.  Breaking out of the loop stops the run
         at the frame just yielded."""
+        if stop is not None and not isinstance(stop, Stop):
+            raise LeafsimError(f"Run.frames: stop {show(stop)}: expected a Stop(...) or None")
         watch = None
         while True:
             if stop is not None:

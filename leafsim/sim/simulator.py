@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.config.params import ParamSet
+from leafsim.config.params import ParamSet, check_seed
 from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
 from leafsim.sim.effects.dynamics import held
 from leafsim.sim.model import Model, State
@@ -44,7 +44,7 @@ class Simulator:
 
     def __init__(self, model: Model, params: ParamSet, effects=None, seed: int = 0, watchdog: bool = True):
         self.model = model
-        self.seed = int(seed)
+        self.seed = check_seed(seed, "Simulator")  # int() truncated 0.5 and took '7'; numpy refused -1 in a bare ValueError
         self.watchdog = None
         self._watch = watchdog
         self._osmosis = None
@@ -53,6 +53,8 @@ class Simulator:
         self._colour = None
         self._path = None
         self._path_was_active = True
+        if isinstance(effects, str):  # set('osmosis') is {'o', 's', 'm', 'i'}
+            raise LeafsimError(f"effects {effects!r}: expected a list of effect names, e.g. ['{effects}']")
         self._override = None if effects is None else set(effects)
         if self._override is not None:
             bad = self._override - set(EFFECTS)

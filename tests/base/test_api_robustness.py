@@ -1,0 +1,293 @@
+"""The documented library API (``build_leaf``, ``Run``/``Stop``, ``export_mesh``, ``ParamSet``,
+``get_species``) called as a careless script would: every wrong type or value is one
+LeafsimError line naming the argument, never a numpy/numba traceback, a crash, a hang, NaN in
+a file or a file of another leaf's geometry (docs/robustness.md)."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from leafsim.base.errors import LeafsimError
+from leafsim.config.species import get_species
+from leafsim.export.mesh import export_mesh
+from leafsim.pipeline import build_leaf
+from leafsim.sim.run import Run, Stop
+
+
+@pytest.fixture(scope="module")
+def oak():
+    sp = get_species("oak")
+    params = sp.params.with_overrides({"mesh.spacing": 0.06})
+    model = build_leaf(sp, params, seed=0).model
+    run = Run(model, params, seed=0)
+    for _ in run.frames(Stop(frames=3)):
+        pass
+    return sp, params, model, run.state
+
+
+@pytest.fixture(scope="module")
+def other(oak):
+    """A second, coarser build of the same species (another particle count)."""
+    sp = oak[0]
+    params = sp.params.with_overrides({"mesh.spacing": 0.08})
+    model = build_leaf(sp, params, seed=1).model
+    assert model.particle_count != oak[2].particle_count
+    return model, Run(model, params, seed=0).state
+
+
+def one_line(e) -> str:
+    msg = str(e.value)
+    assert "\n" not in msg
+    return msg
+
+
+# ------------------------------------------------------------------ seeds
+
+@pytest.mark.parametrize("seed", [0.5, 1.0, "0", -1, np.int32(-5), 2**63, True, None, float("nan")])
+def test_bad_seed_is_one_line(oak, seed):
+    sp, params, model, _ = oak
+    with pytest.raises(LeafsimError, match="seed") as e:
+        Run(model, params, seed=seed)
+    assert "2**63-1" in one_line(e)
+    with pytest.raises(LeafsimError, match="seed"):
+        build_leaf(sp, params, seed=seed)
+
+
+def test_numpy_integer_seed_is_a_seed(oak):
+    _, params, model, _ = oak
+    assert Run(model, params, seed=np.int64(3)).sim.seed == 3
+
+
+# ------------------------------------------------------------------ params and species
+
+@pytest.mark.parametrize("params", [{"mesh.spacing": 0.06}, {}, "oak", None])
+def test_params_that_are_not_a_param_set(oak, params):
+    sp, _, model, _ = oak
+    with pytest.raises(LeafsimError, match="params") as e:
+        build_leaf(sp, params, seed=0)
+    assert "with_overrides" in one_line(e)
+    with pytest.raises(LeafsimError, match="params"):
+        Run(model, params)
+
+
+@pytest.mark.parametrize("overrides", [[("osmosis.every", 2)], "osmosis.every=2"])
+def test_overrides_that_are_not_a_mapping(oak, overrides):
+    with pytest.raises(LeafsimError, match="expected a mapping") as e:
+        oak[1].with_overrides(overrides)
+    one_line(e)
+
+
+def test_species_that_is_not_a_species(oak):
+    _, params, _, _ = oak
+    with pytest.raises(LeafsimError, match="get_species"):
+        build_leaf("oak", params, seed=0)
+    with pytest.raises(LeafsimError, match="species name"):
+        get_species(3)
+
+
+def test_model_that_is_not_a_model(oak):
+    sp, params, model, _ = oak
+    leaf = build_leaf(sp, params, seed=0)
+    with pytest.raises(LeafsimError, match=r"leaf\.model"):
+        Run(leaf, params)
+
+
+# ------------------------------------------------------------------ Stop
+
+@pytest.mark.parametrize("kw, name", [
+    ({"frames": float("nan")}, "frames"), ({"frames": float("inf")}, "frames"), ({"frames": -5}, "frames"),
+    ({"frames": 2.5}, "frames"), ({"frames": "10"}, "frames"), ({"frames": True}, "frames"),
+    ({"frames": 10**30}, "frames"), ({"water_left": float("nan")}, "water_left"), ({"water_left": 1.5}, "water_left"),
+    ({"water_left": -0.1}, "water_left"), ({"water_left": "0.5"}, "water_left"), ({"season": float("nan")}, "season"),
+    ({"season": -1}, "season"), ({"water_left": 0.02, "max_frames": float("nan")}, "max_frames"),
+    ({"water_left": 0.02, "max_frames": -1}, "max_frames"), ({}, "no criterion"), ({"max_frames": 5}, "no criterion"),
+])
+def test_bad_stop_is_one_line(kw, name):
+    with pytest.raises(LeafsimError, match=f"Stop: {name}") as e:
+        Stop(**kw)
+    one_line(e)
+
+
+def test_good_stops_still_hold(oak):
+    _, params, model, _ = oak
+    assert Stop(frames=np.int64(4)).frames == 4
+    assert Stop(water_left=0, max_frames=0).water_left == 0.0
+    run = Run(model, params, seed=0)
+    assert list(run.frames(Stop(water_left=1.0))) == []  # holds already: nothing runs
+
+
+def test_stop_that_is_not_a_stop(oak):
+    _, params, model, _ = oak
+    with pytest.raises(LeafsimError, match="stop"):
+        next(Run(model, params).frames("dry"))
+
+
+def test_nan_frames_does_not_hang():
+    """Stop(frames=nan) used to run for ever (no frame is >= NaN)."""
+    code = textwrap.dedent("""
+        from leafsim.base.errors import LeafsimError
+        from leafsim.sim.run import Stop
+        try:
+            Stop(frames=float("nan"))
+        except LeafsimError as e:
+            print("refused:", e)
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert "refused: Stop: frames" in out.stdout, out.stderr
+
+
+# ------------------------------------------------------------------ Run with a state
+
+def _mod(state, **kw):
+    return dataclasses.replace(state.copy(), **kw)
+
+
+def _crash_free(code: str) -> subprocess.CompletedProcess:
+    """Run ``code`` (after building the coarse oak as M, P, S, M2, S2) in a child: a state that
+    reaches the kernels unchecked aborts the interpreter (double free, segfault)."""
+    head = textwrap.dedent("""
+        import dataclasses
+        import numpy as np
+        from leafsim.base.errors import LeafsimError
+        from leafsim.config.species import get_species
+        from leafsim.pipeline import build_leaf
+        from leafsim.sim.run import Run, Stop
+        sp = get_species("oak")
+        P = sp.params.with_overrides({"mesh.spacing": 0.06})
+        M = build_leaf(sp, P, seed=0).model
+        S = Run(M, P).state
+        P2 = sp.params.with_overrides({"mesh.spacing": 0.08})
+        M2 = build_leaf(sp, P2, seed=1).model
+        S2 = Run(M2, P2).state
+    """)
+    return subprocess.run([sys.executable, "-c", head + textwrap.dedent(code)], capture_output=True, text=True, timeout=300)
+
+
+def test_state_of_another_model_does_not_crash():
+    out = _crash_free("""
+        for name, st in [("other model", S2.copy()),
+                         ("short q", dataclasses.replace(S.copy(), particle_q=S.particle_q[:-5].copy())),
+                         ("empty vol_rest", dataclasses.replace(S.copy(), vol_rest=np.zeros(0)))]:
+            try:
+                run = Run(M, P, state=st)
+                for _ in run.frames(Stop(frames=3)):
+                    pass
+                print(name, "ran")
+            except LeafsimError as e:
+                print(name, "refused:", e)
+    """)
+    assert out.returncode == 0, out.stderr[-500:]
+    assert out.stdout.count("refused: Run: state array") == 3, out.stdout
+
+
+@pytest.mark.parametrize("field, value", [
+    ("particle_water", lambda s: np.full_like(s.particle_water, np.nan)),
+    ("particle_water", lambda s: -s.particle_water),
+    ("particle_q", lambda s: s.particle_q.astype(np.float32)),
+    ("particle_q", lambda s: s.particle_q.tolist()),
+    ("hinge_rest", lambda s: np.zeros(len(s.hinge_rest) + 100)),
+    ("scalars", lambda s: np.zeros(1)),
+    ("scalars", lambda s: np.array([np.nan, 3.0, 0.0])),
+])
+def test_bad_state_is_refused_before_the_kernels(oak, field, value):
+    _, params, model, state = oak
+    with pytest.raises(LeafsimError, match=f"Run: state array {field}") as e:
+        Run(model, params, state=_mod(state, **{field: value(state)}))
+    one_line(e)
+
+
+def test_bad_pigments_are_refused(oak):
+    _, params, model, state = oak
+    pig = dataclasses.replace(state.pigments, chlorophyll=np.full_like(state.pigments.chlorophyll, np.nan))
+    with pytest.raises(LeafsimError, match="chlorophyll"):
+        Run(model, params, state=_mod(state, pigments=pig))
+    with pytest.raises(LeafsimError, match="expected a leafsim.sim.model.State"):
+        Run(model, params, state={"particle_q": state.particle_q})
+
+
+def test_effects_as_one_string(oak):
+    _, params, model, _ = oak
+    with pytest.raises(LeafsimError, match=r"\['osmosis'\]"):
+        Run(model, params, effects="osmosis")
+
+
+def test_simulator_of_another_model(oak, other):
+    from leafsim.sim.simulator import Simulator
+
+    _, params, model, _ = oak
+    with pytest.raises(LeafsimError, match="simulator"):
+        Run(other[0], simulator=Simulator(model, params))
+
+
+def test_a_good_state_still_runs(oak):
+    _, params, model, state = oak
+    run = Run(model, params, state=state.copy())
+    for _ in run.frames(Stop(frames=state.frame + 2)):
+        pass
+    assert run.state.frame == state.frame + 2 and run.finite()
+    Run(model, params, state=model.state())  # a fresh state without pigments is a state
+
+
+# ------------------------------------------------------------------ export_mesh
+
+def test_export_states_of_another_model(oak, other, tmp_path):
+    sp, params, model, state = oak
+    m2, s2 = other
+    for states in ([s2], [state, s2]):
+        with pytest.raises(LeafsimError, match="export: state") as e:
+            export_mesh(model, states, tmp_path / "a.glb", params=params)
+        one_line(e)
+    # the other way round the indices fit, and the file was another leaf's geometry
+    with pytest.raises(LeafsimError, match="export: state 0 array particle_q"):
+        export_mesh(m2, [state], tmp_path / "b.glb", params=params)
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("field, value", [
+    ("particle_q", lambda s: np.full_like(s.particle_q, np.nan)),
+    ("particle_water", lambda s: np.full_like(s.particle_water, np.nan)),
+])
+def test_export_refuses_nan(oak, tmp_path, field, value):
+    _, params, model, state = oak
+    with pytest.raises(LeafsimError, match=f"{field} holds NaN"):
+        export_mesh(model, [_mod(state, **{field: value(state)})], tmp_path / "nan.glb", params=params)
+    assert not (tmp_path / "nan.glb").exists()
+
+
+def test_export_bad_arguments(oak, other, tmp_path):
+    from leafsim.appearance.view import LeafView
+
+    _, params, model, state = oak
+    out = tmp_path / "x.glb"
+    cases = [
+        (dict(states=None), "states"),
+        (dict(params={"render.texture": True}), "params"),
+        (dict(view=LeafView(other[0])), "view"),
+        (dict(view=np.zeros((4, 4, 4), np.uint8)), "view"),
+        (dict(view=LeafView(model, np.zeros((3, 3)))), "photo"),
+        (dict(states=[state, state.copy()], times=[0.0]), "times"),
+        (dict(states=[state, state.copy()], times=[0.0, float("nan")]), "times"),
+        (dict(states=[state, state.copy()], times="ab"), "times"),
+        (dict(states=[{"a": 1}]), "State"),
+        (dict(path=None), "path"),
+    ]
+    for kw, what in cases:
+        kw = {"states": [state], "params": params, "path": out, **kw}
+        with pytest.raises(LeafsimError, match=what) as e:
+            export_mesh(model, kw.pop("states"), kw.pop("path"), **kw)
+        one_line(e)
+    assert not out.exists()
+
+
+def test_export_good_calls_still_write(oak, tmp_path):
+    _, params, model, state = oak
+    export_mesh(model, state, tmp_path / "a.glb", params=params)
+    export_mesh(model, [state, state.copy()], tmp_path / "b.glb", params=params, times=[0.0, 1.0])
+    export_mesh(model, [model.state()], tmp_path / "c.glb")  # fresh state, default params and view
+    assert {p.name for p in tmp_path.iterdir()} == {"a.glb", "b.glb", "c.glb"}
