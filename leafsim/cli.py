@@ -19,6 +19,7 @@ from leafsim import __version__
 from leafsim.base.errors import LeafsimError
 from leafsim.base.signals import Interrupted, main_thread, raise_interrupted
 from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
+from leafsim.config.params import SEED_MAX
 from leafsim.config.presets import QUALITY
 
 #: command → "module:function" in leafsim.commands
@@ -40,9 +41,6 @@ class _Parser(argparse.ArgumentParser):
 
 JSON_HELP = "print exactly one JSON object on stdout instead of text (no progress bar)"
 CONFIG_HELP = "species config file (default: the shipped configs/leaves.json; see docs/species.md)"
-
-#: seeds are non-negative integers below 2**63 (numpy's generators take them as-is)
-SEED_MAX = 2**63 - 1
 
 
 def _int(text: str) -> int:

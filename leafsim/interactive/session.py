@@ -29,25 +29,13 @@ import numpy as np
 
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
-from leafsim.config.params import PARAMS, ParamSet
+from leafsim.config.params import PARAMS, ParamSet, check_seed
 from leafsim.config.presets_io import read_param_set, write_param_set
 from leafsim.config.species import DEFAULT_SPECIES, get_species, load_library
 from leafsim.interactive.builder import Builder, BuildResult, build, live_params
 from leafsim.interactive.history import history_record
 from leafsim.interactive.playback import Playback
 from leafsim.sim.run import Run
-
-#: seeds are non-negative integers up to 2**63-1, as on the command line (leafsim.cli.SEED_MAX)
-SEED_MAX = 2**63 - 1
-
-
-def check_seed(seed, where: str = "seed") -> int:
-    """``seed`` as an int; LeafsimError naming ``where`` unless it is an integer in [0, 2**63-1]."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) <= SEED_MAX:
-        shown = repr(seed) if len(repr(seed)) <= 24 else repr(seed)[:20] + "…"
-        raise LeafsimError(f"{where} {shown}: expected a non-negative integer up to 2**63-1")
-    return int(seed)
-
 
 class Session:
     """One leaf being simulated, plus what the GUI needs to show it.
@@ -240,7 +228,7 @@ class Session:
 
     def set_seed(self, seed: int) -> bool:
         """Stage a new seed (needs a rebuild); LeafsimError unless it is in [0, 2**63-1]."""
-        self.seed = check_seed(seed)
+        self.seed = check_seed(seed, "seed field")
         return self.pending_rebuild
 
     def user_changes(self) -> dict:
@@ -283,7 +271,7 @@ class Session:
         (:func:`leafsim.config.presets_io.read_param_set`); its seed must be one the command
         line takes (in [0, 2**63-1]: a larger one would not fit the seed field)."""
         species, seed, params = read_param_set(path, self.species_key, self.seed, self.config, self.species.params)
-        return species, check_seed(seed, f"{path}: 'seed'"), params
+        return species, check_seed(seed, str(path)), params
 
     def load_params(self, path, rebuild: bool = False) -> bool:
         """Load a parameter set (see :meth:`read_params`); on any error the session is unchanged.

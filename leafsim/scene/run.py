@@ -29,6 +29,7 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes, not_an_input, output_target, read_json
+from leafsim.config.params import SEED_MAX
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
 from leafsim.scene.layout import leaf_dir
@@ -45,8 +46,6 @@ _LAYOUT_KEYS = {"floor": {"kind", "size", "cell", "clearance"},
                 "row": {"kind", "gap"}}
 _NAME = re.compile(r"^[A-Za-z0-9_-]{1,40}$")
 DEFAULT_MAX_FRAMES = 100_000
-#: seeds are non-negative integers below 2**63, as on the command line (numpy's generators take them as-is)
-SEED_MAX = 2**63 - 1
 #: the most leaves one scene may hold, and what setting up each one costs before any
 #: simulation (measured: a million leaves took 2.4 GB and 94 CPU s just to set up)
 MAX_SCENE_LEAVES = 10_000

@@ -14,7 +14,8 @@ from leafsim.config.presets import quality_of, quality_table
 from leafsim.gui.layout import ALBEDOS, COMPARES, SCALES, VIEWS, tip
 from leafsim.gui.status import printable
 from leafsim.gui.widgets import params_panel
-from leafsim.interactive.session import check_seed, species_keys
+from leafsim.config.params import check_seed
+from leafsim.interactive.session import species_keys
 
 
 def path_field(label: str, value: str) -> str:
@@ -93,7 +94,7 @@ class ControlsPanel:
         try:
             if not (text.strip().isascii() and text.strip().isdigit()):
                 raise LeafsimError(f"seed {text.strip()!r}: expected a non-negative integer up to 2**63-1")
-            s.set_seed(check_seed(int(text.strip())))
+            s.set_seed(check_seed(int(text.strip()), "seed field"))
         except LeafsimError as e:
             app.fail(str(e), "seed")
             return
