@@ -12,7 +12,7 @@ from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes, read_json
-from leafsim.config.params import PARAMS, ParamSet, flatten, unknown_key_message
+from leafsim.config.params import PARAMS, ParamSet, check_seed, flatten, unknown_key_message
 from leafsim.config.species import get_species
 
 #: file format tag of saved parameter sets
@@ -38,6 +38,10 @@ def _header(path: Path, doc: dict, species: str, seed: int) -> tuple[dict, str, 
     bad = sorted(set(doc) - PRESET_KEYS)
     if bad:
         raise LeafsimError(f"{path}: unknown key '{bad[0]}' (expected {', '.join(sorted(PRESET_KEYS))})")
+    fmt = doc.get("format", PRESET_FORMAT)
+    if fmt != PRESET_FORMAT:  # another tool's file, or a later version's: its keys may mean other things
+        shown = repr(fmt) if len(repr(fmt)) <= 40 else repr(fmt)[:36] + "…"
+        raise LeafsimError(f"{path}: 'format' is {shown}: expected {PRESET_FORMAT!r} (a parameter set saved by leafsim)")
     values = doc["params"]
     if not isinstance(values, dict):
         raise LeafsimError(f"{path}: 'params' must be an object of parameter values")
@@ -45,9 +49,7 @@ def _header(path: Path, doc: dict, species: str, seed: int) -> tuple[dict, str, 
     seed = doc.get("seed", seed)
     if not isinstance(species, str):
         raise LeafsimError(f"{path}: 'species' must be a species key string")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise LeafsimError(f"{path}: 'seed' must be a non-negative integer")
-    return values, species, seed
+    return values, species, check_seed(seed, f"{path}: 'seed'")
 
 
 def read_param_set(path, species: str, seed: int, config=None, species_params: ParamSet | None = None

@@ -268,10 +268,8 @@ class Session:
 
     def read_params(self, path) -> tuple[str, int, ParamSet]:
         """Parse and validate a parameter-set file without touching the session
-        (:func:`leafsim.config.presets_io.read_param_set`); its seed must be one the command
-        line takes (in [0, 2**63-1]: a larger one would not fit the seed field)."""
-        species, seed, params = read_param_set(path, self.species_key, self.seed, self.config, self.species.params)
-        return species, check_seed(seed, str(path)), params
+        (:func:`leafsim.config.presets_io.read_param_set`)."""
+        return read_param_set(path, self.species_key, self.seed, self.config, self.species.params)
 
     def load_params(self, path, rebuild: bool = False) -> bool:
         """Load a parameter set (see :meth:`read_params`); on any error the session is unchanged.

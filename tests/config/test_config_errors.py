@@ -220,3 +220,22 @@ def test_crossing_pairs_matches_brute_force():
     t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
     c = np.column_stack([np.cos(t), np.sin(t)])
     assert len(crossing_pairs(c, np.roll(c, -1, axis=0))) == 0
+
+
+def test_a_preset_of_another_format_or_with_a_seed_beyond_2_63_is_refused(tmp_path):
+    """A parameter set whose 'format' is not leafsim's (another tool's file, or a later
+    version's whose keys may mean other things) was read as ours; a seed beyond 2**63-1 was
+    taken here and refused later by the window. Both are one line naming the file and key."""
+    import json
+
+    from leafsim.config.presets_io import read_param_set
+
+    p = tmp_path / "p.json"
+    p.write_text(json.dumps({"format": "other/9", "species": "oak", "seed": 0, "params": {}}))
+    with pytest.raises(LeafsimError, match=r"p\.json: 'format' is 'other/9': expected 'leafsim-params/1'"):
+        read_param_set(p, "oak", 0)
+    p.write_text(json.dumps({"format": "leafsim-params/1", "species": "oak", "seed": 2**63, "params": {}}))
+    with pytest.raises(LeafsimError, match=r"p\.json: 'seed'.*2\*\*63-1"):
+        read_param_set(p, "oak", 0)
+    p.write_text(json.dumps({"species": "oak", "seed": 5, "params": {"mesh.spacing": 0.05}}))  # no format: ours
+    assert read_param_set(p, "oak", 0)[:2] == ("oak", 5)
