@@ -291,3 +291,34 @@ def test_export_good_calls_still_write(oak, tmp_path):
     export_mesh(model, [state, state.copy()], tmp_path / "b.glb", params=params, times=[0.0, 1.0])
     export_mesh(model, [model.state()], tmp_path / "c.glb")  # fresh state, default params and view
     assert {p.name for p in tmp_path.iterdir()} == {"a.glb", "b.glb", "c.glb"}
+
+
+def test_run_continues_a_crumpled_or_strongly_curled_state(oak):
+    """``Run(state=...)`` checks a state as a checkpoint's, and the simulator's own states must
+    pass: a crumpled leaf folds a few per cent of its springs below 0.2 × their rest lengths (the
+    thesis preset's ball), and a strong bilayer's hinge_plastic (the largest angle a hinge asked
+    for; its rest angle is clamped) passes 2π (6.1 rad on oak with shrink.sigma_surface_top 0.8).
+    A collapsed array (every spring crushed) and a scrambled one (most torn) are still refused."""
+    from leafsim.sim.checkpoint import check_state
+
+    sp, params, model, state = oak
+    st = state.copy()
+    ij = model.spring_ij
+    fold = np.arange(0, len(ij), 25)  # 4 % of the springs folded to a tenth of their length
+    a, b = ij[fold, 0], ij[fold, 1]
+    st.particle_q[b] = st.particle_q[a] + 0.1 * (st.particle_q[b] - st.particle_q[a])
+    st.hinge_plastic[:] = 6.1
+    check_state(st, model, "crumpled")
+    Run(model, params, seed=0, state=st)  # accepted
+    bad = state.copy()
+    bad.particle_q[:] = 0.0
+    with pytest.raises(LeafsimError, match="does not form this leaf"):
+        check_state(bad, model, "collapsed")
+    bad = state.copy()
+    bad.particle_q[:] = bad.particle_q + np.random.default_rng(0).normal(0.0, 0.05, bad.particle_q.shape)
+    with pytest.raises(LeafsimError, match="does not form this leaf"):
+        check_state(bad, model, "scrambled")
+    bad = state.copy()
+    bad.hinge_plastic[0] = 1e300
+    with pytest.raises(LeafsimError, match="hinge_plastic"):
+        check_state(bad, model, "garbage")
