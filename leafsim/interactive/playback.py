@@ -183,7 +183,7 @@ class Playback:
             fresh()
             return
         epoch = w.request_reset()
-        while wait and w.running and w.epoch < epoch:
+        while wait and w.running and w.epoch < epoch and w.reset_failed < epoch:  # a failed reset ends the wait
             time.sleep(0.002)
         if wait:
             self.take_snapshot()

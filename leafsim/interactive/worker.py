@@ -124,6 +124,7 @@ class SimWorker:
         self._seq = 0
         self.epoch = 0
         self._reset_wanted = 0
+        self.reset_failed = 0  # the last epoch a failed reset was asked for (its waiters stop waiting)
         self.error: str | None = None
         self.dry_done = False
         self._snap = self._make_snapshot({})
@@ -173,8 +174,11 @@ class SimWorker:
                 return None
             reset = self._reset_wanted > self.epoch
         if reset:
-            with self._step_lock:
-                self._reset_locked(self.simulator.state())
+            try:
+                with self._step_lock:
+                    self._reset_locked(self.simulator.state())
+            except Exception as e:
+                self._failed(e, reset=True)
             return t_next
         with self._cond:
             free = (self._playing or self._dry) and self.error is None
@@ -185,18 +189,23 @@ class SimWorker:
         self._step_once(publish_now=last_single)
         return self._pace(speed, t_next) if free else time.perf_counter()
 
-    def _failed(self, e: Exception) -> None:
+    def _failed(self, e: Exception, reset: bool = False) -> None:
         """Something besides a step failed (applying parameters, a reset, a snapshot): the run
         stops with an error, as after a failed step, instead of the thread ending silently
-        (the window showed "playing" while nothing moved)."""
+        (the window showed "playing" while nothing moved).  A failed ``reset`` is not retried,
+        and whoever waits for it stops waiting (:attr:`reset_failed`)."""
         with self._cond:
             if self.error is None:
                 self.error = (f"simulation failed ({type(e).__name__}: {e}) at frame {self.run.state.frame}: "
                               "press Reset or change the parameters")
-            self._reset_wanted = min(self._reset_wanted, self.epoch)  # a reset that failed is not retried
+            if reset:
+                self.reset_failed = self._reset_wanted
+                self._reset_wanted = min(self._reset_wanted, self.epoch)
             self._dry = self._playing = False
+            self._cond.notify_all()
         try:
-            self._publish({})
+            with self._step_lock:  # as every other publish: not beside a step of the caller's thread
+                self._publish({})
         except Exception:  # the UI reads the error from the worker itself (Playback.take_snapshot)
             pass
 
@@ -404,7 +413,7 @@ class SimWorker:
         """Ask the worker thread for a fresh leaf (made by its simulator between two steps);
         returns the epoch whose first snapshot shows it."""
         with self._cond:
-            self._reset_wanted = max(self._reset_wanted, self.epoch) + 1
+            self._reset_wanted = max(self._reset_wanted, self.epoch, self.reset_failed) + 1  # past a failed one
             self._cond.notify_all()
             return self._reset_wanted
 

@@ -291,3 +291,21 @@ def test_drying_eta_uses_the_pace_until_the_tail():
 def test_durations_read_as_seconds_minutes_hours():
     assert [duration(x) for x in (0.4, 17.2, 59.6, 125.0, 3599.0, 3600.0 * 19.4, float("inf"))] == [
         "0 s", "17 s", "1 min 00 s", "2 min 05 s", "59 min 59 s", "19 h 24 min", "?"]
+
+
+def test_a_failed_reset_ends_the_wait_and_is_shown(s, monkeypatch):
+    """A reset whose fresh leaf cannot be made (here the simulator fails) used to end the worker
+    thread, which ended the waiting; now the thread survives it, so the waiter must be told:
+    ``reset(wait=True)`` returns, the error is the worker's, and a later reset works again."""
+    w = s.playback.worker
+    sim = w.simulator
+
+    def boom():
+        raise RuntimeError("fresh state failed")
+
+    monkeypatch.setattr(sim, "state", boom)
+    s.reset(wait=True)  # returned: it hung for ever before
+    assert w.running and w.error is not None and "fresh state failed" in w.error
+    monkeypatch.undo()
+    s.reset(wait=True)
+    assert w.error is None and s.frame == 0
