@@ -49,7 +49,7 @@ def _header(path: Path, doc: dict, species: str, seed: int) -> tuple[dict, str, 
     seed = doc.get("seed", seed)
     if not isinstance(species, str):
         raise LeafsimError(f"{path}: 'species' must be a species key string")
-    return values, species, check_seed(seed, f"{path}: 'seed'")
+    return values, species, check_seed(seed, str(path))
 
 
 def read_param_set(path, species: str, seed: int, config=None, species_params: ParamSet | None = None

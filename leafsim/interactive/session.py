@@ -228,7 +228,7 @@ class Session:
 
     def set_seed(self, seed: int) -> bool:
         """Stage a new seed (needs a rebuild); LeafsimError unless it is in [0, 2**63-1]."""
-        self.seed = check_seed(seed, "seed field")
+        self.seed = check_seed(seed, "Session.set_seed")
         return self.pending_rebuild
 
     def user_changes(self) -> dict:

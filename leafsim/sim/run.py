@@ -14,6 +14,7 @@ Example
 
 from __future__ import annotations
 
+import math
 import numbers
 from dataclasses import dataclass
 from typing import Callable, Iterator
@@ -70,7 +71,7 @@ class Stop:
         for name, hi in (("frames", MAX_RUN_FRAMES), ("max_frames", None)):
             v = getattr(self, name)
             if v is not None:
-                object.__setattr__(self, name, _count(name, v, hi))
+                object.__setattr__(self, name, _count(f"Stop: {name}", v, hi))
         for name, hi, what in (("water_left", 1.0, "a fraction of the fresh leaf's water in [0, 1]"),
                                ("season", 1e12, "a season clock value ≥ 0")):
             v = getattr(self, name)
@@ -109,9 +110,11 @@ class Stop:
 
 
 def _count(name: str, v, hi: int | None) -> int:
-    if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 0 or (hi is not None and v > hi):
+    """A number of frames: a whole number (3 or 3.0), ≥ 0 and at most ``hi``; else one line naming ``name``."""
+    whole = isinstance(v, numbers.Integral) or (isinstance(v, numbers.Real) and math.isfinite(v) and float(v).is_integer())
+    if isinstance(v, bool) or not whole or v < 0 or (hi is not None and v > hi):
         upto = f" up to {hi:,}" if hi is not None else ""
-        raise LeafsimError(f"Stop: {name} = {show(v)}: expected a whole number of frames ≥ 0{upto}")
+        raise LeafsimError(f"{name} = {show(v)}: expected a whole number of frames ≥ 0{upto}")
     return int(v)
 
 
@@ -264,8 +267,7 @@ def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stat
     called after every frame; return False to stop.  A NaN frame ends the run (its statistics
     say ``"nan": true``) without raising.  ``seed``, ``state``, ``simulator``: as :class:`Run`.
     """
-    if frames < 0:
-        raise LeafsimError(f"run: frames = {frames} must be ≥ 0")
+    frames = _count("run_headless: frames", frames, MAX_RUN_FRAMES)  # a whole number, as Stop's
     run = Run(model, params, effects, seed=seed, state=state, simulator=simulator)
     own = StatsStream(stats_path) if stats_path and stats_stream is None else None
     stream = stats_stream or own

@@ -92,9 +92,8 @@ class ControlsPanel:
             return
         self._seed_text = text
         try:
-            if not (text.strip().isascii() and text.strip().isdigit()):
-                raise LeafsimError(f"seed {text.strip()!r}: expected a non-negative integer up to 2**63-1")
-            s.set_seed(check_seed(int(text.strip()), "seed field"))
+            digits = text.strip().isascii() and text.strip().isdigit()
+            s.set_seed(check_seed(int(text.strip()) if digits else text.strip(), "seed field"))
         except LeafsimError as e:
             app.fail(str(e), "seed")
             return
