@@ -227,10 +227,11 @@ def _fail(where: str, msg: str) -> LeafsimError:
 WATER_SLACK = 2.0
 #: a loaded state's springs: at most CRUSHED_SHARE of them shorter than STRAIN_RANGE[0] × their
 #: rest lengths and at most TORN_SHARE longer than STRAIN_RANGE[1] (a collapsed position array
-#: has them all crushed, a scrambled one nearly all torn; a crumpled leaf folds a few per cent of
-#: its springs below 0.2 (the thesis preset's crumpled ball) and tears none)
+#: has them all crushed, a scrambled one nearly all torn, half a leaf collapsed to a point 47 %
+#: crushed, a leaf flattened onto a line 13 %; the thesis preset's crumpled ball, the most
+#: deformed leaf the simulator makes, at most 1.1 % crushed and 1.1 % torn on oak and maple)
 STRAIN_RANGE = (0.2, 5.0)
-CRUSHED_SHARE = 0.5
+CRUSHED_SHARE = 0.1
 TORN_SHARE = 0.05
 #: |hinge_rest| is clamped at 0.35 rad by the shrink effect; hinge_plastic, the largest bilayer
 #: angle a hinge has asked for, is not (6.1 rad measured on oak with shrink.sigma_surface_top 0.8)
@@ -295,15 +296,17 @@ def _check_physical(state: State, model: Model, where: str, frame) -> None:
     ratio = np.linalg.norm(state.particle_q[ij[:, 0]] - state.particle_q[ij[:, 1]], axis=1) / np.maximum(state.spring_rest, 1e-300)
     crushed = float(np.mean(ratio < STRAIN_RANGE[0])) if len(ratio) else 0.0
     torn = float(np.mean(ratio > STRAIN_RANGE[1])) if len(ratio) else 0.0
-    if crushed > CRUSHED_SHARE or torn > TORN_SHARE:
+    if crushed > CRUSHED_SHARE:
         raise _fail(where, f"array particle_q does not form this leaf: {100 * crushed:.3g} % of its springs are shorter "
-                           f"than {STRAIN_RANGE[0]:g} × their rest lengths (at most {100 * CRUSHED_SHARE:g} %) and "
-                           f"{100 * torn:.3g} % longer than {STRAIN_RANGE[1]:g} × (at most {100 * TORN_SHARE:g} %)")
+                           f"than {STRAIN_RANGE[0]:g} × their rest lengths (at most {100 * CRUSHED_SHARE:g} %)")
+    if torn > TORN_SHARE:
+        raise _fail(where, f"array particle_q does not form this leaf: {100 * torn:.3g} % of its springs are longer "
+                           f"than {STRAIN_RANGE[1]:g} × their rest lengths (at most {100 * TORN_SHARE:g} %)")
     if (np.abs(state.hinge_rest) > np.pi).any():
         raise _fail(where, f"array hinge_rest holds angles beyond ±π ({np.abs(state.hinge_rest).max():.3g} rad)")
     if (np.abs(state.hinge_plastic) > PLASTIC_MAX).any():
         raise _fail(where, f"array hinge_plastic holds angles beyond ±{PLASTIC_MAX:g} rad "
-                           f"({np.abs(state.hinge_plastic).max():.3g})")
+                           f"({np.abs(state.hinge_plastic).max():.3g} rad)")
     t, k, tw = float(state.scalars[0]), float(state.scalars[1]), float(state.scalars[2])
     if t < 0 or t > 1e9 or k < 0 or k != round(k) or (frame is not None and int(k) != frame):
         raise _fail(where, f"array scalars holds time {t:g} s, frame {k:g} (expected non-negative, frame {frame})")
