@@ -84,8 +84,8 @@ class Playback:
                 self.history[k].append(v)
         if snap.ms:
             self.last_ms = dict(snap.ms)
-        error = snap.error or w.error  # a failure whose snapshot could not be made is seen too
-        if error and self.sim_error is None:
+        error = w.error or snap.error  # the newest: a failed reset replaces the error it was to clear
+        if error:
             self.sim_error = error
         self.sim_rate = snap.sim_rate if w.running else 0.0
         if snap.seq == self._snap_seq:

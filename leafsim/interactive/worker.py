@@ -172,13 +172,13 @@ class SimWorker:
                 self._apply_params()  # parameters change while paused too
             if self._stop:
                 return None
-            reset = self._reset_wanted > self.epoch
+            reset = self._reset_wanted if self._reset_wanted > self.epoch else 0  # the request served
         if reset:
             try:
                 with self._step_lock:
                     self._reset_locked(self.simulator.state())
             except Exception as e:
-                self._failed(e, reset=True)
+                self._failed(e, reset)
             return t_next
         with self._cond:
             free = (self._playing or self._dry) and self.error is None
@@ -189,18 +189,21 @@ class SimWorker:
         self._step_once(publish_now=last_single)
         return self._pace(speed, t_next) if free else time.perf_counter()
 
-    def _failed(self, e: Exception, reset: bool = False) -> None:
+    def _failed(self, e: Exception, reset: int = 0) -> None:
         """Something besides a step failed (applying parameters, a reset, a snapshot): the run
         stops with an error, as after a failed step, instead of the thread ending silently
-        (the window showed "playing" while nothing moved).  A failed ``reset`` is not retried,
-        and whoever waits for it stops waiting (:attr:`reset_failed`)."""
+        (the window showed "playing" while nothing moved).  ``reset``: the reset request that
+        failed; it is not retried and whoever waits for it stops waiting (:attr:`reset_failed`),
+        while a reset asked for meanwhile is still made."""
         with self._cond:
-            if self.error is None:
+            if reset:
+                self.error = (f"reset failed ({type(e).__name__}: {e}): change the parameters or rebuild the leaf")
+                self.reset_failed = max(self.reset_failed, reset)
+                if self._reset_wanted == reset:  # nothing newer asked for
+                    self._reset_wanted = self.epoch
+            elif self.error is None:
                 self.error = (f"simulation failed ({type(e).__name__}: {e}) at frame {self.run.state.frame}: "
                               "press Reset or change the parameters")
-            if reset:
-                self.reset_failed = self._reset_wanted
-                self._reset_wanted = min(self._reset_wanted, self.epoch)
             self._dry = self._playing = False
             self._cond.notify_all()
         try:

@@ -305,7 +305,37 @@ def test_a_failed_reset_ends_the_wait_and_is_shown(s, monkeypatch):
 
     monkeypatch.setattr(sim, "state", boom)
     s.reset(wait=True)  # returned: it hung for ever before
-    assert w.running and w.error is not None and "fresh state failed" in w.error
+    assert w.running and w.error is not None and "reset failed" in w.error and "fresh state failed" in w.error
+    s.playback.take_snapshot()
+    assert "reset failed" in s.playback.sim_error  # shown in place of whatever error it was to clear
     monkeypatch.undo()
     s.reset(wait=True)
     assert w.error is None and s.frame == 0
+
+
+def test_a_reset_asked_for_while_one_fails_is_still_made(s, monkeypatch):
+    """A second reset requested while the first is failing is made afterwards (the failure
+    dropped it, and its waiter returned at once, with the leaf not reset)."""
+    import threading
+
+    w = s.playback.worker
+    sim = w.simulator
+    real = sim.state
+    entered, release = threading.Event(), threading.Event()
+    calls = []
+
+    def first_fails():
+        calls.append(1)
+        if len(calls) == 1:
+            entered.set()
+            release.wait(120)
+            raise RuntimeError("first reset failed")
+        return real()
+
+    monkeypatch.setattr(sim, "state", first_fails)
+    w.request_reset()
+    assert entered.wait(120)
+    second = w.request_reset()
+    release.set()
+    assert until(lambda: w.epoch >= second, 300)
+    assert len(calls) == 2 and w.error is None

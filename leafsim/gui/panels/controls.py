@@ -92,7 +92,7 @@ class ControlsPanel:
             return
         self._seed_text = text
         try:
-            digits = text.strip().isascii() and text.strip().isdigit()
+            digits = text.strip().isascii() and text.strip().isdigit() and len(text.strip()) <= 30  # int() refuses > 4300
             s.set_seed(check_seed(int(text.strip()) if digits else text.strip(), "seed field"))
         except LeafsimError as e:
             app.fail(str(e), "seed")
