@@ -368,28 +368,14 @@ class Problem:
     def error(self, x):
         return self._mnorm(x - self.ref) / self.scale
 
-    def run_vbd(self, cap, rho=0.0):
-        x = self.y.copy()
-        prev2 = x.copy()
-        prev1 = x.copy()
-        omega = 1.0
+    def _sweeps(self, sweep, x, cap):
+        """``sweep(k, x)`` (the k-th sweep, in place) until the error is below the last level or
+        ``cap`` sweeps: the sweeps to each level, the errors after 2, 6, 300 and 1000 sweeps, the
+        median ms of a sweep and the last error."""
         hits, times = {}, []
         for k in range(1, cap + 1):
             t0 = time.perf_counter()
-            vbd_sweep(x, self.y, self.mh2, self.ij, self.sk, self.srest, self.hidx, self.hk, self.hrest, self.vidx,
-                      self.vk, self.vrest, self.sptr, self.slist, self.hptr, self.hlist, self.vptr, self.vlist)
-            if rho > 0.0:
-                # Chebyshev semi-iteration (Wang 2015, as VBD's paper applies it), from the 2nd sweep
-                if k == 1:
-                    omega = 1.0
-                elif k == 2:
-                    omega = 2.0 / (2.0 - rho * rho)
-                else:
-                    omega = 4.0 / (4.0 - rho * rho * omega)
-                if k >= 2:
-                    x[:] = omega * (x - prev2) + prev2
-                prev2[:] = prev1
-                prev1[:] = x
+            sweep(k, x)
             times.append(time.perf_counter() - t0)
             e = self.error(x)
             if k in (2, 6, 300, 1000):
@@ -405,31 +391,30 @@ class Problem:
         hits["last"] = k
         return hits, float(np.median(times)) * 1e3, e
 
-    def run_xpbd(self, cap):
+    def run_vbd(self, cap, rho=0.0):
         x = self.y.copy()
+        prev2, prev1, omega = x.copy(), x.copy(), [1.0]
+
+        def sweep(k, x):
+            vbd_sweep(x, self.y, self.mh2, self.ij, self.sk, self.srest, self.hidx, self.hk, self.hrest, self.vidx,
+                      self.vk, self.vrest, self.sptr, self.slist, self.hptr, self.hlist, self.vptr, self.vlist)
+            if rho > 0.0:
+                # Chebyshev semi-iteration (Wang 2015, as VBD's paper applies it), from the 2nd sweep
+                w = 1.0 if k == 1 else 2.0 / (2.0 - rho * rho) if k == 2 else 4.0 / (4.0 - rho * rho * omega[0])
+                omega[0] = w
+                if k >= 2:
+                    x[:] = w * (x - prev2) + prev2
+                prev2[:] = prev1
+                prev1[:] = x
+
+        return self._sweeps(sweep, x, cap)
+
+    def run_xpbd(self, cap):
         invm = 1.0 / self.mass
-        ls = np.zeros(len(self.sk))
-        lh = np.zeros(len(self.hk))
-        lv = np.zeros(len(self.vk))
-        hits, times = {}, []
-        for k in range(1, cap + 1):
-            t0 = time.perf_counter()
-            xpbd_sweep(x, invm, self.h * self.h, self.ij, self.sk, self.srest, ls, self.hidx, self.hk, self.hrest,
-                       lh, self.vidx, self.vk, self.vrest, lv)
-            times.append(time.perf_counter() - t0)
-            e = self.error(x)
-            if k in (2, 6, 300, 1000):
-                hits[k] = e
-            if not math.isfinite(e) or e > 1e6:
-                hits["diverged"] = k
-                break
-            for lv_ in LEVELS:
-                if lv_ not in hits and e < lv_:
-                    hits[lv_] = k
-            if e < LEVELS[-1]:
-                break
-        hits["last"] = k
-        return hits, float(np.median(times)) * 1e3, e
+        ls, lh, lv = np.zeros(len(self.sk)), np.zeros(len(self.hk)), np.zeros(len(self.vk))
+        return self._sweeps(lambda k, x: xpbd_sweep(x, invm, self.h * self.h, self.ij, self.sk, self.srest, ls,
+                                                    self.hidx, self.hk, self.hrest, lh, self.vidx, self.vk,
+                                                    self.vrest, lv), self.y.copy(), cap)
 
 
 def _history(hits, e):

@@ -19,6 +19,7 @@ import pytest
 pytest.importorskip("imgui_bundle")
 pytest.importorskip("moderngl")
 
+from helpers.gui import wait_until  # noqa: E402
 from helpers.paths import HANG_S
 from helpers.paths import REPO as ROOT  # noqa: E402
 from leafsim.base.errors import LeafsimError  # noqa: E402
@@ -46,14 +47,6 @@ def run_gui(test_fn, species="oak", overrides=None, play=False):
 
 PLAY = "**/###play"
 DISMISS = "**/###dismiss"
-
-
-def wait_until(ctx, cond, frames=900):
-    for _ in range(frames):
-        if cond():
-            return True
-        ctx.yield_()
-    return cond()
 
 
 def ref(name):

@@ -17,6 +17,7 @@ import pytest
 pytest.importorskip("imgui_bundle")
 pytest.importorskip("moderngl")
 
+from helpers.gui import wait_until  # noqa: E402
 from leafsim.base.errors import LeafsimError  # noqa: E402
 from leafsim.config.params import PARAMS  # noqa: E402
 
@@ -40,14 +41,6 @@ def run_gui(test_fn, species="oak", overrides=SMALL, seed=0):
     without_test_time_limit(rp)
     testing.run(test_function=lambda ctx: test_fn(ctx, app), runner_params=rp, add_ons_params=app.addons())
     return app
-
-
-def wait_until(ctx, cond, frames=900):
-    for _ in range(frames):
-        if cond():
-            return True
-        ctx.yield_()
-    return cond()
 
 
 def clear(app):
