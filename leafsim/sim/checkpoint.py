@@ -51,7 +51,10 @@ def model_fingerprint(model: Model) -> str:
 def save_checkpoint(path, model: Model, state: State, meta: dict, carry: dict | None = None) -> None:
     """Write ``state`` (and ``meta``, plus format, frame and model fingerprint) atomically, with
     ``carry``, what the simulator's stages hand to the next frame beyond the state
-    (:meth:`~leafsim.sim.simulator.Simulator.carry`)."""
+    (:meth:`~leafsim.sim.simulator.Simulator.carry`).  A state that does not fit ``model`` (another
+    leaf's arrays) or holds NaN is refused before anything is written: it could never be resumed,
+    and it would replace the last good checkpoint."""
+    check_state(state, model, f"checkpoint {path}: the state to save", physical=False)
     arrays = {f"state_{f.name}": getattr(state, f.name) for f in fields(State) if f.name not in ("pigments", "path")}
     arrays.update({f"carry_{k}": np.asarray(v) for k, v in (carry or {}).items()})
     if state.path is not None:  # the drying-path mesh's state (leafsim.sim.path)

@@ -328,3 +328,25 @@ def test_run_continues_a_crumpled_or_strongly_curled_state(oak):
     bad.hinge_plastic[0] = 1e300
     with pytest.raises(LeafsimError, match="hinge_plastic"):
         check_state(bad, model, "garbage")
+
+
+# ------------------------------------------------------------------ save_checkpoint
+
+def test_save_checkpoint_refuses_foreign_or_nan_states(oak, other, tmp_path):
+    """A state that no load could resume (another leaf's arrays, NaN) is refused before a byte
+    is written, so the last good checkpoint at that path stays as it was."""
+    from leafsim.sim.checkpoint import load_checkpoint, save_checkpoint
+
+    _, params, model, state = oak
+    ck = tmp_path / "checkpoint.npz"
+    meta = {"species": "oak"}
+    save_checkpoint(ck, model, state, meta)
+    good = ck.read_bytes()
+    bad_states = [other[1], _mod(state, particle_q=np.full_like(state.particle_q, np.nan)),
+                  _mod(state, particle_water=np.where(np.arange(state.particle_water.size) == 3, np.inf, state.particle_water))]
+    for bad in bad_states:
+        with pytest.raises(LeafsimError, match=r"checkpoint .*the state to save array particle_(q|water)") as e:
+            save_checkpoint(ck, model, bad, meta)
+        one_line(e)
+        assert ck.read_bytes() == good
+    assert load_checkpoint(ck, model, meta).frame == state.frame
