@@ -47,6 +47,9 @@ class RenderMesh:
         colour at the vertex (blurred as the vertex colour is) over its luminance, and the
         weight, 0..1, with which a texel's own chromaticity replaces it (the living share of
         the tissue). None: luminance detail only (:data:`NO_CHROMA` everywhere).
+    vein_colours : (n, 3) float32 or None
+        Linear RGB albedo of the vein tissue at each vertex, which the drawn veins show (the
+        pigment model's pure vein tissue). None: the veins take the blade's albedo under them.
     vein_lines : list of (indices (p,) int, widths (p,) float metres, order int)
         Vein polylines through blade vertices; ``order`` 0 = main, 1 = lateral,
         2 = sublateral, 3+ = tertiary.
@@ -68,6 +71,7 @@ class RenderMesh:
     texture_rgba: np.ndarray | None = None
     tint: np.ndarray | None = None
     chroma: np.ndarray | None = None
+    vein_colours: np.ndarray | None = None
     vein_lines: list = field(default_factory=list)
     springs: np.ndarray | None = None
     spring_kind: np.ndarray | None = None
@@ -103,7 +107,8 @@ def validate_mesh(mesh) -> None:
     _check("colours", (3,))
     _check("tint", (3,))
     _check("chroma", (4,))
-    for name in ("colours", "tint", "chroma"):
+    _check("vein_colours", (3,))
+    for name in ("colours", "tint", "chroma", "vein_colours"):
         a = getattr(mesh, name, None)
         if a is not None and not np.all(np.isfinite(np.asarray(a, dtype=np.float64))):
             raise LeafsimError(f"render mesh: {name} must be finite")

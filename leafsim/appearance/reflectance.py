@@ -68,7 +68,8 @@ def _rgb_kernel(C, K, A, B, N, vein, s_chl, s_car, s_ant, s_brn, s_nec, pallor, 
         out[i, 2] = o2[i]
 
 
-def pigments_to_rgb(pig: PigmentState, params: Mapping[str, Any], contents: tuple | None = None) -> np.ndarray:
+def pigments_to_rgb(pig: PigmentState, params: Mapping[str, Any], contents: tuple | None = None,
+                    vein: np.ndarray | None = None) -> np.ndarray:
     """(n, 3) float32 linear-RGB reflectance ``surface + base·exp(−Σ c_p k_p)`` (module docstring).
 
     Concentrations are ``c_chl = colour.chlorophyll·leaf_chl·(1 − vein_pallor·m̂)·C``,
@@ -76,7 +77,9 @@ def pigments_to_rgb(pig: PigmentState, params: Mapping[str, Any], contents: tupl
     ``c_brn = colour.brown_level·(1 − colour.vein_browning·m̂)·B``, ``c_nec = colour.necrosis·(chlorophyll content)·(1 − vein_pallor·m̂)·N``;
     all palette values act live.  ``contents`` = (chlorophyll, carotenoid, extra surface
     reflectance) replaces the palette's contents and the per-leaf factors (a leaf whose
-    young colour was fitted to its photo, :func:`fit_photo_contents`).
+    young colour was fitted to its photo, :func:`fit_photo_contents`).  ``vein`` (n,) float32
+    replaces the tissue's m̂ (``pig.vein``): ones give the colour of pure vein tissue, which the
+    drawn veins show.
     """
     leaf = pig.leaf
     out = np.empty((pig.n, 3), np.float32)
@@ -87,7 +90,8 @@ def pigments_to_rgb(pig: PigmentState, params: Mapping[str, Any], contents: tupl
     else:
         chl, car = float(contents[0]), float(contents[1])
         surface = np.float32(SURFACE_REFLECTANCE + float(contents[2]))
-    _rgb_kernel(pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.necrosis, pig.vein,
+    _rgb_kernel(pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.necrosis,
+                pig.vein if vein is None else np.ascontiguousarray(vein, np.float32),
                 np.float32(chl), np.float32(car), np.float32(float(params["colour.anthocyanin"]) * leaf[2]),
                 np.float32(params["colour.brown_level"]),
                 np.float32(float(params["colour.necrosis"]) * max(chl, 1.0)),

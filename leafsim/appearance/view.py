@@ -54,6 +54,7 @@ class LeafView:
         self.T, self.V, self.remap = T, V, remap
         self._young = None   # (photo colour per particle (n, 3) linear, luminance normaliser (nT,))
         self._fit = None     # (vein_pallor, fitted contents)
+        self._pure_vein = None  # ones (n,): m̂ of pure vein tissue (vein_colours)
 
     def use_texture(self, params) -> bool:
         return bool(params["render.texture"]) and self.photo_rgba is not None
@@ -103,6 +104,24 @@ class LeafView:
         if self.photo_tint and pig is not None and self.pigments0 is not None:
             return rgb, np.clip(tint_for_texture(pig, self.pigments0, params)[T], 0.0, 4.0)
         return rgb, np.ones_like(rgb)
+
+    def vein_colours(self, state: State, params):
+        """(nT, 3) linear RGB of the vein tissue at each layer-T particle, or None.
+
+        A drawn vein is the vein itself, not the blade under it: the pigment model's colour of
+        pure vein tissue (m̂ = 1: ``colour.vein_pallor`` less chlorophyll, ``colour.vein_browning``
+        less browning), so a fresh leaf's veins are paler green and a dried leaf's a paler tan,
+        as the parameters say.  None (the veins take the blade's colour under them) without
+        pigments and wherever the photo is drawn or gives the young colour: there the model's
+        veins lie on the photo's own and take its colour (docs/method.md §7)."""
+        from leafsim.appearance.reflectance import pigments_to_rgb
+
+        pig = state.pigments
+        if pig is None or self.use_texture(params) or (self.photo_colour and self.pigments0 is not None):
+            return None
+        if self._pure_vein is None or len(self._pure_vein) != pig.n:
+            self._pure_vein = np.ones(pig.n, np.float32)
+        return pigments_to_rgb(pig, params, vein=self._pure_vein)[self.T]
 
     def _photo_colours(self, pig, params):
         from leafsim.appearance.reflectance import pigments_to_rgb
@@ -178,6 +197,7 @@ class LeafView:
             texture_rgba=self.photo_rgba if self.use_texture(params) else None,
             tint=tint,
             chroma=self.chroma(state, params),
+            vein_colours=self.vein_colours(state, params),
             vein_lines=veins,
             springs=remap[m.spring_ij].astype(np.int32),
             spring_kind=kind_map[m.spring_type],
@@ -195,6 +215,9 @@ class LeafView:
         chroma = self.chroma(state, params)
         if chroma is not None:
             out["chroma"] = chroma
+        vein = self.vein_colours(state, params)
+        if vein is not None:
+            out["vein_colours"] = vein
         return out
 
 

@@ -37,8 +37,6 @@ TEXTURES = ("colours", "photo")
 #: the ageing factor on a photo texture is clipped to this (a green pixel needs × 10 and more
 #: to turn red; the app's photo albedo clips at 64)
 MAX_AGEING = 64.0
-#: veins are drawn this much lighter than the blade under them (multiplier of the albedo)
-VEIN_LIGHTEN = 1.35
 #: largest photo side embedded as a texture (pixels)
 TEXTURE_MAX = 1024
 
@@ -103,7 +101,8 @@ def blade_surface(model, state, T, remap, layers, uv, col) -> tuple[Surface, np.
 
 def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray, uv, col) -> Surface | None:
     """Flat ribbons of the vein widths on the upper surface ``top`` (nT, 3) with normals ``n``;
-    2 vertices per vein point, 2 triangles per segment.  None when the model has no veins."""
+    2 vertices per vein point, 2 triangles per segment, coloured ``col`` (nT, 3) (the vein
+    tissue's own albedo, as the renderer draws it).  None when the model has no veins."""
     pos, nrm, tris, uvs, cols = [], [], [], [], []
     base = 0
     lift = 0.02 * model.thickness
@@ -125,7 +124,7 @@ def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray
         if uv is not None:
             uvs.append(np.concatenate([uv[i], uv[i]]))
         if col is not None:
-            cols.append(np.concatenate([col[i], col[i]]) * VEIN_LIGHTEN)
+            cols.append(np.concatenate([col[i], col[i]]))
         base += 2 * k
     if not pos:
         return None
@@ -174,7 +173,8 @@ class MeshSource:
         blade, top, n = blade_surface(self.model, state, self.view.T, self.view.remap, self.layers, self.uv, col)
         out = {"blade": blade}
         if self.veins:
-            v = vein_surface(self.model, self.view.remap, top, n, self.uv, col)
+            vcol = None if col is None else self.view.vein_colours(state, self.params)
+            v = vein_surface(self.model, self.view.remap, top, n, self.uv, col if vcol is None else np.asarray(vcol, np.float64))
             if v is not None:
                 out["veins"] = v
         if self.texture == "photo":  # the ageing as a factor on the photo, per vertex of each surface

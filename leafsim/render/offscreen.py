@@ -79,7 +79,8 @@ class OffscreenRenderer:
             m = mesh_or_update
             self.renderer.update(m.positions, colours=getattr(m, "colours", None),
                                  scalar=getattr(m, "scalars", None) or None, tint=getattr(m, "tint", None),
-                                 top_positions=getattr(m, "top_positions", None), chroma=getattr(m, "chroma", None))
+                                 top_positions=getattr(m, "top_positions", None), chroma=getattr(m, "chroma", None),
+                                 vein_colours=getattr(m, "vein_colours", None))
         else:
             self.renderer.populate(mesh_or_update)
             self._mesh = mesh_or_update

@@ -45,8 +45,10 @@ class RenderOptions:
         Blinn-Phong highlight strength and exponent.
     vein_colours : tuple of (3,) float
         Per vein order (0 main, 1 lateral, 2 sublateral, 3+ tertiary): a multiplier of the
-        blade albedo under the vein (>1 = lighter veins), or absolute linear RGB when
-        ``vein_absolute``.
+        vein's albedo (the vein tissue's own colour from the pigments when the mesh carries
+        ``vein_colours``, else the blade's under it), or absolute linear RGB when
+        ``vein_absolute``.  Ones by default: the veins' colour is the pigment model's, not painted
+        (a fixed × 1.7 made a dried tan leaf's veins and stalk glow orange).
     vein_absolute : bool
         Interpret ``vein_colours`` as absolute linear RGB.
     vein_width_scale : float
@@ -90,7 +92,7 @@ class RenderOptions:
     translucency: float = 0.65
     specular: float = 0.25
     shininess: float = 40.0
-    vein_colours: tuple = ((1.7, 1.6, 1.05), (1.5, 1.45, 1.05), (1.3, 1.28, 1.0), (1.15, 1.13, 1.0))
+    vein_colours: tuple = ((1.0, 1.0, 1.0),) * 4
     vein_absolute: bool = False
     vein_width_scale: float = 1.0
     vein_min_px: float = 1.0

@@ -170,6 +170,8 @@ class Renderer:
         tint = getattr(mesh, "tint", None)
         self.colours = np.ascontiguousarray(colours, dtype=np.float32).copy()
         self.tint = np.ones((n, 3), np.float32) if tint is None else np.ascontiguousarray(tint, dtype=np.float32).copy()
+        vein_col = getattr(mesh, "vein_colours", None)
+        self.vein_col = None if vein_col is None else np.ascontiguousarray(vein_col, dtype=np.float32).copy()
         chroma = getattr(mesh, "chroma", None)
         self.chroma = np.tile(NO_CHROMA, (n, 1)) if chroma is None else np.ascontiguousarray(chroma, dtype=np.float32).copy()
         uv = getattr(mesh, "texcoords", None)
@@ -223,7 +225,7 @@ class Renderer:
         self.veins = VeinRibbons(getattr(mesh, "vein_lines", None), n, uv if self.has_uv else None)
         if self.veins.count:
             self.vbo_vein_dyn = self._buf(self.veins.frame(self.pos, self.nrm), dynamic=True)
-            self.vbo_vein_base = self._buf(self.veins.base_colours(self.colours, self.tint, self.chroma), dynamic=True)
+            self.vbo_vein_base = self._buf(self.veins.base_colours(self._vein_albedo(), self.tint, self.chroma), dynamic=True)
             self.vbo_vein_static = self._buf(self.veins.static)
             self.ibo_vein = self._buf(self.veins.indices)
             self._specs["vein"] = ([
@@ -268,7 +270,8 @@ class Renderer:
                 self.tex_mean = tuple(float(x) for x in lin.mean(axis=0))
 
     # --- per frame ------------------------------------------------------------------------
-    def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None, chroma=None) -> None:
+    def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None, chroma=None,
+               vein_colours=None) -> None:
         """Write new per-frame data into the GL buffers.
 
         Parameters
@@ -286,13 +289,16 @@ class Renderer:
         chroma : (n, 4) float, optional
             The "detail" albedo's young chromaticity and living weight per vertex
             (:class:`~leafsim.appearance.mesh.RenderMesh`).
+        vein_colours : (n, 3) float, optional
+            Linear RGB albedo of the vein tissue per vertex (a mesh populated without them
+            keeps drawing its veins in the blade's albedo).
         """
         if self.mesh is None:
             raise LeafsimError("renderer: update() before populate()")
         pos = np.asarray(positions)
         if pos.shape != (self.n, 3):
             raise LeafsimError(f"renderer: positions must be ({self.n}, 3), got {pos.shape}")
-        for name, a in (("colours", colours), ("tint", tint)):
+        for name, a in (("colours", colours), ("tint", tint), ("vein_colours", vein_colours)):
             if a is not None and (np.shape(a) != (self.n, 3) or not np.all(np.isfinite(a))):
                 raise LeafsimError(f"renderer: {name} must be finite, ({self.n}, 3), got {np.shape(a)}")
         c = None if chroma is None else np.asarray(chroma, dtype=np.float32)
@@ -316,6 +322,9 @@ class Renderer:
             self.chroma[:] = c
             self.vbo_chroma.write(self.chroma)
             recolour = True
+        if vein_colours is not None and self.vein_col is not None:
+            self.vein_col[:] = vein_colours
+            recolour = True
         if scalar is not None:
             for k, v in scalar.items():
                 v = np.asarray(v, dtype=np.float32)
@@ -328,9 +337,13 @@ class Renderer:
         if self.veins.count:
             self.vbo_vein_dyn.write(self.veins.frame(self.pos, self.nrm))
             if recolour:
-                self.vbo_vein_base.write(self.veins.base_colours(self.colours, self.tint, self.chroma))
+                self.vbo_vein_base.write(self.veins.base_colours(self._vein_albedo(), self.tint, self.chroma))
         self._dirty_particles = self._dirty_springs = True
         self._geometry += 1
+
+    def _vein_albedo(self) -> np.ndarray:
+        """The albedo the vein ribbons start from: the vein tissue's own, else the blade's."""
+        return self.colours if self.vein_col is None else self.vein_col
 
     def _bounds(self):
         self.lo, self.hi = bounds(self.pos)

@@ -103,3 +103,39 @@ def test_photo_detail_follows_the_living_tissue():
         photo = species_photo_rgba(sp2, p2) if sp2.image is not None else None
         v2 = LeafView(m2, photo, s2.pigments.copy(), photo_tint=False, photo_colour=sp2.photo_colour)
         assert v2.chroma(s2, p2) is None and "chroma" not in v2.update(s2, p2)
+
+
+def test_drawn_veins_take_the_vein_tissues_own_colour():
+    """A drawn vein is vein tissue (docs/method.md §7): the pigment model's colour at m̂ = 1,
+    paler green than the lamina while fresh (``colour.vein_pallor``), paler than the browned
+    lamina when dried (``colour.vein_browning``), and the lamina's colour when both are 0; a
+    photo drawn as the albedo keeps its own veins' colour (None)."""
+    sp = get_species("maple")
+    params = sp.params.with_overrides(COARSE)
+    _, _, model = build_leaf(sp, params, seed=0)
+    sim = Simulator(model, params, effects=("osmosis", "colour"), seed=0)
+    st = sim.state()
+    view = LeafView(model, None, photo_tint=False)
+    lum = np.float32([0.2126, 0.7152, 0.0722])
+    lamina = np.asarray(st.pigments.vein)[view.T] < 0.05  # the thinnest lamina
+    fresh_blade, _ = view.colours(st, params)
+    fresh_vein = view.vein_colours(st, params)
+    assert fresh_vein.shape == fresh_blade.shape and np.isfinite(fresh_vein).all()
+    assert (fresh_vein @ lum)[lamina].mean() > 1.1 * (fresh_blade @ lum)[lamina].mean()  # paler
+    assert np.median(fresh_vein[:, 1] / fresh_vein[:, 0]) > 1.2  # still green
+    run = Run(model, simulator=sim, state=st, name="maple")
+    w0 = float(model.particle_water0.sum())
+    for _ in run.frames(until=lambda s: float(s.particle_water.sum()) <= 0.02 * w0):
+        pass
+    dry_blade, _ = view.colours(run.state, params)
+    dry_vein = view.vein_colours(run.state, params)
+    assert params["colour.vein_browning"] > 0
+    assert (dry_vein @ lum)[lamina].mean() > 1.05 * (dry_blade @ lum)[lamina].mean()  # browned less
+    same = params.with_overrides({"colour.vein_pallor": 0.0, "colour.vein_browning": 0.0})
+    np.testing.assert_allclose(view.vein_colours(run.state, same), view.colours(run.state, same)[0][:, :3], rtol=1e-6)
+    photo = get_species("oak")
+    p_oak = photo.params.with_overrides(COARSE)
+    _, _, m_oak = build_leaf(photo, p_oak, seed=0)
+    st_oak = Simulator(m_oak, p_oak, effects=("colour",), seed=0).state()
+    v_oak = LeafView(m_oak, species_photo_rgba(photo, p_oak), st_oak.pigments.copy(), photo_colour=photo.photo_colour)
+    assert v_oak.vein_colours(st_oak, p_oak) is None

@@ -249,28 +249,29 @@ def test_cli_export_animation_and_bad_input(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["chestnut.glb"]
 
 
-@pytest.mark.parametrize("frames", [0, 80])
-def test_an_exported_glb_renders_like_the_app(tmp_path, frames):
+@pytest.mark.parametrize("key, frames", [("oak", 0), ("oak", 80), ("maple", 80)])
+def test_an_exported_glb_renders_like_the_app(tmp_path, key, frames):
     """The exported glb drawn as glTF viewers draw it (double-sided, back faces lit with the
     flipped normal) against the app's own renderer on the same state, both from above: the
     same colour (mean chromaticity within 0.01, young and aged) and the same silhouette; the
-    veins render lighter than the blade under them, never dark (a vein wound against its
-    normals rendered black in Blender)."""
+    veins never render darker than the blade under them (a vein wound against its normals
+    rendered black in Blender).  A drawn leaf's veins carry the vein tissue's own colour, paler
+    than the browning lamina; a photo leaf's the blade's colour under them (its photo's veins)."""
     from helpers.gltf_render import render_top
     from leafsim.render.camera import OrbitCamera
     from leafsim.render.offscreen import OffscreenRenderer
     from leafsim.render.options import RenderOptions
 
-    sp = get_species("oak")
+    sp = get_species(key)
     params = sp.params.with_overrides({"mesh.spacing": 0.06, "colour.age_rate": 5.0})
     _, _, model = build_leaf(sp, params, 0)
     sim = Simulator(model, params, seed=0)
     st = sim.state()
     for _ in range(frames):
         sim.step(st)
-    photo = load_photo_rgba(sp.image)
+    photo = load_photo_rgba(sp.image) if sp.image is not None else None
     view = LeafView(model, photo, sim.state().pigments, photo_tint=False, photo_colour=sp.photo_colour)
-    path = tmp_path / "oak.glb"
+    path = tmp_path / f"{key}.glb"
     export_mesh(model, st, path, params=params, view=view, veins=True)
     glb, blade_only = render_top(path), render_top(path, only={"blade"})
     mesh = view.mesh(st, params)
@@ -287,9 +288,12 @@ def test_an_exported_glb_renders_like_the_app(tmp_path, frames):
     (cg, ag), (ca, aa) = chroma(blade_only), chroma(app)
     assert np.abs(cg - ca).max() < 0.01, (cg, ca)
     assert abs(ag - aa) < 0.25 * aa  # the same leaf fills about the same share of the picture
-    vein = np.abs(glb.astype(int) - blade_only).sum(-1) > 6
-    assert vein.sum() > 300
-    assert glb[vein].astype(float).mean() > blade_only[vein].astype(float).mean()  # lighter, not black
+    darker = (blade_only.astype(int) - glb).sum(-1) > 6
+    assert darker.sum() < 0.001 * darker.size, darker.sum()  # never black
+    if sp.image is None:
+        vein = np.abs(glb.astype(int) - blade_only).sum(-1) > 6
+        assert vein.sum() > 300
+        assert glb[vein].astype(float).mean() > blade_only[vein].astype(float).mean()  # paler than the lamina
 
 
 def test_the_exported_photo_has_no_background_at_or_past_the_margin(leaf, tmp_path):

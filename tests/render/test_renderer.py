@@ -468,3 +468,42 @@ def test_texture_fringe_takes_the_colour_further_in():
     assert not (out[fringe, 0] > 100).any() and not (out[~inside, 0] > 100).any()
     # a fringe texel takes a clean texel's colour from just inside it (green 60 + 8 r, r ≈ 12–13)
     assert np.abs(out[ring, 1].astype(int) - int(60 + 8 * 12.5)).max() <= 12
+
+
+def test_veins_seen_edge_on_stay_whole_lines(off, leaf):
+    """A vein is a rod: seen edge-on (the blade from its side, as a stalk lying on the ground
+    is seen from a low camera) it is as wide as seen from above and drawn whole.  The ribbon
+    used to lie in the blade's tangent plane, so it vanished edge-on and broke into dots."""
+    cam = OrbitCamera(yaw=0.0, pitch=1.0, distance=0.3, target=np.array([0.0, B, 0.0]), fov=30.0)
+    opts = dict(shadows=False, ground=False)
+    with_v = off.render_array(leaf, cam, RenderOptions(**opts)).astype(int)
+    without = off.render_array(leaf, cam, RenderOptions(veins=False, **opts)).astype(int)
+    diff = np.abs(with_v - without).sum(-1)
+    px_per_m = H / (2 * cam.distance * math.tan(math.radians(cam.fov) / 2))
+    cols = [int(W / 2 + s * (y - B) * px_per_m) for y in np.linspace(0.01, 0.09, 40) for s in (1,)]
+    seen = [diff[:, c].max() for c in cols]
+    assert min(seen) > 40, seen  # every column along the midrib shows the vein
+
+
+def test_veins_drawn_in_the_vein_colours_the_mesh_carries(off, leaf):
+    """``vein_colours`` colour the ribbons (the vein tissue's own albedo), not the blade."""
+    import dataclasses
+
+    red = dataclasses.replace(leaf, vein_colours=np.tile(np.float32([0.6, 0.05, 0.05]), (leaf.vertex_count, 1)))
+    img = render(off, red, shadows=False).astype(int)
+    plain = render(off, leaf, shadows=False).astype(int)
+    cam = top_camera()
+    px_per_m = H / (2 * cam.distance * math.tan(math.radians(cam.fov) / 2))
+    rows = [int(H / 2 - (y - B) * px_per_m) for y in np.linspace(0.02, 0.08, 12)]
+    mid = np.array([img[r, W // 2] for r in rows])
+    was = np.array([plain[r, W // 2] for r in rows])
+    assert (was[:, 1] > was[:, 0]).all(), was  # the blade's colour under the vein: green
+    assert (mid[:, 0] - mid[:, 1] > was[:, 0] - was[:, 1] + 40).all(), mid  # red veins (thinner to the apex)
+    assert (mid[:6, 0] > mid[:6, 1] + 40).all(), mid  # fully red where the midrib is a few pixels wide
+    changed = (img != plain).any(-1)
+    assert 0 < changed.mean() < 0.03  # only the veins' pixels: the blade keeps its colour
+    assert (img[changed][:, 0] - img[changed][:, 1] > plain[changed][:, 0] - plain[changed][:, 1]).mean() > 0.95
+    # an update carries them too
+    off.render_array(leaf, cam, RenderOptions(shadows=False))
+    upd = off.render_array({"positions": leaf.positions, "vein_colours": red.vein_colours}, cam, RenderOptions(shadows=False))
+    assert np.array_equal(upd, plain)  # a mesh populated without vein colours keeps the blade's
