@@ -143,6 +143,10 @@ def load_view(path: Path) -> dict:
         raise bad("triangles", f"is {tri.shape}, expected (t, 3) indices into the {m} positions")
     if col.shape != (m, 3) or col.min() < 0.0 or col.max() > 1.0:
         raise bad("colours", f"is {col.shape}, expected ({m}, 3) linear RGB in [0, 1]")
+    vc = v.get("vein_colours")  # optional: a leaf finished before 6 December has none
+    if vc is not None and (vc.dtype.kind != "f" or vc.shape != (m, 3) or not np.isfinite(vc).all()
+                           or vc.min() < 0.0 or vc.max() > 1.0):
+        raise bad("vein_colours", f"is {vc.dtype} {vc.shape}, expected ({m}, 3) linear RGB in [0, 1]")
     vi, vs, vw, vo = v["vein_index"], v["vein_start"], v["vein_width"], v["vein_order"]
     if vi.ndim != 1 or (len(vi) and (vi.min() < 0 or vi.max() >= m)):
         raise bad("vein_index", f"is not a list of indices into the {m} positions")
@@ -210,13 +214,17 @@ def state_arrays(model: Model, state: State) -> dict:
 
 def view_arrays(model: Model, state: State, params) -> dict:
     """What a scene composition draws of one leaf (``view.npz``): layer-T positions, triangles,
-    linear RGB colours from the pigments, and the veins as flat index/width/order arrays."""
+    linear RGB colours from the pigments, the vein tissue's own (:meth:`LeafView.vein_colours`),
+    and the veins as flat index/width/order arrays."""
     v = LeafView(model)
     rgb, _ = v.colours(state, params)
+    vein_rgb = v.vein_colours(state, params)
     lines = model.vein_polylines()
     idx = [v.remap[i] for i, _, _ in lines]
     return {"positions": state.particle_q[v.T], "triangles": v.remap[model.tri_T].astype(np.int32),
-            "colours": np.asarray(rgb, np.float32), "thickness": np.float64(model.thickness),
+            "colours": np.asarray(rgb, np.float32),
+            "vein_colours": np.asarray(rgb if vein_rgb is None else vein_rgb, np.float32),
+            "thickness": np.float64(model.thickness),
             "length": np.float64(model.length),
             "vein_index": np.concatenate(idx) if idx else np.zeros(0, np.int64),
             "vein_width": np.concatenate([w for _, w, _ in lines]) if lines else np.zeros(0),

@@ -149,17 +149,19 @@ def _floor(layout, seed, views):
 def merge_views(views: dict, placed: dict) -> RenderMesh:
     """One RenderMesh of every placed leaf (``views``: name → ``view.npz`` arrays;
     ``placed``: :func:`leafsim.scene.placement.place` output)."""
-    pos, tri, col, veins = [], [], [], []
+    pos, tri, col, vcol, veins = [], [], [], [], []
     base = 0
     for leaf in placed["leaves"]:
         v = views[leaf["name"]]
         pos.append(transformed(v, leaf))
         tri.append(v["triangles"] + base)
         col.append(v["colours"])
+        vcol.append(v.get("vein_colours", v["colours"]))  # a leaf finished before they were kept
         s = v["vein_start"]
         for k in range(len(v["vein_order"])):
             a, b = s[k], s[k + 1]
             veins.append((v["vein_index"][a:b] + base, v["vein_width"][a:b], int(v["vein_order"][k])))
         base += len(v["positions"])
     return RenderMesh(positions=np.concatenate(pos).astype(np.float32), triangles=np.concatenate(tri).astype(np.int32),
-                      colours=np.concatenate(col).astype(np.float32), vein_lines=veins)
+                      colours=np.concatenate(col).astype(np.float32),
+                      vein_colours=np.concatenate(vcol).astype(np.float32), vein_lines=veins)

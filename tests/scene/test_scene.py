@@ -102,6 +102,15 @@ def test_damaged_files_of_a_finished_leaf_make_a_rerun_simulate_it_again(one_wor
     with open(tmp_path / "far.npz", "wb") as f:
         np.savez(f, **far)
     load_view(tmp_path / "far.npz")
+    assert far["vein_colours"].shape == far["colours"].shape  # the veins' own colour is kept
+    old = {k: x for k, x in far.items() if k != "vein_colours"}  # a leaf finished before it was
+    with open(tmp_path / "old.npz", "wb") as f:
+        np.savez(f, **old)
+    load_view(tmp_path / "old.npz")
+    with open(tmp_path / "badvein.npz", "wb") as f:
+        np.savez(f, **{**far, "vein_colours": far["vein_colours"][:-1]})
+    with pytest.raises(LeafsimError, match="array 'vein_colours'"):
+        load_view(tmp_path / "badvein.npz")
     for damage in ("junk view", "nan positions", "no triangles", "bad index", "nan water", "string frames"):
         out = tmp_path / damage.replace(" ", "_")
         shutil.copytree(out1, out)
