@@ -187,7 +187,29 @@ def cmd_run(args):
     if outputs.frames is not None and run.state.frame % args.every:
         outputs.frames.write(run.state.frame, run.state)  # the last frame too (where --until stopped)
     rep = run_report(sp, params, args, run, stats, start, build_s, sim_s, outputs.frames)
-    emit(args, rep, json.dumps(rep, indent=1, sort_keys=True))
+    emit(args, rep, run_text(rep, out, ck if args.checkpoint_every else None))
+
+
+def run_text(rep: dict, out: Path | None, ck: Path | None) -> str:
+    """The few lines a person reads after ``leafsim run`` (``--json`` gives every number)."""
+    stalk = rep.get("petiole_water_fraction")
+    lines = [f"{rep['species']}, seed {rep['seed']}: frame {rep['frame']} ({rep['frames']} frames run"
+             + (f", resumed from {rep['resumed_from']}" if rep["resumed_from"] else "") + "), "
+             f"{100 * rep['water_fraction']:.1f} % of the blade's water left"
+             + (f" (stalk {100 * stalk:.0f} %)" if stalk is not None else "") + "; "
+             f"{rep['build_s']:.1f} s building, {rep['sim_s']:.1f} s simulating ({rep['ms_per_frame_median']:.1f} ms a frame, median)",
+             f"shape: 3D area kept {100 * rep['shape_area_ratio']:.1f} %, margin lift {rep['shape_margin_lift']:.3f} L, "
+             f"margin roll {rep.get('shape_margin_roll_deg', 0.0):.0f}°, midrib fold {rep.get('shape_midrib_fold_deg', 0.0):.0f}°"
+             + (f", {rep['shape_inverted']} inverted triangles" if rep.get("shape_inverted") else "")]
+    wrote = [str(out / "final.npz")] if out is not None else []
+    if ck is not None:
+        wrote.append(str(ck))
+    if rep["png_frames"]:
+        wrote.append(f"{rep['png_frames']} frame pictures in {out}")
+    if wrote:
+        lines.append("wrote " + ", ".join(wrote))
+    lines.append("(every number: --json)")
+    return "\n".join(lines)
 
 
 def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames, check_nan: bool = True) -> dict:
