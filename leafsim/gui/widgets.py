@@ -25,6 +25,10 @@ def reset_drawn() -> None:
     DRAWN.clear()
 
 
+#: narrowest parameter widget [px] when a group's labels are long
+MIN_WIDGET_PX = 110.0
+
+
 def widget_label(p: Param) -> str:
     """Visible label (short name + unit) with the dotted name as the imgui ID."""
     short = p.name.split(".", 1)[1] if "." in p.name else p.name
@@ -108,6 +112,11 @@ def params_panel(params: ParamSet, built: ParamSet | None = None, open_groups: t
         imgui.set_next_item_open(g in open_groups, imgui.Cond_.once)
         if not imgui.collapsing_header(f"{g}{'  (rebuild)' if rebuild else ''}###group {g}"):
             continue
+        # every label of the group whole beside its widget ("evaporation_bottom [kg/(m²·s)]" was
+        # cut at the panel's edge); the widgets keep at least MIN_WIDGET_PX
+        label_px = max(imgui.calc_text_size(widget_label(p).split("###")[0]).x for p in plist)
+        gap = imgui.get_style().item_inner_spacing.x + 2.0
+        imgui.push_item_width(max(imgui.get_content_region_avail().x - label_px - gap, MIN_WIDGET_PX))
         for p in plist:
             staged = p.rebuild and built is not None and params[p.name] != built[p.name]
             if staged:
@@ -117,4 +126,5 @@ def params_panel(params: ParamSet, built: ParamSet | None = None, open_groups: t
                 imgui.pop_style_color()
             if ch:
                 changes[p.name] = v
+        imgui.pop_item_width()
     return changes
