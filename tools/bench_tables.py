@@ -1,8 +1,10 @@
-"""Markdown tables of a ``leafsim bench --json`` result (docs/performance.md, README).
+"""Markdown tables of a ``leafsim bench --json`` result (docs/performance.md).
 
     .venv/bin/leafsim bench --json > docs/bench.json
     python tools/bench_tables.py docs/bench.json            # every table
-    python tools/bench_tables.py docs/bench.json --readme   # the README's summary table
+    python tools/bench_tables.py docs/bench.json --readme   # the summary table (docs/performance.md, "Summary")
+
+The summary table was the top-level README's until 6 December; the flag keeps its name.
 """
 
 from __future__ import annotations
@@ -126,7 +128,8 @@ def readme_table(res: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("bench_json", type=Path)
-    ap.add_argument("--readme", action="store_true")
+    ap.add_argument("--readme", action="store_true",
+                    help="print only the summary table (docs/performance.md, section Summary)")
     a = ap.parse_args(argv)
     res = json.loads(a.bench_json.read_text())
     missing = [s for s in SIZES if s not in res] + [f"{s}: {k}" for s in SIZES if s in res

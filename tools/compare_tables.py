@@ -1,5 +1,7 @@
-"""The markdown tables of docs/compare/README.md and README.md from the saved `leafsim compare
---json` outputs (docs/compare/KEY.json), so the docs quote exactly what the command measured.
+"""The markdown tables of docs/compare/README.md from the saved `leafsim compare --json` outputs
+(docs/compare/KEY.json), so the docs quote exactly what the command measured. The last table
+printed is the summary (docs/compare/README.md, section "Summary"; the top-level README quoted
+it until 6 December); the others go under its "Numbers".
 
     .venv/bin/python tools/compare_tables.py [docs/compare]
 """

@@ -4,7 +4,11 @@ and save a top/side picture per species into docs/drying/.
 
     .venv/bin/python tools/drying_report.py [--species a,b] [--scenes ground,free] [--json FILE]
         [--set KEY=VALUE ...] [--pictures DIR]
-    .venv/bin/python tools/drying_report.py --render docs/drying/curl.json   # the README tables
+    .venv/bin/python tools/drying_report.py --render docs/drying/curl.json   # the tables of docs/drying/README.md
+
+Each leaf dries until less than 2 % of its water is left, then settles to 1.15 × that time, so
+"frames" ("frames to dry") counts to the end of the settling: maple 3063, where
+`leafsim run --until dry` and the GUI's "Dry to end" stop at 2 % water (frame 2663).
 """
 
 from __future__ import annotations
@@ -102,8 +106,10 @@ def _pct(x) -> str:
 
 
 def render(rows: list) -> str:
-    """The two markdown tables made from a report: README's (ground, with the free lift) and
-    docs/drying/README.md's (both scenes), plus the ranges the text quotes."""
+    """The markdown tables made from a report, all in docs/drying/README.md: the summary (ground,
+    with the free lift; its section "Summary", which the top-level README quoted until
+    6 December), every measure in both scenes, and the dried shape's measures; plus the ranges
+    the text quotes."""
     rows = [r for r in rows if not r.get("seed")]  # the tables are the seed-0 leaves'
     by = {(r["species"], r["scene"]): r for r in rows}
     keys = list(dict.fromkeys(r["species"] for r in rows))
