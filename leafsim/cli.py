@@ -91,8 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("gui", help="interactive application (default)")
     _common(g)
     g.add_argument("--frames", type=_int, default=None, metavar="N",
-                   help="simulate to frame N as fast as possible, draw it and exit (scripted screenshots: the same "
-                        "picture on any machine)")
+                   help="simulate to frame N as fast as possible, draw it and exit (scripted screenshots: the "
+                        "simulation is bit-identical on any machine, the picture nearly so)")
     g.add_argument("--until", default=None, metavar="dry",
                    help="dry the leaf to the end as fast as possible (the 'Dry to end' button), draw it and exit")
     g.add_argument("--window-frames", type=_int, default=None, metavar="N",

@@ -87,7 +87,7 @@ class LeafApp:
     ----------
     session : Session (may still be building).
     frames : simulate to this frame as fast as possible, draw it, then exit (scripted runs:
-        the same picture on any machine).
+        the simulation is bit-identical on any machine, the picture nearly so).
     window_frames : exit after this many window frames drawn with the leaf (playing; timing).
     play : start playing.
     window_size : (w, h) pixels.
