@@ -47,7 +47,10 @@ void main() {
     float dist = abs(v_v) * v_hd;                   // pixels from the centre line
     float cover = clamp(v_target - dist + 0.5, 0.0, 1.0) * v_alpha;
     if (cover <= 0.0) discard;
-    float a = clamp(dist / max(v_target, 1e-3), 0.0, 1.0);
+    // the rounded cross-section only where the vein is wide enough on screen to show it: on a
+    // vein one or two pixels wide the bent normals lit alternate pixels light and dark along
+    // the line, which read as stitches
+    float a = clamp(dist / max(v_target, 1e-3), 0.0, 1.0) * clamp(v_target - 1.0, 0.0, 1.0);
     // rounded cross-section: bend the normal towards the sides
     vec3 N = normalize(normalize(v_nrm) * sqrt(max(1.0 - a * a, 0.0)) * 1.3 + normalize(v_side) * sign(v_v) * a);
 #if LS_TEX == 2
