@@ -102,8 +102,9 @@ class LeafApp:
         self.window_size = tuple(int(v) for v in window_size)
         self.title = title
         self.view = "shaded"
-        self.export_dir = str(Path.cwd() / "frames")
-        self.preset_path = str(Path.cwd() / "leafsim_params.json")
+        # relative to the folder the app was started in: short enough to read in the field
+        self.export_dir = "frames"
+        self.preset_path = "leafsim_params.json"
         self.record_every = 1
         self.take: Path | None = None     # folder of the take being recorded
         self.recorded = 0
