@@ -11,10 +11,11 @@ in float v_target;
 in vec3 v_base;
 in vec3 v_tint;
 in vec4 v_chroma;
+in vec3 v_vein;
 in vec2 v_uv;
 flat in int v_order;
 
-// Compile-time switches (see blade.frag): LS_TEX 1 = albedo from the photo (else v_base),
+// Compile-time switches (see blade.frag): LS_TEX 1 = albedo from the photo (else v_vein),
 // LS_CUTOUT 1 = photo mask cut-out, LS_SHADOW 1 = self-shadowing.
 #ifndef LS_TEX
 #define LS_TEX 0
@@ -63,7 +64,7 @@ void main() {
 #endif
     vec3 base = t.rgb * v_tint;
 #else
-    vec3 base = v_base;
+    vec3 base = v_vein;   // vertex colours: the vein tissue's own
 #endif
     vec3 vc = u_vein_cols[clamp(v_order, 0, 3)];
 #if LS_TEX

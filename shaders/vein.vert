@@ -8,6 +8,7 @@ in float in_v;        // -1 or +1
 in vec3 in_base;      // blade albedo under the vein (linear colour x tint)
 in vec3 in_tint;      // tint alone (multiplies the photo)
 in vec4 in_chroma;    // detail albedo: young chromaticity under the vein, living weight
+in vec3 in_vein;      // the vein tissue's own albedo (linear colour x tint): the vertex-colour albedo's
 in vec2 in_uv;
 in float in_order;
 
@@ -17,6 +18,7 @@ uniform vec2 u_viewport;
 uniform float u_lift;       // offset along the normal towards the viewer, metres
 uniform float u_min_px;     // minimum full width on screen, pixels
 uniform float u_width_scale;
+uniform float u_pull_max;   // the most the depth test pulls a ribbon toward the eye beyond its half width, metres
 
 out vec3 v_pos;
 out vec3 v_nrm;
@@ -28,6 +30,7 @@ out float v_target;
 out vec3 v_base;
 out vec3 v_tint;
 out vec4 v_chroma;
+out vec3 v_vein;
 out vec2 v_uv;
 flat out int v_order;
 
@@ -43,8 +46,7 @@ void main() {
     vec3 t = cross(in_side, in_nrm);
     vec3 e = cross(t, V);
     float le = length(e);
-    e = le > 1e-6 * length(V) ? e / le : in_side;
-    if (dot(e, in_side) < 0.0) e = -e;
+    e = le > 1e-6 * length(V) ? e / le : in_side;   // t runs along the polyline, so e turns smoothly
     vec3 m = normalize(cross(e, t));                 // the rod's normal facing the viewer
     if (dot(m, V) < 0.0) m = -m;
     vec4 c0 = u_viewproj * vec4(c, 1.0);
@@ -65,15 +67,16 @@ void main() {
     v_base = in_base;
     v_tint = in_tint;
     v_chroma = in_chroma;
+    v_vein = in_vein;
     v_uv = in_uv;
     v_order = int(in_order + 0.5);
-    // Depth only: the ribbon is tested as if it lay nearer the eye by its drawn half width and
-    // two pixels, so the blade cannot cover it where the surface bulges above a straight
-    // segment between two vein points (a lobe curved across a 2.4 mm segment sags 0.07 mm,
-    // more than the lift: the veins broke into dashes).  Its pixels stay where they are.
+    // Depth only: the ribbon is tested as if it lay nearer the eye by half its width and two
+    // pixels, at most u_pull_max, so the blade cannot cover it where the surface bulges above
+    // a straight segment between two vein points (a lobe curved across a 2.4 mm segment sags
+    // 0.07 mm, more than the lift: the veins broke into dashes).  Its pixels stay where they
+    // are, and a surface more than that far in front still hides it (a leaf lying on another).
     vec4 clip = u_viewproj * vec4(p, 1.0);
-    float pull = u_lift + hw * scale + 2.0 * hw / max(px, 1e-6);
-    pull = min(pull, u_lift + 61.0 * hw);
+    float pull = u_lift + 0.5 * hw + min(2.0 * hw / max(px, 1e-6), u_pull_max);
     vec4 near = u_viewproj * vec4(p + normalize(u_eye - p) * pull, 1.0);
     gl_Position = vec4(clip.xy, near.z / near.w * clip.w, clip.w);
 }

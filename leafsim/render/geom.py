@@ -230,7 +230,7 @@ class VeinRibbons:
         static[:, :, 4] = order[:, None]
         self.static = static.reshape(-1, 5)
         self.dynamic = np.empty((start, 2, 9), dtype=np.float32)  # centre, side, normal
-        self.base = np.empty((start, 2, 10), dtype=np.float32)
+        self.base = np.empty((start, 2, 13), dtype=np.float32)
 
     def frame(self, pos: np.ndarray, nrm: np.ndarray) -> np.ndarray:
         """(2p, 9) float32: centre, side, normal per ribbon vertex."""
@@ -246,10 +246,14 @@ class VeinRibbons:
         d[:, :, 6:9] = n[:, None, :]
         return d.reshape(-1, 9)
 
-    def base_colours(self, colours: np.ndarray, tint: np.ndarray, chroma: np.ndarray) -> np.ndarray:
-        """(2p, 10) float32 per ribbon vertex: colour x tint, tint (linear), the detail
-        albedo's chromaticity and weight (:class:`~leafsim.appearance.mesh.RenderMesh`)."""
+    def base_colours(self, colours: np.ndarray, tint: np.ndarray, chroma: np.ndarray,
+                     vein: np.ndarray | None = None) -> np.ndarray:
+        """(2p, 13) float32 per ribbon vertex: the blade's colour x tint, tint (linear), the
+        detail albedo's chromaticity and weight (:class:`~leafsim.appearance.mesh.RenderMesh`),
+        and the vein tissue's own colour x tint (``vein``; the blade's when None), which the
+        vertex-colour albedo draws (the photo albedos draw the photo's veins under them)."""
         self.base[:, :, 0:3] = (colours[self.idx] * tint[self.idx])[:, None, :]
         self.base[:, :, 3:6] = tint[self.idx][:, None, :]
         self.base[:, :, 6:10] = chroma[self.idx][:, None, :]
-        return self.base.reshape(-1, 10)
+        self.base[:, :, 10:13] = ((colours if vein is None else vein)[self.idx] * tint[self.idx])[:, None, :]
+        return self.base.reshape(-1, 13)

@@ -21,6 +21,10 @@ from leafsim.render.geom import VeinRibbons, bounds, orient_up, unique_edges, ve
 from leafsim.render.options import BASIC_VIEWS, RenderOptions
 
 DEFAULT_COLOUR = np.array([0.10, 0.32, 0.05], dtype=np.float32)  # linear summer green
+#: the most the vein ribbons' depth test is pulled toward the eye beyond their half width [m]:
+#: twice the 0.07 mm a lobe curled to a 10 mm radius sags below a 2.4 mm chord between two vein
+#: points, and far less than the gap between two leaves lying on each other (shaders/vein.vert)
+VEIN_PULL_MAX = 1.5e-4
 GL_SRGB8_ALPHA8 = 0x8C43
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)
 
@@ -225,13 +229,13 @@ class Renderer:
         self.veins = VeinRibbons(getattr(mesh, "vein_lines", None), n, uv if self.has_uv else None)
         if self.veins.count:
             self.vbo_vein_dyn = self._buf(self.veins.frame(self.pos, self.nrm), dynamic=True)
-            self.vbo_vein_base = self._buf(self.veins.base_colours(self._vein_albedo(), self.tint, self.chroma), dynamic=True)
+            self.vbo_vein_base = self._buf(self.veins.base_colours(self.colours, self.tint, self.chroma, self.vein_col), dynamic=True)
             self.vbo_vein_static = self._buf(self.veins.static)
             self.ibo_vein = self._buf(self.veins.indices)
             self._specs["vein"] = ([
                 (self.vbo_vein_dyn, "3f 3f 3f", "in_center", "in_side", "in_nrm"),
                 (self.vbo_vein_static, "1f 1f 2f 1f", "in_hw", "in_v", "in_uv", "in_order"),
-                (self.vbo_vein_base, "3f 3f 4f", "in_base", "in_tint", "in_chroma")], self.ibo_vein)
+                (self.vbo_vein_base, "3f 3f 4f 3f", "in_base", "in_tint", "in_chroma", "in_vein")], self.ibo_vein)
         self._upload_texture(getattr(mesh, "texture_rgba", None))
         self._dirty_particles = True
         self._dirty_springs = True
@@ -337,13 +341,9 @@ class Renderer:
         if self.veins.count:
             self.vbo_vein_dyn.write(self.veins.frame(self.pos, self.nrm))
             if recolour:
-                self.vbo_vein_base.write(self.veins.base_colours(self._vein_albedo(), self.tint, self.chroma))
+                self.vbo_vein_base.write(self.veins.base_colours(self.colours, self.tint, self.chroma, self.vein_col))
         self._dirty_particles = self._dirty_springs = True
         self._geometry += 1
-
-    def _vein_albedo(self) -> np.ndarray:
-        """The albedo the vein ribbons start from: the vein tissue's own, else the blade's."""
-        return self.colours if self.vein_col is None else self.vein_col
 
     def _bounds(self):
         self.lo, self.hi = bounds(self.pos)
@@ -624,6 +624,7 @@ class Renderer:
         _set(v, "u_viewproj", vp)
         _set(v, "u_viewport", (float(width), float(height)))
         _set(v, "u_lift", 3e-4 * self.radius)
+        _set(v, "u_pull_max", VEIN_PULL_MAX)
         _set(v, "u_min_px", float(opts.vein_min_px))
         _set(v, "u_width_scale", float(opts.vein_width_scale))
         _set(v, "u_absolute", int(opts.vein_absolute))
