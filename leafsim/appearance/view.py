@@ -105,23 +105,31 @@ class LeafView:
             return rgb, np.clip(tint_for_texture(pig, self.pigments0, params)[T], 0.0, 4.0)
         return rgb, np.ones_like(rgb)
 
-    def vein_colours(self, state: State, params):
-        """(nT, 3) linear RGB of the vein tissue at each layer-T particle, or None.
+    def vein_colours(self, state: State, params, blade: np.ndarray | None = None):
+        """(nT, 3) linear RGB of the vein tissue at each layer-T particle, or None without pigments.
 
         A drawn vein is the vein itself, not the blade under it: the pigment model's colour of
         pure vein tissue (m̂ = 1: ``colour.vein_pallor`` less chlorophyll, ``colour.vein_browning``
         less browning), so a fresh leaf's veins are paler green and a dried leaf's a paler tan,
-        as the parameters say.  None (the veins take the blade's colour under them) without
-        pigments and wherever the photo is drawn or gives the young colour: there the model's
-        veins lie on the photo's own and take its colour (docs/method.md §7)."""
+        as the parameters say.  A species whose young colour is its photo's gets the photo's
+        colour there (``blade``, :meth:`colours`' first array, computed when not given) times
+        the same change, pure vein tissue over the particle's tissue.  Where the photo itself is
+        drawn (the renderer's texture and detail albedos, an export's photo texture) the veins
+        take the photo's colour under them instead: the photo shows its own veins."""
         from leafsim.appearance.reflectance import pigments_to_rgb
 
         pig = state.pigments
-        if pig is None or self.use_texture(params) or (self.photo_colour and self.pigments0 is not None):
+        if pig is None:
             return None
         if self._pure_vein is None or len(self._pure_vein) != pig.n:
             self._pure_vein = np.ones(pig.n, np.float32)
-        return pigments_to_rgb(pig, params, vein=self._pure_vein)[self.T]
+        T = self.T
+        if not (self.photo_colour and self.pigments0 is not None):
+            return pigments_to_rgb(pig, params, vein=self._pure_vein)[T]
+        contents = self.photo_contents(params)
+        ratio = pigments_to_rgb(pig, params, contents, vein=self._pure_vein)[T] / np.maximum(pigments_to_rgb(pig, params, contents)[T], 1e-4)
+        blade = self.colours(state, params)[0] if blade is None else blade
+        return (np.asarray(blade, np.float32) * np.clip(ratio, 0.0, 4.0)).astype(np.float32)
 
     def _photo_colours(self, pig, params):
         from leafsim.appearance.reflectance import pigments_to_rgb
@@ -186,6 +194,7 @@ class LeafView:
         kind_map[SPRING_SURFACE], kind_map[SPRING_V] = SPRING_SURFACE_T, SPRING_SURFACE_V
         kind_map[SPRING_LINK], kind_map[SPRING_VEIN] = R_LINK, R_VEIN
         colours, tint = self.colours(state, params)
+        vein_colours = self.vein_colours(state, params, colours)
         stalk = ~m.blade_particles
         veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()
                  if not (self.blade_only and stalk[idx].any())]
@@ -197,7 +206,7 @@ class LeafView:
             texture_rgba=self.photo_rgba if self.use_texture(params) else None,
             tint=tint,
             chroma=self.chroma(state, params),
-            vein_colours=self.vein_colours(state, params),
+            vein_colours=vein_colours,
             vein_lines=veins,
             springs=remap[m.spring_ij].astype(np.int32),
             spring_kind=kind_map[m.spring_type],
@@ -215,7 +224,7 @@ class LeafView:
         chroma = self.chroma(state, params)
         if chroma is not None:
             out["chroma"] = chroma
-        vein = self.vein_colours(state, params)
+        vein = self.vein_colours(state, params, colours)
         if vein is not None:
             out["vein_colours"] = vein
         return out

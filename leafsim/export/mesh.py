@@ -173,7 +173,7 @@ class MeshSource:
         blade, top, n = blade_surface(self.model, state, self.view.T, self.view.remap, self.layers, self.uv, col)
         out = {"blade": blade}
         if self.veins:
-            vcol = None if col is None else self.view.vein_colours(state, self.params)
+            vcol = None if col is None else self.view.vein_colours(state, self.params, col)
             v = vein_surface(self.model, self.view.remap, top, n, self.uv, col if vcol is None else np.asarray(vcol, np.float64))
             if v is not None:
                 out["veins"] = v

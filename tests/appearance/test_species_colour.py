@@ -105,11 +105,16 @@ def test_photo_detail_follows_the_living_tissue():
         assert v2.chroma(s2, p2) is None and "chroma" not in v2.update(s2, p2)
 
 
+def dataclasses_replace_none(state):
+    import dataclasses
+
+    return dataclasses.replace(state, pigments=None)
+
+
 def test_drawn_veins_take_the_vein_tissues_own_colour():
     """A drawn vein is vein tissue (docs/method.md §7): the pigment model's colour at m̂ = 1,
     paler green than the lamina while fresh (``colour.vein_pallor``), paler than the browned
-    lamina when dried (``colour.vein_browning``), and the lamina's colour when both are 0; a
-    photo drawn as the albedo keeps its own veins' colour (None)."""
+    lamina when dried (``colour.vein_browning``), and the lamina's colour when both are 0."""
     sp = get_species("maple")
     params = sp.params.with_overrides(COARSE)
     _, _, model = build_leaf(sp, params, seed=0)
@@ -133,9 +138,17 @@ def test_drawn_veins_take_the_vein_tissues_own_colour():
     assert (dry_vein @ lum)[lamina].mean() > 1.05 * (dry_blade @ lum)[lamina].mean()  # browned less
     same = params.with_overrides({"colour.vein_pallor": 0.0, "colour.vein_browning": 0.0})
     np.testing.assert_allclose(view.vein_colours(run.state, same), view.colours(run.state, same)[0][:, :3], rtol=1e-6)
+    # a photo species: the photo's colour at the vein, changed as pure vein tissue differs from
+    # the particle's own (the renderer's photo albedos draw the photo's veins instead)
     photo = get_species("oak")
     p_oak = photo.params.with_overrides(COARSE)
     _, _, m_oak = build_leaf(photo, p_oak, seed=0)
     st_oak = Simulator(m_oak, p_oak, effects=("colour",), seed=0).state()
     v_oak = LeafView(m_oak, species_photo_rgba(photo, p_oak), st_oak.pigments.copy(), photo_colour=photo.photo_colour)
-    assert v_oak.vein_colours(st_oak, p_oak) is None
+    blade_oak = v_oak.colours(st_oak, p_oak)[0]
+    vein_oak = v_oak.vein_colours(st_oak, p_oak)
+    lam = np.asarray(st_oak.pigments.vein)[v_oak.T] < 0.05
+    assert (vein_oak @ lum)[lam].mean() > 1.1 * (blade_oak @ lum)[lam].mean()
+    flat = p_oak.with_overrides({"colour.vein_pallor": 0.0, "colour.vein_browning": 0.0})
+    np.testing.assert_allclose(v_oak.vein_colours(st_oak, flat), v_oak.colours(st_oak, flat)[0], rtol=1e-5)
+    assert v_oak.vein_colours(dataclasses_replace_none(st_oak), p_oak) is None  # no pigments
