@@ -36,7 +36,8 @@ missing=""
 for p in $DEB_PKGS; do
   dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"
 done
-if [ ! -x .venv/bin/python ] && ! "$PY" -c 'import ensurepip, venv' >/dev/null 2>&1; then
+venv_ok() { [ -x .venv/bin/python ] && .venv/bin/python -m pip --version >/dev/null 2>&1; }
+if ! venv_ok && ! "$PY" -c 'import ensurepip, venv' >/dev/null 2>&1; then
   missing="$missing $("$PY" -c 'import sys; print(f"python{sys.version_info[0]}.{sys.version_info[1]}-venv")')"
 fi
 if [ -n "$missing" ]; then
@@ -44,9 +45,13 @@ if [ -n "$missing" ]; then
   apt_install $missing
 fi
 
-if [ ! -x .venv/bin/python ]; then
+if ! venv_ok; then
+  # a .venv without pip is what a `python3 -m venv` leaves behind when the venv module was
+  # missing: make it again
+  [ -e .venv ] && { echo "setup: .venv has no pip; making it again"; rm -rf .venv; }
   echo "setup: creating .venv with $PY"
   "$PY" -m venv .venv
+  rm -f .venv/.leafsim-installed
 fi
 stamp=.venv/.leafsim-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then

@@ -54,7 +54,12 @@ def save_checkpoint(path, model: Model, state: State, meta: dict, carry: dict | 
     (:meth:`~leafsim.sim.simulator.Simulator.carry`).  A state that does not fit ``model`` (another
     leaf's arrays) or holds NaN is refused before anything is written: it could never be resumed,
     and it would replace the last good checkpoint."""
-    check_state(state, model, f"checkpoint {path}: the state to save", physical=False)
+    where = f"checkpoint {path}: the state to save"
+    check_state(state, model, where, physical=False)
+    if isinstance(state.path, State) != (model.path is not None):  # its drying-path mesh's too
+        raise _fail(where, "has no drying-path mesh state" if model.path is not None else "has a drying-path mesh state this model has not")
+    if state.path is not None:
+        check_state(state.path, model.path, f"{where} (drying-path mesh)", physical=False)
     arrays = {f"state_{f.name}": getattr(state, f.name) for f in fields(State) if f.name not in ("pigments", "path")}
     arrays.update({f"carry_{k}": np.asarray(v) for k, v in (carry or {}).items()})
     if state.path is not None:  # the drying-path mesh's state (leafsim.sim.path)

@@ -350,3 +350,27 @@ def test_save_checkpoint_refuses_foreign_or_nan_states(oak, other, tmp_path):
         one_line(e)
         assert ck.read_bytes() == good
     assert load_checkpoint(ck, model, meta).frame == state.frame
+
+
+def test_save_checkpoint_checks_the_drying_path_mesh_state_too(tmp_path):
+    """With the drying path (the default mesh) the state carries the path mesh's state: NaN
+    there, or none at all, is refused before writing, as a load would refuse it."""
+    from leafsim.sim.checkpoint import load_checkpoint, save_checkpoint
+
+    sp = get_species("oak")
+    params = sp.params
+    model = build_leaf(sp, params, seed=0).model
+    assert model.path is not None
+    state = Run(model, params, seed=0).state
+    ck = tmp_path / "checkpoint.npz"
+    save_checkpoint(ck, model, state, {"species": "oak"})
+    good = ck.read_bytes()
+    nan_path = state.copy()
+    nan_path.path.particle_q[:] = np.nan
+    for bad, what in ((nan_path, r"\(drying-path mesh\) array particle_q holds NaN"),
+                      (dataclasses.replace(state.copy(), path=None), "has no drying-path mesh state")):
+        with pytest.raises(LeafsimError, match=what) as e:
+            save_checkpoint(ck, model, bad, {"species": "oak"})
+        one_line(e)
+        assert ck.read_bytes() == good
+    assert load_checkpoint(ck, model, {"species": "oak"}).path is not None
