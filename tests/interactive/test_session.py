@@ -53,6 +53,9 @@ def test_build_and_step(s):
     assert np.isfinite(h["residual"][-1]) and h["kinetic"][-1] >= 0
     blade = float(s.state.particle_water[s.model.blade_particles].sum())  # the history plots the blade's
     assert h["water_T"][-1] + h["water_V"][-1] == pytest.approx(blade) and blade < s.total_water()
+    # the margin band dries first (its thin boundary layer): below the interior, around the blade
+    assert h["water_margin"][0] == pytest.approx(1.0) and h["water_interior"][0] == pytest.approx(1.0)
+    assert h["water_margin"][-1] < h["water"][-1] < h["water_interior"][-1] < 1.0
 
 
 def test_live_param_applies_at_once_and_keeps_state(s):

@@ -62,9 +62,16 @@ class StatsPanel:
             # below the plot, in a row: inside, it covered the curves and was cut at the edge
             implot.setup_legend(implot.Location_.south, implot.LegendFlags_.outside | implot.LegendFlags_.horizontal)
             implot.plot_line("blade", x, np.ascontiguousarray(np.asarray(h["water"], np.float64)[sl]))
-            for key, label in (("water_T", "bottom T"), ("water_V", "top V")):
-                v = np.asarray(h[key], np.float64)
-                implot.plot_line(label, x, np.ascontiguousarray(v[sl] / max(v[0], 1e-300)))
+            # where the blade dries first: the margin band against the interior (docs/method.md
+            # §3); the two layers only when they part (through-thickness flow off), since with it
+            # on they lie on the blade's curve
+            for key, label in (("water_margin", "margin"), ("water_interior", "interior")):
+                implot.plot_line(label, x, np.ascontiguousarray(np.asarray(h[key], np.float64)[sl]))
+            T, V = np.asarray(h["water_T"], np.float64), np.asarray(h["water_V"], np.float64)
+            t, v = T / max(T[0], 1e-300), V / max(V[0], 1e-300)
+            if np.nanmax(np.abs(t - v)) > 0.05:
+                for label, y in (("T", t), ("V", v)):
+                    implot.plot_line(label, x, np.ascontiguousarray(y[sl]))
             implot.end_plot()
         if implot.begin_plot("log10 max |C| / l (constraint residual)", (pw, 130), implot.Flags_.no_legend):
             implot.setup_axes("frame", "", fit, fit)
