@@ -105,10 +105,12 @@ def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray
     tissue's own albedo, as the renderer draws it).  None when the model has no veins."""
     pos, nrm, tris, uvs, cols = [], [], [], [], []
     base = 0
-    lift = 0.02 * model.thickness
-    for idx, width, _order in model.vein_polylines():
+    for k, (idx, width, order) in enumerate(model.vein_polylines()):
         if len(idx) < 2:
             continue
+        # each ribbon a hair above the blade at its own height, the main veins highest: where
+        # ribbons met at one height (a branch point), Cycles drew the coplanar faces black
+        lift = (0.02 + 0.03 * (3 - min(int(order), 3)) + 0.002 * (k % 5)) * model.thickness
         i = remap[idx]
         c = top[i] + lift * n[i]
         t = np.gradient(c, axis=0)
