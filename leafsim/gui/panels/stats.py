@@ -56,8 +56,13 @@ class StatsPanel:
         x = np.ascontiguousarray(x[sl])
         pw = imgui.get_content_region_avail().x
         fit = implot.AxisFlags_.auto_fit
+        # a fresh leaf (one record, after a reset or a species switch) has nothing to fit: the
+        # frame axis starts at 0..10 instead of the fit of one point (−0.4..0.4) or the old leaf's
+        xfit = fit if len(x) > 1 else 0
         if implot.begin_plot("water / initial", (pw, 170)):
-            implot.setup_axes("frame", "", fit, 0)
+            implot.setup_axes("frame", "", xfit, 0)
+            if not xfit:
+                implot.setup_axis_limits(implot.ImAxis_.x1, 0.0, 10.0, imgui.Cond_.always)
             implot.setup_axis_limits(implot.ImAxis_.y1, 0.0, 1.05, imgui.Cond_.once)
             # below the plot, in a row: inside, it covered the curves and was cut at the edge
             implot.setup_legend(implot.Location_.south, implot.LegendFlags_.outside | implot.LegendFlags_.horizontal)
@@ -74,7 +79,9 @@ class StatsPanel:
                     implot.plot_line(label, x, np.ascontiguousarray(y[sl]))
             implot.end_plot()
         if implot.begin_plot("log10 max |C| / l (constraint residual)", (pw, 130), implot.Flags_.no_legend):
-            implot.setup_axes("frame", "", fit, fit)
+            implot.setup_axes("frame", "", xfit, fit)
+            if not xfit:
+                implot.setup_axis_limits(implot.ImAxis_.x1, 0.0, 10.0, imgui.Cond_.always)
             r = np.nan_to_num(np.asarray(h["residual"], np.float64), nan=1.0)[sl]
             ok = r > 0  # the fresh leaf (frame 0) has none
             implot.plot_line("residual", np.ascontiguousarray(x[ok]), np.log10(r[ok]))
