@@ -275,12 +275,17 @@ class Problem:
                                self.vrest)
         return e + 0.5 * float(np.sum(self.mh2[:, None] * (x - self.y) ** 2))
 
-    def _newton(self):
+    def _pattern(self):
+        """The block-sparse Hessian's pattern (indptr, indices, the records' maps), its blocks and
+        the gradient to fill, and each particle's diagonal block."""
         n = self.n
         indptr, indices, smap, hmap, vmap = kst.block_pattern(n, self.ij, self.hidx, self.vidx)
-        data = np.zeros((len(indices), 3, 3))
-        grad = np.zeros((n, 3))
         diag = np.array([np.searchsorted(indices[indptr[i]:indptr[i + 1]], i) + indptr[i] for i in range(n)])
+        return indptr, indices, smap, hmap, vmap, np.zeros((len(indices), 3, 3)), np.zeros((n, 3)), diag
+
+    def _newton(self):
+        n = self.n
+        indptr, indices, smap, hmap, vmap, data, grad, diag = self._pattern()
         x = self.y.copy()
         for it in range(60):
             kst.elastic(x, self.ij, self.sk, self.srest, self.hidx, self.hk, self.hrest, self.vidx, self.vk,
@@ -321,10 +326,7 @@ class Problem:
         import pyamg
 
         n = self.n
-        indptr, indices, smap, hmap, vmap = kst.block_pattern(n, self.ij, self.hidx, self.vidx)
-        data = np.zeros((len(indices), 3, 3))
-        grad = np.zeros((n, 3))
-        diag = np.array([np.searchsorted(indices[indptr[i]:indptr[i + 1]], i) + indptr[i] for i in range(n)])
+        indptr, indices, smap, hmap, vmap, data, grad, diag = self._pattern()
         x = self.y.copy()
         hits, secs, cg = {}, {}, 0
         t0 = time.perf_counter()
