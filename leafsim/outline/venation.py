@@ -1,17 +1,20 @@
 """The photo's own venation: midrib, main and lateral veins traced from the image.
 
 A vein is a line of the blade lighter or darker than the tissue beside it (light on the
-underside of most leaves and on back-lit scans, dark on some upper sides).  Its strength at
-every pixel is the Hessian ridge measure of the lightness at the vein's scale (the larger
-eigenvalue's magnitude with the polarity the leaf shows); the cost of a pixel is small on
-strong ridges and large elsewhere.  Then:
+underside of most leaves and on back-lit scans, dark on some upper sides), or yellower (the
+midrib of a back-lit oak leaf is a yellow band no lighter than the blade, with darker flanks
+that a lightness ridge would follow instead).  Its strength at every pixel is the Hessian
+ridge measure of that channel at the vein's scale (the larger eigenvalue's magnitude with the
+polarity the leaf shows); the channel and polarity are the ones whose midrib stands out most
+from the blade.  The cost of a pixel is small on strong ridges and large elsewhere.  Then:
 
 * **midrib** — the cheapest 8-connected path from the base (petiole junction) to the apex;
 * **main veins** — for a palmate leaf the cheapest path from the base to each lobe tip, for
   pinnate lobes the cheapest from anywhere on the midrib (multi-source Dijkstra);
-* **laterals** — from every point of the main veins the cheapest path to the margin band
-  over the finer ridges (one shortest-path tree grown from the margin, so two laterals never
-  cross: where their paths merge the weaker one ends); a path is a lateral when its mean
+* **laterals** — from every point of the main veins, on either side, the cheapest path to the
+  margin band over the finer ridges (one shortest-path tree grown from the margin, so two
+  laterals never cross: where their paths merge the weaker one ends), ridges that are lines
+  (a spot, curved both ways, scores nothing); a path is a lateral when its median
   ridge strength is well above the blade's and it is at least 8 % of the leaf length long.
   Laterals closer than 4 % of the leaf length to a stronger one along most of their length
   are the same vein and are dropped.
@@ -37,6 +40,12 @@ WORK_LENGTH = 500.0
 MAIN_SIGMA, LATERAL_SIGMA = 0.006, 0.0035
 #: cost floor: a pixel on the strongest ridges costs this, the blade's median ≈ 1
 _FLOOR = 0.03
+#: width of the ring of lateral starts beside a main vein's own ridge [px of the working copy]
+RING_WIDTH = 2
+
+#: the colour channels a vein may show in (CIELAB): its lightness, or its yellowness — the
+#: midrib of a back-lit oak leaf is a yellow band with darker flanks, no lighter than the blade
+CHANNELS = (("lightness", 0), ("yellowness", 2))
 
 
 @dataclass
@@ -44,22 +53,25 @@ class PhotoVeins:
     """Traced veins in photo pixels (x, y down): the midrib (base → apex), the other main veins
     and the laterals, each an (k, 2) polyline from its start to its end; ``parents[i]`` is the
     index in ``mains`` (0 = the midrib) a lateral leaves from; ``polarity`` is "light" or
-    "dark" (how the veins show); ``strength`` the midrib's mean ridge strength over the
-    blade's median (a photo without visible veins has ≈ 1)."""
+    "dark" and ``channel`` "lightness" or "yellowness" (how the veins show); ``strength`` the
+    midrib's mean ridge strength over the blade's median (a photo without visible veins has ≈ 1)."""
 
     midrib: np.ndarray
     mains: list = field(default_factory=list)
     laterals: list = field(default_factory=list)
     parents: list = field(default_factory=list)
     polarity: str = "light"
+    channel: str = "lightness"
     strength: float = 0.0
 
     def all_mains(self) -> list:
         return [self.midrib, *self.mains]
 
 
-def _ridge(L: np.ndarray, inner: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """(light ridge, dark ridge) strength at scale ``sigma`` px, scale-normalised, 0 outside."""
+def _ridge(L: np.ndarray, inner: np.ndarray, sigma: float, line: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(light ridge, dark ridge) strength at scale ``sigma`` px, scale-normalised, 0 outside.
+    ``line``: less the curvature along the ridge, so that a spot (curved both ways, as the
+    light speckles of an aspen blade) scores about nothing and only lines stand out."""
     fill = float(np.median(L[inner])) if inner.any() else 0.0
     g = cv2.GaussianBlur(np.where(inner, L, fill).astype(np.float32), (0, 0), sigma)
     xx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3)
@@ -68,7 +80,10 @@ def _ridge(L: np.ndarray, inner: np.ndarray, sigma: float) -> tuple[np.ndarray, 
     root = np.sqrt(0.25 * (xx - yy) ** 2 + xy ** 2)
     lo, hi = 0.5 * (xx + yy) - root, 0.5 * (xx + yy) + root
     s2 = sigma * sigma
-    return np.where(inner, np.maximum(-lo, 0) * s2, 0), np.where(inner, np.maximum(hi, 0) * s2, 0)
+    light, dark = -lo, hi
+    if line:
+        light, dark = light - np.abs(hi), dark - np.abs(lo)
+    return np.where(inner, np.maximum(light, 0) * s2, 0), np.where(inner, np.maximum(dark, 0) * s2, 0)
 
 
 class _Grid:
@@ -76,7 +91,7 @@ class _Grid:
 
     def __init__(self, cost: np.ndarray):
         h, w = cost.shape
-        self.h, self.w = h, w
+        self.h, self.w, self.cost = h, w, cost
         idx = np.arange(h * w).reshape(h, w)
         rows, cols, wts = [], [], []
         for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
@@ -148,7 +163,7 @@ def trace_venation(img: np.ndarray, mask: np.ndarray, base_px, apex_px, lobes_px
     L = L0 * f
     to_s = lambda p: (np.asarray(p, float) + 0.5) * f - 0.5  # noqa: E731
     back = lambda p: (np.asarray(p, float) + 0.5) / f - 0.5  # noqa: E731
-    light = cv2.cvtColor(small[..., :3].astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)[..., 0]
+    lab = cv2.cvtColor(small[..., :3].astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)
     e = max(3, int(round(0.012 * L)) | 1)
     inner = cv2.erode(m.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (e, e))) > 0
     if not inner.any():
@@ -161,21 +176,33 @@ def trace_venation(img: np.ndarray, mask: np.ndarray, base_px, apex_px, lobes_px
         ex = cv2.dilate(ex.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         # the base itself stays reachable: a petiole ends at the junction
         near_base = np.hypot(*np.meshgrid(np.arange(m.shape[1]) - to_s(base)[0], np.arange(m.shape[0]) - to_s(base)[1])) < 0.03 * L
-        inner = inner & ~(ex & ~near_base)
+        under = inner & ex & ~near_base
+        inner = inner & ~under
+    else:
+        under = np.zeros(m.shape, bool)
     b, a = _nearest_inside(inner, to_s(base)), _nearest_inside(inner, to_s(apex))
     best = None
-    for pol, R in zip(("light", "dark"), _ridge(light, inner, MAIN_SIGMA * L)):
-        scale = float(np.percentile(R[inner], 99.5)) or 1.0
-        cost = np.where(inner, 1.0 / (_FLOOR + R / scale), 1e4).astype(np.float64)
+    for channel, k in CHANNELS:
+        image = lab[..., k]
+        for pol, R in zip(("light", "dark"), _ridge(image, inner, MAIN_SIGMA * L)):
+            scale = float(np.percentile(R[inner], 99.5)) or 1.0
+            cost = np.where(inner, 1.0 / (_FLOOR + R / scale), 1e4).astype(np.float64)
+            grid = _Grid(cost)
+            d, pred = grid.tree([grid.index(b)])
+            mid = grid.path(pred, grid.index(a))
+            # the channel and polarity the leaf shows: the one whose midrib stands out most
+            on = R[mid[:, 1].astype(int), mid[:, 0].astype(int)]
+            strength = float(np.median(on)) / (float(np.median(R[inner])) or 1e-12)
+            if best is None or strength > best[0]:
+                best = (strength, pol, R, grid, mid, image, channel)
+    strength, pol, R, grid, mid, image, channel = best
+    if under.any() and len(lobes_px):
+        # a main vein may pass under a petiole lying on the blade, as the hidden vein would,
+        # at the cost of the midrib's typical pixel (it cannot follow the petiole's own ridge,
+        # which is left out of R, and it is no cheaper there than on a vein)
+        cost = grid.cost.copy()
+        cost[under] = float(np.median(cost[mid[:, 1].astype(int), mid[:, 0].astype(int)]))
         grid = _Grid(cost)
-        d, pred = grid.tree([grid.index(b)])
-        mid = grid.path(pred, grid.index(a))
-        # the polarity the leaf shows: the one whose midrib stands out more from the blade
-        on = R[mid[:, 1].astype(int), mid[:, 0].astype(int)]
-        strength = float(np.median(on)) / (float(np.median(R[inner])) or 1e-12)
-        if best is None or strength > best[0]:
-            best = (strength, pol, R, grid, mid)
-    strength, pol, R, grid, mid = best
     mains = []
     for tip in lobes_px:
         t = _nearest_inside(inner, to_s(tip))
@@ -186,50 +213,82 @@ def trace_venation(img: np.ndarray, mask: np.ndarray, base_px, apex_px, lobes_px
         mains.append(grid.path(pred, grid.index(t)))
     out_l, parents = [], []
     if laterals:
-        out_l, parents = _laterals(light, m, inner, [mid, *mains], L, pol)
+        out_l, parents = _laterals(image, m, inner, [mid, *mains], L, pol, under)
     w = 0.01 * L
     return PhotoVeins(midrib=back(_smooth(mid, w)), mains=[back(_smooth(p, w)) for p in mains],
                       laterals=[back(_smooth(p, w)) for p in out_l], parents=parents, polarity=pol,
-                      strength=round(strength, 2))
+                      channel=channel, strength=round(strength, 2))
 
 
-def _laterals(light, m, inner, mains, L, pol) -> tuple[list, list]:
-    """Laterals leaving the main veins (module docstring): (paths from main vein to margin
-    band in working pixels, parent main index each)."""
-    R = _ridge(light, inner, LATERAL_SIGMA * L)[0 if pol == "light" else 1]
-    scale = float(np.percentile(R[inner], 99.0)) or 1.0
+def _lateral_starts(mains, ring: np.ndarray, L: float, kr: int) -> list:
+    """Candidate starts of laterals: (main index, pixel (x, y)) of ``ring`` (the pixels just
+    beside the main veins), every 0.5 % L along each main vein, two on either side of it: of
+    the ring's pixels within 4 % L, those at most 1 px farther than the side's nearest plus
+    the ring's width (so where a petiole lying on the blade hides the vein, at its edge)."""
+    ys, xs = np.nonzero(ring)
+    ring_pts = np.column_stack([xs, ys]).astype(float)
+    cands = []
+    if not len(ring_pts):
+        return cands
+    for mi, p in enumerate(mains):
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        s = np.r_[0.0, np.cumsum(seg)]
+        for t in np.arange(0.03 * L, s[-1] - 0.03 * L, 0.005 * L):
+            q = np.array([np.interp(t, s, p[:, 0]), np.interp(t, s, p[:, 1])])
+            dt = np.array([np.interp(t + 1.0, s, p[:, 0]), np.interp(t + 1.0, s, p[:, 1])]) - q
+            dist = np.linalg.norm(ring_pts - q, axis=1)
+            within = dist < 0.04 * L
+            near, dist = ring_pts[within], dist[within]
+            # either side on its own: the ring's pixels come in raster order, each row's left
+            # pixels before its right ones, so one stride over them all can land on one side
+            side = dt[0] * (near[:, 1] - q[1]) - dt[1] * (near[:, 0] - q[0]) > 0
+            for sel in (side, ~side):
+                if not sel.any():
+                    continue
+                side_pts = near[sel][dist[sel] <= dist[sel].min() + RING_WIDTH + 1.0]
+                for r in side_pts[:: max(1, len(side_pts) // 2)]:
+                    cands.append((mi, r))
+    return cands
+
+
+def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list]:
+    """Laterals leaving the main veins (module docstring) in ``image`` (the midrib's channel):
+    (paths from main vein to margin band in working pixels, parent main index each).
+    ``under``: a petiole lying on the blade (left out of ``inner``), which is no margin; the
+    laterals of a main vein hidden under it leave from its edge."""
+    k = 0 if pol == "light" else 1
+    # the paths follow lines only; a path is scored by the plain ridge strength against the
+    # blade's median (the line measure's median is 0: most of a blade is no line)
+    R_line = _ridge(image, inner, LATERAL_SIGMA * L, line=True)[k]
+    R = _ridge(image, inner, LATERAL_SIGMA * L)[k]
     med = float(np.median(R[inner])) or 1e-12
-    cost = np.where(inner, 1.0 / (_FLOOR + R / scale), 1e4).astype(np.float64)
+    scale = float(np.percentile(R_line[inner], 99.0)) or 1.0
+    cost = np.where(inner, 1.0 / (_FLOOR + R_line / scale), 1e4).astype(np.float64)
     # keep the tree off the main veins themselves (a lateral must leave them)
     main_px = np.zeros(m.shape, np.uint8)
     for p in mains:
         cv2.polylines(main_px, [np.round(p).astype(np.int32).reshape(-1, 1, 2)], False, 255, 1)
     kw = max(3, int(round(0.012 * L)) | 1)  # a main vein's own ridge is that wide
     near_main = cv2.dilate(main_px, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (kw, kw))) > 0
+    blade = inner
+    if under is not None and under.any():
+        blade = inner | under
+        # the petiole's pieces a main vein runs under count as that vein
+        n, lab = cv2.connectedComponents(under.astype(np.uint8), connectivity=8)
+        hit = np.unique(lab[under & near_main])
+        near_main = near_main | (np.isin(lab, hit[hit > 0]) & under)
     cost[near_main] = 1e4
     grid = _Grid(cost)
     band_w = max(2, int(round(0.02 * L)))
-    band = inner & ~(cv2.erode(inner.astype(np.uint8), np.ones((2 * band_w + 1, 2 * band_w + 1), np.uint8)) > 0) & ~near_main
+    band = inner & ~(cv2.erode(blade.astype(np.uint8), np.ones((2 * band_w + 1, 2 * band_w + 1), np.uint8)) > 0) & ~near_main
     if not band.any():
         return [], []
     _, pred = grid.tree(np.flatnonzero(band.reshape(-1)))
-    # candidate starts: pixels just beside every main vein (2 px off), every 2 % L
-    kr = kw + 4
-    ring = (cv2.dilate(main_px, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (kr, kr))) > 0) & ~near_main & inner
-    cands = []
-    for mi, p in enumerate(mains):
-        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-        s = np.r_[0.0, np.cumsum(seg)]
-        ys, xs = np.nonzero(ring)
-        ring_pts = np.column_stack([xs, ys]).astype(float)
-        if not len(ring_pts):
-            continue
-        for t in np.arange(0.03 * L, s[-1] - 0.03 * L, 0.005 * L):
-            q = np.array([np.interp(t, s, p[:, 0]), np.interp(t, s, p[:, 1])])
-            dd = np.linalg.norm(ring_pts - q, axis=1)
-            for side_pts in (ring_pts[(dd < 0.5 * kr + 1.5)],):
-                for r in side_pts[:: max(1, len(side_pts) // 4)]:
-                    cands.append((mi, r))
+    # candidate starts: the ring of pixels just beside every main vein
+    kr = kw + 2 * RING_WIDTH
+    ring = (cv2.dilate(near_main.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_WIDTH + 1,) * 2)) > 0) \
+        & ~near_main & inner
+    cands = _lateral_starts(mains, ring, L, kr)
     d_main = cv2.distanceTransform(np.where(main_px > 0, 0, 255).astype(np.uint8), cv2.DIST_L2, 5)
     scored = []
     for mi, r in cands:

@@ -41,24 +41,33 @@ def test_traced_midrib_of_a_shipped_photo_lies_on_the_hand_marked_one():
     # both ways: every hand-marked point near the traced midrib, every traced point near the marked line
     d1 = _dist_to_polyline(OAK_MIDRIB, pv.midrib)
     d2 = _dist_to_polyline(_dense(pv.midrib, 2.0), OAK_MIDRIB)
-    assert d1.max() < 0.02 * L and d2.max() < 0.02 * L, (d1.max() / L, d2.max() / L)
-    # on average within 1 % L (measured 0.66 %: on this photo the path runs along the midrib's
-    # darker flank, ≈ 5 px beside its light centre line)
-    assert np.mean(d2) < 0.01 * L
+    assert d1.max() < 0.01 * L and d2.max() < 0.01 * L, (d1.max() / L, d2.max() / L)
+    # on average within 0.4 % L (measured 0.18 %, 0.71 % at most).  The midrib of this
+    # back-lit photo is a yellow band with darker flanks: traced in its lightness the path ran
+    # along a flank, 0.66 % L (≈ 5 px) beside the centre line on average, 1.4 % at most.
+    assert pv.channel == "yellowness"
+    assert np.mean(d2) < 0.004 * L, np.mean(d2) / L
 
 
-def _veined_photo(size=700, laterals=6):
-    """A leaf with light veins: a midrib and ``laterals`` straight laterals per side at 50°."""
+def _veined_photo(size=700, laterals=6, sides=(-1, 1), yellow_midrib=False):
+    """A leaf with light veins: a midrib and ``laterals`` straight laterals per side at 50°.
+    ``yellow_midrib``: the midrib a yellow band as light as the blade, with darker flanks (as
+    on the back-lit oak photo)."""
     img, poly = leafimg.photo(size)
     base, tip, _ = leafimg.petiole_line(size)
     apex = np.array([0.5, 0.45 - 0.31]) * size
     vein = (120, 215, 150)
-    cv2.line(img, tuple(np.round(base).astype(int)), tuple(np.round(apex).astype(int)), vein, 4, cv2.LINE_AA)
+    ends = tuple(np.round(base).astype(int)), tuple(np.round(apex).astype(int))
+    if yellow_midrib:
+        cv2.line(img, *ends, (30, 120, 45), round(0.0145 * size), cv2.LINE_AA)  # the darker flanks
+        cv2.line(img, *ends, (10, 135, 100), round(0.011 * size), cv2.LINE_AA)  # yellower, as light as the blade
+    else:
+        cv2.line(img, *ends, vein, 4, cv2.LINE_AA)
     drawn = []
     for k in range(laterals):
         s = 0.18 + 0.6 * k / laterals
         p0 = base + (apex - base) * s
-        for side in (-1, 1):
+        for side in sides:
             d = np.array([side * np.sin(np.radians(50)), -np.cos(np.radians(50))])
             p1 = p0 + d * 0.16 * size
             cv2.line(img, tuple(np.round(p0).astype(int)), tuple(np.round(p1).astype(int)), vein, 2, cv2.LINE_AA)
@@ -86,6 +95,51 @@ def test_synthetic_veins_are_traced_where_they_are_drawn():
     assert len(pv.laterals) == len(found)
 
 
+def test_lateral_starts_lie_on_both_sides_of_a_main_vein():
+    """Starts are taken on both sides (they were once picked by a stride over the ring's
+    pixels in raster order, which landed on the oak photo's left side only)."""
+    from leafsim.outline.venation import _lateral_starts
+
+    L, kw = 500.0, 7
+    kr = kw + 4
+    for x0, slope in ((250.0, 0.0), (250.0, 0.15), (250.0, -0.3)):
+        main = np.array([[x0, 20.0], [x0 + slope * 460, 480.0]])
+        px = np.zeros((500, 500), np.uint8)
+        cv2.polylines(px, [np.round(main).astype(np.int32).reshape(-1, 1, 2)], False, 255, 1)
+        near = cv2.dilate(px, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (kw, kw))) > 0
+        ring = (cv2.dilate(px, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (kr, kr))) > 0) & ~near
+        starts = np.array([r for _, r in _lateral_starts([main], ring, L, kr)])
+        d = main[1] - main[0]
+        side = d[0] * (starts[:, 1] - main[0, 1]) - d[1] * (starts[:, 0] - main[0, 0]) > 0
+        assert 0.4 < side.mean() < 0.6, (slope, side.mean())
+
+
+@pytest.mark.parametrize("side", [-1, 1])
+def test_laterals_on_one_side_of_the_midrib_are_found(side):
+    """Lateral starts are taken on both sides of a main vein (they were once picked by a
+    stride over the ring's pixels in raster order, which can land on one side only)."""
+    img, mask, base, apex, drawn = _veined_photo(sides=(side,))
+    pv = trace_venation(img, mask, base, apex)
+    L = float(np.linalg.norm(apex - base))
+    found = {int(np.argmin([np.median(_dist_to_polyline(_dense(lat, 2.0)[: max(3, int(0.1 * L / 2))], dl)) for dl in drawn]))
+             for lat in pv.laterals}
+    assert len(found) >= 0.75 * len(drawn), (len(found), len(drawn))
+
+
+def test_a_yellow_midrib_with_darker_flanks_is_traced_on_its_centre_line():
+    """The oak photo's case: a 12 px yellow band, 2 px darker flanks, a noisy blade, the leaf
+    682 px long (traced on a copy scaled to 500 px, as the 824 px oak is)."""
+    img, mask, base, apex, _ = _veined_photo(size=1100, laterals=0, yellow_midrib=True)
+    lab = cv2.cvtColor(img, cv2.COLOR_BGR2Lab).astype(float)
+    centre = np.round((base + apex) / 2).astype(int)
+    assert abs(lab[centre[1], centre[0], 0] - lab[centre[1], centre[0] + 30, 0]) < 3  # no lighter than the blade
+    img = np.clip(img + np.random.default_rng(0).normal(0.0, 3.0, img.shape), 0, 255).astype(np.uint8)
+    pv = trace_venation(img, mask, base, apex, laterals=False)
+    assert pv.channel == "yellowness" and pv.polarity == "light"
+    d = _dist_to_polyline(_dense(pv.midrib, 2.0)[5:-5], np.array([base, apex]))
+    assert d.max() < 2.0, d.max()  # px; the flanks' centres are 7 px off
+
+
 @pytest.mark.parametrize("key", ["oak", "hornbeam"])
 def test_model_veins_sit_on_the_photo_veins(key):
     """With veins.photo the model's midrib is the traced one: within a mesh spacing of it."""
@@ -103,3 +157,19 @@ def test_model_veins_sit_on_the_photo_veins(key):
     # veins.photo = off: the grown midrib (a straight-ish line to the apex target) is elsewhere
     grown = build_leaf(sp, params.with_overrides({"veins.photo": "off"}), seed=0).veins.veins[0].points
     assert not np.allclose(grown[:3], model_mid[:3])
+
+
+def test_the_lateral_ridge_measure_scores_lines_not_spots():
+    """``_ridge(line=True)`` (the laterals'): a light spot as wide as a light line scores about
+    a third of the line (0.35), where the plain measure scores it nearly as high (0.83)."""
+    from leafsim.outline.venation import _ridge
+
+    img = np.full((200, 200), 50.0, np.float32)
+    cv2.line(img, (20, 60), (180, 60), 70.0, 5)
+    cv2.circle(img, (100, 140), 4, 70.0, -1)
+    inner = np.ones(img.shape, bool)
+    for line, spot_share in ((False, (0.6, 2.0)), (True, (0.0, 0.5))):
+        light, dark = _ridge(img, inner, 2.5, line=line)
+        on_line, on_spot = light[60, 60:140].mean(), light[138:143, 98:103].max()
+        assert spot_share[0] <= on_spot / on_line <= spot_share[1], (line, on_spot / on_line)
+        assert dark[60, 60:140].max() == 0.0
