@@ -29,8 +29,9 @@ Metrics (:func:`compare_images`):
 * **Vein offset** (:func:`vein_offset`): the photo's own veins traced
   (:mod:`leafsim.outline.venation`) against the model's: how far, along every traced midrib,
   main vein and lateral, the nearest model vein is (mean, 90th percentile; px and × L).
-* **Veins** (:func:`vein_agreement`): light or dark ridges of the photo's lightness at the
-  scale of the main and lateral veins (Hessian eigenvalue, σ = 0.4 % of the leaf length), as
+* **Veins** (:func:`vein_agreement`): light or dark lines of the photo's lightness at the
+  scale of the main and lateral veins (Hessian eigenvalue across the line less the one along
+  it, σ = 0.4 % of the leaf length, so that spots and speckles are no ridge), as
   many ridge pixels as the model's main and lateral veins cover; precision = share of model
   vein pixels within 1.5 % of the leaf length of a photo ridge, recall = share of photo ridge
   pixels that close to a model vein, each with its chance level (the share of the blade that
@@ -253,7 +254,9 @@ def mean_lab(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
 def ridges(rgb: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
     """Ridge strength (light or dark lines, whichever the photo shows more of) of the
     lightness at scale ``sigma`` px, 0 outside ``mask``; outside the mask the lightness is
-    the blade's median, so the margin itself is no ridge."""
+    the blade's median, so the margin itself is no ridge.  The curvature along a ridge is
+    taken off the one across it: a spot, curved both ways, is no line (the hornbeam photo's
+    dark speckles and the aspen photo's light ones counted as veins before)."""
     m = np.asarray(mask, bool)
     L = _lab(rgb)[..., 0]
     L = cv2.GaussianBlur(np.where(m, L, float(np.median(L[m])) if m.any() else 0.0).astype(np.float32), (0, 0), sigma)
@@ -262,7 +265,8 @@ def ridges(rgb: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
     xy = cv2.Sobel(L, cv2.CV_32F, 1, 1, ksize=3)
     root = np.sqrt(0.25 * (xx - yy) ** 2 + xy ** 2)
     lo, hi = 0.5 * (xx + yy) - root, 0.5 * (xx + yy) + root
-    light, dark = np.where(m, np.maximum(-lo, 0), 0), np.where(m, np.maximum(hi, 0), 0)
+    light = np.where(m, np.maximum(-lo - np.abs(hi), 0), 0)
+    dark = np.where(m, np.maximum(hi - np.abs(lo), 0), 0)
     return light if light.sum() >= dark.sum() else dark
 
 
