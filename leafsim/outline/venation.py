@@ -42,6 +42,11 @@ MAIN_SIGMA, LATERAL_SIGMA = 0.006, 0.0035
 _FLOOR = 0.03
 #: width of the ring of lateral starts beside a main vein's own ridge [px of the working copy]
 RING_WIDTH = 2
+#: a traced lateral whose heading swings further than this turns back on itself [deg]; real
+#: laterals bend toward the apex or loop along the margin by up to about 90-120
+MAX_TURN_DEG = 150.0
+#: lateral starts from this far along a main vein [× L] (aspen's basal veins leave at its base)
+START_AT = 0.01
 
 #: the colour channels a vein may show in (CIELAB): its lightness, or its yellowness — the
 #: midrib of a back-lit oak leaf is a yellow band with darker flanks, no lighter than the blade
@@ -222,7 +227,8 @@ def trace_venation(img: np.ndarray, mask: np.ndarray, base_px, apex_px, lobes_px
 
 def _lateral_starts(mains, ring: np.ndarray, L: float, kr: int) -> list:
     """Candidate starts of laterals: (main index, pixel (x, y)) of ``ring`` (the pixels just
-    beside the main veins), every 0.5 % L along each main vein, two on either side of it: of
+    beside the main veins), every 0.5 % L along each main vein from :data:`START_AT` to 3 % L
+    before its end, two on either side of it: of
     the ring's pixels within 4 % L, those at most 1 px farther than the side's nearest plus
     the ring's width (so where a petiole lying on the blade hides the vein, at its edge)."""
     ys, xs = np.nonzero(ring)
@@ -233,7 +239,7 @@ def _lateral_starts(mains, ring: np.ndarray, L: float, kr: int) -> list:
     for mi, p in enumerate(mains):
         seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
         s = np.r_[0.0, np.cumsum(seg)]
-        for t in np.arange(0.03 * L, s[-1] - 0.03 * L, 0.005 * L):
+        for t in np.arange(START_AT * L, s[-1] - 0.03 * L, 0.005 * L):
             q = np.array([np.interp(t, s, p[:, 0]), np.interp(t, s, p[:, 1])])
             dt = np.array([np.interp(t + 1.0, s, p[:, 0]), np.interp(t + 1.0, s, p[:, 1])]) - q
             dist = np.linalg.norm(ring_pts - q, axis=1)
@@ -303,14 +309,46 @@ def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list]:
         if score > 2.5:
             scored.append((score, mi, path))
     scored.sort(key=lambda x: -x[0])
-    taken = np.zeros(m.shape, np.uint8)
+    taken = np.zeros(m.shape, np.uint8)  # within 2 % L of a kept lateral
+    kept_px = np.zeros(m.shape, np.uint8)  # a kept lateral's own pixels
     out, parents = [], []
     for score, mi, path in scored:
         ix = path.astype(int)
         if float(np.mean(taken[ix[:, 1], ix[:, 0]] > 0)) > 0.3:
             continue  # the same vein as a stronger one
-        cv2.polylines(taken, [np.round(path).astype(np.int32).reshape(-1, 1, 2)], False, 255,
-                      max(1, int(round(0.04 * L))))
+        # where it joins a kept lateral (tree paths share their pixels from there to the
+        # margin) it ends: the shared tail would be a doubled vein closing a loop
+        joined = kept_px[ix[:, 1], ix[:, 0]] > 0
+        if joined.any():
+            path = path[: int(np.argmax(joined)) + 1]
+            if len(path) < 0.08 * L:
+                continue
+        if _turning_deg(path, L) > MAX_TURN_DEG or _backward(path, mains[mi]):
+            continue  # it turns back on itself, or back along its main vein: a blotch's edge
+        for mask, width in ((taken, max(1, int(round(0.04 * L)))), (kept_px, 1)):
+            cv2.polylines(mask, [np.round(path).astype(np.int32).reshape(-1, 1, 2)], False, 255, width)
         out.append(path)
         parents.append(mi)
     return out, parents
+
+
+def _backward(path: np.ndarray, main: np.ndarray) -> bool:
+    """Whether a lateral heads back along its main vein (start → end more than 120° from the
+    main vein's direction where it leaves): laterals leave toward the main vein's tip."""
+    j = int(np.argmin(np.linalg.norm(main - path[0], axis=1)))
+    t = main[min(j + 2, len(main) - 1)] - main[max(j - 2, 0)]
+    c = path[-1] - path[0]
+    nt, nc = float(np.linalg.norm(t)), float(np.linalg.norm(c))
+    return nt > 0 and nc > 0 and float(np.dot(t, c)) < -0.5 * nt * nc
+
+
+def _turning_deg(path: np.ndarray, L: float) -> float:
+    """How far a path's heading swings, smoothed over 2 % L: the range of its unwrapped
+    direction [deg] (a straight vein 0, a vein turning back on itself 180)."""
+    sm = _smooth(path, 0.02 * L)
+    d = np.diff(sm, axis=0)
+    d = d[np.linalg.norm(d, axis=1) > 1e-9]
+    if len(d) < 2:
+        return 0.0
+    a = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    return float(np.degrees(a.max() - a.min()))

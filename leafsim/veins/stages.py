@@ -180,15 +180,32 @@ def given_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet,
     return reached
 
 
+def _join_index(main: np.ndarray, pts: np.ndarray, L: float) -> int:
+    """Where on its main vein a traced lateral joins: the main vein's point most in line with the
+    lateral's first 2 % L, among those within 2.5 × the nearest one's distance of its start (the
+    traced path starts beside the main vein's own ridge; joining it at the nearest point would
+    add a peg at right angles)."""
+    d = np.linalg.norm(main - pts[0], axis=1)
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
+    ahead = pts[min(int(np.searchsorted(s, 0.02 * L)), len(pts) - 1)] - pts[0]
+    near = np.flatnonzero(d <= 2.5 * max(float(d.min()), 1e-12))
+    if np.linalg.norm(ahead) == 0 or len(near) < 2:
+        return int(np.argmin(d))
+    back = pts[0] - main[near]
+    cos = back @ ahead / (np.linalg.norm(back, axis=1) * np.linalg.norm(ahead) + 1e-300)
+    return int(near[np.argmax(cos)])
+
+
 def given_laterals(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, laterals, parents, taper: float) -> None:
-    """The laterals traced from the photo, each starting on the nearest point of its main vein."""
+    """The laterals traced from the photo, each joining its main vein in line with its start
+    (:func:`_join_index`)."""
     n_main = len(graph.veins)
     for pts, parent in zip(laterals, parents):
         if not (0 <= parent < n_main):
             continue
         pts = np.asarray(pts, float)
         mv = graph.veins[parent]
-        j = int(np.argmin(np.linalg.norm(mv.points - pts[0], axis=1)))
+        j = _join_index(mv.points, pts, shape.length)
         pts = _until_crossing(g, _inside_prefix(shape, np.vstack([mv.points[j][None], pts])))
         if len(pts) < 3:
             continue

@@ -173,3 +173,35 @@ def test_the_lateral_ridge_measure_scores_lines_not_spots():
         on_line, on_spot = light[60, 60:140].mean(), light[138:143, 98:103].max()
         assert spot_share[0] <= on_spot / on_line <= spot_share[1], (line, on_spot / on_line)
         assert dark[60, 60:140].max() == 0.0
+
+
+def test_a_traced_lateral_joins_its_main_vein_in_line_not_with_a_peg():
+    """The traced path starts beside the main vein's ridge; it joins the main vein at the point
+    in line with its first stretch (the nearest point added a right-angled peg: 32-34° median kink
+    at the joint on oak and hornbeam, now 5-7°)."""
+    from leafsim.veins.stages import _join_index
+
+    L = 0.1
+    main = np.column_stack([np.zeros(201), np.linspace(0.0, L, 201)])  # along +y, a point every 0.5 mm
+    d = np.array([np.sin(np.radians(45)), np.cos(np.radians(45))])
+    start = np.array([0.0012, 0.05])
+    lat = start + np.linspace(0, 0.04, 41)[:, None] * d
+    j = _join_index(main, lat, L)
+    first, rest = lat[0] - main[j], lat[-1] - lat[0]
+    kink = np.degrees(np.arccos(first @ rest / np.linalg.norm(first) / np.linalg.norm(rest)))
+    assert kink < 15.0 and main[j, 1] < start[1] - 0.0008, (kink, main[j])
+
+
+def test_turning_and_backward_laterals_are_recognised():
+    from leafsim.outline.venation import _backward, _turning_deg
+
+    L = 500.0
+    t = np.linspace(0, 1, 200)[:, None]
+    straight = np.hstack([100 + 150 * t, 300 - 150 * t])
+    u_turn = np.vstack([np.hstack([100 + 120 * t, 300 + 0 * t]), np.hstack([220 - 120 * t, 330 + 0 * t])])
+    u_turn = np.vstack([u_turn[:200], np.column_stack([np.full(30, 220.0), np.linspace(300, 330, 30)]), u_turn[200:]])
+    assert _turning_deg(straight, L) < 5 and _turning_deg(u_turn, L) > 150
+    main = np.column_stack([np.full(100, 100.0), np.linspace(450, 50, 100)])  # base at the bottom, tip up (y down)
+    up_and_out = np.hstack([100 + 150 * t, 300 - 100 * t])
+    back_down = np.hstack([100 + 60 * t, 300 + 150 * t])
+    assert not _backward(up_and_out, main) and _backward(back_down, main)
