@@ -3,6 +3,7 @@
 
 in vec3 v_pos;
 in vec3 v_nrm;
+in vec3 v_bnrm;
 in vec3 v_side;
 in float v_v;
 in float v_alpha;
@@ -44,7 +45,17 @@ uniform float u_shininess;
 
 out vec4 f_colour;
 
+// A ribbon carries the photo's texture coordinate of its centre line on both sides, so the
+// photo is sampled along that line only and its texel-to-texel variation came out as bands
+// across the vein: it is sampled this many mip levels coarser (a 2^1.5 ≈ 3 texel blur)
+#define UV_BLUR 1.5
+
 void main() {
+#if LS_TEX
+    // over a photo only the veins traced from it are drawn (main and lateral, which lie on the
+    // photo's own); the grown finer orders crossed its areoles as pale hairlines, a second pattern
+    if (v_order >= 2) discard;
+#endif
     float dist = abs(v_v) * v_hd;                   // pixels from the centre line
     float cover = clamp(v_target - dist + 0.5, 0.0, 1.0) * v_alpha;
     if (cover <= 0.0) discard;
@@ -54,11 +65,16 @@ void main() {
     float a = clamp(dist / max(v_target, 1e-3), 0.0, 1.0) * clamp(v_target - 1.0, 0.0, 1.0);
     // rounded cross-section: bend the normal towards the sides
     vec3 N = normalize(normalize(v_nrm) * sqrt(max(1.0 - a * a, 0.0)) * 1.3 + normalize(v_side) * sign(v_v) * a);
+#if LS_TEX
+    // over a photo, which shows its veins in their own light, a rounded rod drew a second,
+    // darker outline on each side of the photo's vein ("inked"): the vein is lit as the blade
+    N = normalize(v_bnrm);
+#endif
 #if LS_TEX == 2
     // detail: the vertex colour times the photo's detail under the vein (as the blade)
-    vec3 base = photo_detail(v_base, texture(u_tex, v_uv).rgb, u_tex_mean, v_chroma);
+    vec3 base = photo_detail(v_base, texture(u_tex, v_uv, UV_BLUR).rgb, u_tex_mean, v_chroma);
 #elif LS_TEX
-    vec4 t = texture(u_tex, v_uv);
+    vec4 t = texture(u_tex, v_uv, UV_BLUR);
 #if LS_CUTOUT
     if (t.a < 0.5) discard;
 #endif

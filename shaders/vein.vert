@@ -22,6 +22,7 @@ uniform float u_pull_max;   // the most the depth test pulls a ribbon toward the
 
 out vec3 v_pos;
 out vec3 v_nrm;
+out vec3 v_bnrm;
 out vec3 v_side;
 out float v_v;
 out float v_alpha;
@@ -62,6 +63,7 @@ void main() {
     vec3 p = c + e * (hw * scale * in_v);
     v_pos = p;
     v_nrm = m;
+    v_bnrm = n;     // the blade's normal, facing the eye
     v_side = e;
     v_v = in_v;
     v_base = in_base;
