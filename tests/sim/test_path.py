@@ -102,7 +102,10 @@ def test_dried_shape_like_the_direct_run(oak):
     print(f"path against direct: position {e['position_rms'] / deform:.1%}, lift {e['r_margin_lift']:.1%}, "
           f"top {e['r_area_top']:.1%}, 3D {e['r_area_3d']:.1%}")
     assert e["position_rms"] < 0.1 * deform, (e, deform)
-    assert e["r_margin_lift"] < 0.1 and e["r_area_top"] < 0.03 and e["r_area_3d"] < 0.01
+    # the margin lift is the touchiest measure: 7.7 % with the oak's traced veins before 6
+    # December, 8.9-11.4 % over seeds 0-3 with today's (20 laterals on both sides of the midrib
+    # instead of 12 on one; position 7.3-9.0 %)
+    assert e["r_margin_lift"] < 0.13 and e["r_area_top"] < 0.03 and e["r_area_3d"] < 0.01
 
 
 def test_state_without_its_path_state_is_refused(maple):
