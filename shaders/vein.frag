@@ -52,8 +52,9 @@ out vec4 f_colour;
 
 void main() {
 #if LS_TEX
-    // over a photo only the veins traced from it are drawn (main and lateral, which lie on the
-    // photo's own); the grown finer orders crossed its areoles as pale hairlines, a second pattern
+    // over a photo only the main veins and laterals are drawn (with the default veins.photo
+    // they are traced from it and lie on its own); the grown finer orders crossed its areoles
+    // as pale hairlines, a second pattern
     if (v_order >= 2) discard;
 #endif
     float dist = abs(v_v) * v_hd;                   // pixels from the centre line
@@ -84,8 +85,8 @@ void main() {
 #endif
     vec3 vc = u_vein_cols[clamp(v_order, 0, 3)];
 #if LS_TEX
-    // the photo shows its own veins (and the model's lie on them, traced from it): the vein
-    // takes the photo's colour under it and only its rounded shading, never a second, tinted line
+    // the photo shows its own veins (and the model's traced ones lie on them): the vein takes
+    // the photo's colour under it and the blade's light, never a second, tinted or shaded line
     vec3 albedo = u_absolute != 0 ? vc : base;
 #else
     vec3 albedo = u_absolute != 0 ? vc : clamp(base * vc, 0.0, 1.0);
@@ -96,7 +97,14 @@ void main() {
 #else
     float sh = 1.0;
 #endif
+#if LS_TEX
+    // lit as the blade under it in every respect (its translucency and sheen too: with the
+    // light behind the leaf a thicker, less translucent vein drew darker than the photo's own)
+    vec3 c = shade_leaf(albedo, N, V, u_light_dir, u_light_col, u_sky_col, sh,
+                        u_translucency, u_specular, u_shininess);
+#else
     vec3 c = shade_leaf(albedo, N, V, u_light_dir, u_light_col, u_sky_col, sh,
                         u_translucency * 0.6, u_specular * 1.5, u_shininess);
+#endif
     f_colour = vec4(linear_to_srgb(c), cover);
 }

@@ -22,6 +22,8 @@ def fringe_width(rgba: np.ndarray, dist: np.ndarray | None = None) -> float:
     from scipy.ndimage import distance_transform_edt
 
     outside = np.asarray(rgba)[:, :, 3] < 128
+    if not outside.any() or outside.all():
+        return FRINGE_PX  # no margin in the picture to measure
     d = distance_transform_edt(~outside) if dist is None else dist
     lum = np.asarray(rgba)[:, :, :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
     ref_band, edge_band = (d > 10) & (d <= 20), (d > 0) & (d <= 1)
@@ -58,7 +60,7 @@ def clean_texture(rgba: np.ndarray) -> np.ndarray:
     outside = out[:, :, 3] < 128
     if outside.any() and not outside.all():
         d = distance_transform_edt(~outside)
-        clean = d >= fringe_width(out, d)
+        clean = d > fringe_width(out, d)  # a band (k, k + 1] found tinted is cleaned whole
         source = clean if clean.any() else ~outside
         _, (iy, ix) = distance_transform_edt(~source, return_indices=True)
         out[:, :, :3] = out[iy, ix, :3]

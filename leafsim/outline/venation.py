@@ -225,11 +225,11 @@ def trace_venation(img: np.ndarray, mask: np.ndarray, base_px, apex_px, lobes_px
                       channel=channel, strength=round(strength, 2))
 
 
-def _lateral_starts(mains, ring: np.ndarray, L: float, kr: int) -> list:
+def _lateral_starts(mains, ring: np.ndarray, L: float) -> list:
     """Candidate starts of laterals: (main index, pixel (x, y)) of ``ring`` (the pixels just
     beside the main veins), every 0.5 % L along each main vein from :data:`START_AT` to 3 % L
-    before its end, two on either side of it: of
-    the ring's pixels within 4 % L, those at most 1 px farther than the side's nearest plus
+    before its end, one to three on either side of it: of the ring's pixels within 4 % L (at
+    least 12 px, for a small photo), those at most 1 px farther than the side's nearest plus
     the ring's width (so where a petiole lying on the blade hides the vein, at its edge)."""
     ys, xs = np.nonzero(ring)
     ring_pts = np.column_stack([xs, ys]).astype(float)
@@ -243,7 +243,7 @@ def _lateral_starts(mains, ring: np.ndarray, L: float, kr: int) -> list:
             q = np.array([np.interp(t, s, p[:, 0]), np.interp(t, s, p[:, 1])])
             dt = np.array([np.interp(t + 1.0, s, p[:, 0]), np.interp(t + 1.0, s, p[:, 1])]) - q
             dist = np.linalg.norm(ring_pts - q, axis=1)
-            within = dist < 0.04 * L
+            within = dist < max(0.04 * L, 12.0)
             near, dist = ring_pts[within], dist[within]
             # either side on its own: the ring's pixels come in raster order, each row's left
             # pixels before its right ones, so one stride over them all can land on one side
@@ -291,10 +291,9 @@ def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list]:
         return [], []
     _, pred = grid.tree(np.flatnonzero(band.reshape(-1)))
     # candidate starts: the ring of pixels just beside every main vein
-    kr = kw + 2 * RING_WIDTH
     ring = (cv2.dilate(near_main.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_WIDTH + 1,) * 2)) > 0) \
         & ~near_main & inner
-    cands = _lateral_starts(mains, ring, L, kr)
+    cands = _lateral_starts(mains, ring, L)
     d_main = cv2.distanceTransform(np.where(main_px > 0, 0, 255).astype(np.uint8), cv2.DIST_L2, 5)
     scored = []
     for mi, r in cands:

@@ -48,7 +48,8 @@ class RenderOptions:
         vein's albedo (the vein tissue's own colour from the pigments when the mesh carries
         ``vein_colours``, else the blade's under it), or absolute linear RGB when
         ``vein_absolute``.  Ones by default: the veins' colour is the pigment model's, not painted
-        (a fixed × 1.7 made a dried tan leaf's veins and stalk glow orange).
+        (a fixed × 1.7 made a dried tan leaf's veins and stalk glow orange).  With a photo albedo
+        ("texture", "detail") orders 2 and finer are not drawn: the photo shows its own veins.
     vein_absolute : bool
         Interpret ``vein_colours`` as absolute linear RGB.
     vein_width_scale : float
