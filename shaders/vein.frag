@@ -46,8 +46,9 @@ uniform float u_shininess;
 out vec4 f_colour;
 
 // A ribbon carries the photo's texture coordinate of its centre line on both sides, so the
-// photo is sampled along that line only and its texel-to-texel variation came out as bands
-// across the vein: it is sampled this many mip levels coarser (a 2^1.5 ≈ 3 texel blur)
+// photo is sampled along that line only, and (seeing no change across the ribbon) at a sharper
+// mip level than the blade's: its texel-to-texel variation came out as bands across the vein.
+// It is sampled this many mip levels coarser (a 2^1.5 ≈ 3 texel blur)
 #define UV_BLUR 1.5
 
 void main() {
