@@ -208,3 +208,21 @@ def test_turning_and_backward_laterals_are_recognised():
     up_and_out = np.hstack([100 + 150 * t, 300 - 100 * t])
     back_down = np.hstack([100 + 60 * t, 300 + 150 * t])
     assert not _backward(up_and_out, main) and _backward(back_down, main)
+
+
+def test_a_main_vein_passes_under_a_petiole_lying_on_it():
+    """A petiole lying on the blade is left out (it is a ridge too), but a main vein hidden
+    under it runs on under it, as grapevine's to its upper-left lobe does; it detoured round the
+    petiole before (0.13 L off the vein at most, 0.05 L on average; now 0.02 and 0.006)."""
+    img, mask, base, apex, _ = _veined_photo(laterals=0)
+    size = img.shape[0]
+    tip = base + np.array([-0.14, -0.224]) * size
+    cv2.line(img, tuple(np.round(base).astype(int)), tuple(np.round(tip).astype(int)), (120, 215, 150), 3, cv2.LINE_AA)
+    ex = np.zeros(mask.shape, np.uint8)  # the petiole over the vein's first 60 %: a wide pale band
+    cv2.line(ex, tuple(np.round(base).astype(int)), tuple(np.round(base + 0.6 * (tip - base)).astype(int)), 255, 16)
+    img[ex > 0] = (200, 220, 230)
+    img = np.clip(img + np.random.default_rng(0).normal(0.0, 3.0, img.shape), 0, 255).astype(np.uint8)
+    pv = trace_venation(img, mask, base, apex, lobes_px=[tip], main_origin="base", laterals=False, exclude=ex)
+    L = float(np.linalg.norm(apex - base))
+    d = _dist_to_polyline(_dense(pv.mains[0], 2.0), np.array([base, tip]))
+    assert d.max() < 0.04 * L and d.mean() < 0.015 * L, (d.max() / L, d.mean() / L)
