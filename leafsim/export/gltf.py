@@ -3,7 +3,8 @@
 One node and one mesh per exported surface (blade, veins), a double-sided metallic-roughness
 material each (baked pigment colours as ``COLOR_0``, or the photo as ``baseColorTexture``).
 Several frames become morph targets — one per key frame after the first, with ``POSITION``,
-``NORMAL`` and ``COLOR_0`` deltas — and one animation whose sampler keys the weights one-hot at
+``NORMAL`` and ``COLOR_0`` deltas, the mesh's default weights on the last one (the state asked
+for) — and one animation whose sampler keys the weights one-hot at
 the frames' times (LINEAR interpolation between two one-hot keys is the linear blend of two
 consecutive frames).  The output depends only on the data (no timestamps), so it is
 reproducible byte for byte.
@@ -90,7 +91,10 @@ class GltfBuilder:
         mesh = {"name": name, "primitives": [prim]}
         if len(frames) > 1:
             prim["targets"] = [self._target(s0, s) for s in frames[1:]]
-            mesh["weights"] = [0.0] * (len(frames) - 1)
+            # the default pose is the last key, the state the export was asked for: a viewer
+            # that does not play the animation (trimesh, a still in an engine) shows the dried
+            # leaf, not the fresh one; the animation's keys start from frame 0 as before
+            mesh["weights"] = [0.0] * (len(frames) - 2) + [1.0]
             if target_names:
                 mesh["extras"] = {"targetNames": list(target_names)}
         self.doc["meshes"].append(mesh)

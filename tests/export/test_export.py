@@ -81,6 +81,26 @@ def test_animated_glb_is_valid_and_loads_with_expected_counts(leaf, tmp_path):
     times = doc["accessors"][anim["samplers"][0]["input"]]
     assert times["count"] == 3 and times["max"][0] == pytest.approx(states[-1].time - states[0].time, rel=1e-6)
     assert doc["materials"][0]["doubleSided"] and "pbrMetallicRoughness" in doc["materials"][0]
+    # the default pose is the last key (the state asked for), so a viewer that does not play the
+    # animation shows it: base + last target = the last state exported alone (frame 0 before)
+    assert [m["weights"] for m in doc["meshes"]] == [[0.0, 1.0], [0.0, 1.0]]
+    last = tmp_path / "last.glb"
+    export_mesh(model, states[-1], last, params=params, view=view, veins=True)
+    pose = _accessor(path, prim["attributes"]["POSITION"]) + _accessor(path, prim["targets"][-1]["POSITION"])
+    alone = _accessor(last, _glb_json(last)["meshes"][0]["primitives"][0]["attributes"]["POSITION"])
+    assert np.abs(pose - alone).max() < 1e-6 and np.abs(pose - _accessor(path, prim["attributes"]["POSITION"])).max() > 1e-5
+
+
+def _accessor(path, index: int) -> np.ndarray:
+    """The float32 VEC3 data of accessor ``index`` of a .glb file."""
+    data = path.read_bytes()
+    n = struct.unpack("<I", data[12:16])[0]
+    doc = json.loads(data[20:20 + n])
+    binary = data[20 + n + 8:]
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    return np.frombuffer(binary, np.float32, acc["count"] * 3, start).reshape(-1, 3)
 
 
 def _winding_against_normals(vertices, faces, normals) -> tuple[int, int]:
