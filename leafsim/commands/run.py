@@ -197,7 +197,7 @@ def run_text(rep: dict, out: Path | None, ck: Path | None) -> str:
              + (f", resumed from {rep['resumed_from']}" if rep["resumed_from"] else "") + "), "
              f"{100 * rep['water_fraction']:.1f} % of the blade's water left"
              + (f" (stalk {100 * stalk:.0f} %)" if stalk is not None else "") + "; "
-             f"{rep['build_s']:.1f} s building, {rep['sim_s']:.1f} s simulating ({rep['ms_per_frame_median']:.1f} ms a frame, median)",
+             f"{rep['build_s']:.1f} s building, {rep['sim_s']:.1f} s simulating ({_frame_costs(rep)})",
              f"shape: 3D area kept {100 * rep['shape_area_ratio']:.1f} %, margin lift {rep['shape_margin_lift']:.3f} L, "
              f"margin roll {rep.get('shape_margin_roll_deg', 0.0):.0f}°, midrib fold {rep.get('shape_midrib_fold_deg', 0.0):.0f}°"
              + (f", {rep['shape_inverted']} inverted triangles" if rep.get("shape_inverted") else "")]
@@ -212,6 +212,29 @@ def run_text(rep: dict, out: Path | None, ck: Path | None) -> str:
     return "\n".join(lines)
 
 
+def _frame_costs(rep: dict) -> str:
+    """What a frame cost: the mean, and on the drying path the two meshes' frames apart (the
+    leaf's own mesh costs several times a path frame, so a median alone hid where the time went)."""
+    phases = rep.get("phases") or {}
+    text = f"{rep['ms_per_frame_mean']:.1f} ms a frame on average"
+    if phases.get("path", {}).get("frames") and phases.get("own", {}).get("frames"):
+        p, o = phases["path"], phases["own"]
+        text += (f": {p['frames']} on the coarse drying-path mesh at {p['ms_mean']:.1f} ms, "
+                 f"{o['frames']} on the leaf's own mesh at {o['ms_mean']:.1f} ms")
+    return text
+
+
+def _phases(stats) -> dict:
+    """Frames and their summed stage milliseconds on the drying path's coarse mesh and on the
+    leaf's own mesh (``on_path`` of each frame's stats)."""
+    out = {}
+    for name, on in (("path", True), ("own", False)):
+        ms = [sum(s["ms"].values()) for s in stats if bool(s.get("on_path")) == on]
+        out[name] = {"frames": len(ms), "s": round(sum(ms) / 1e3, 3),
+                     "ms_mean": round(float(np.mean(ms)), 4) if ms else 0.0}
+    return out
+
+
 def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames, check_nan: bool = True) -> dict:
     """The ``leafsim run`` report (LeafsimError when the run produced NaN and ``check_nan``).
     ``water_kg`` is the water left now, ``fresh_water_kg`` the fresh leaf's (blade and petiole);
@@ -223,6 +246,8 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
         "species": sp.key, "seed": args.seed, "frames": len(stats), "frame": state.frame, "resumed_from": start,
         "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
         "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
+        "ms_per_frame_mean": round(float(np.mean(ms)), 4) if ms else 0.0,
+        "phases": _phases(stats),
         "water_fraction": round(water, 6),
         "weather_hours": round(state.weather_time / 3600.0, 4) if params["environment.drive"] == "weather" else None,
         "until": args.until,
