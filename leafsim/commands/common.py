@@ -105,8 +105,8 @@ def stop_of(args, start: int = 0):
         except ValueError:
             v = float("nan")
         if not (v == v and (0.0 <= v <= 1.0 if kind == "water" else 0.0 <= v <= 10.0)):
-            raise LeafsimError(f"--until {until}: expected {kind}=F with F in "
-                               f"{'[0, 1] (a fraction of the fresh water)' if kind == 'water' else '[0, 10] (the season clock)'}")
+            raise LeafsimError(f"--until {until}: expected " + ("water=F with F in [0, 1] (a fraction of the fresh water)"
+                                                                 if kind == "water" else "season=S with S in [0, 10] (the season clock)"))
         water, season = (v, None) if kind == "water" else (None, v)
     else:
         raise LeafsimError(f"--until {until!r}: expected dry, water=F or season=S")

@@ -86,10 +86,13 @@ def cmd_export(args):
     view = LeafView(model, photo, run.sim.state().pigments, photo_colour=sp.photo_colour)
     rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view,
                       layers=args.layers, veins=args.veins, texture=args.texture)
-    rep.update(species=sp.key, seed=args.seed, frames=run.state.frame)
+    water = model.water_fraction(run.state.particle_water)
+    rep.update(species=sp.key, seed=args.seed, frames=run.state.frame, water_fraction=round(water, 6))
     if fmt in ("glb", "gltf") and len(keys) > 1:
         from leafsim.export import blender_import  # the add-on that brings the colour morphs into Blender
 
         rep["blender_addon"] = str(Path(blender_import.__file__).resolve())
     counts = ", ".join(f"{k} {v['vertices']} vertices / {v['triangles']} triangles" for k, v in rep["meshes"].items())
-    emit(args, rep, f"{sp.key}: {counts}, {rep['targets']} morph targets -> {', '.join(rep['files'])}")
+    shown = "the last key shown by default" if rep["targets"] else "one frame"
+    emit(args, rep, f"{sp.key}: frame {run.state.frame}, {100 * water:.1f} % of the blade's water left ({shown}); "
+                    f"{counts}, {rep['targets']} morph targets -> {', '.join(rep['files'])}")
