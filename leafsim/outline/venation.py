@@ -47,6 +47,15 @@ RING_WIDTH = 2
 MAX_TURN_DEG = 150.0
 #: lateral starts from this far along a main vein [× L] (aspen's basal veins leave at its base)
 START_AT = 0.01
+#: laterals leaving the midrib this near its base [× L] are also searched as the strongest
+#: path to a margin at least BASAL_MIN_REACH away (the margin beside the base is near)
+BASAL_ZONE, BASAL_MIN_REACH = 0.15, 0.25
+#: one basal search a side every this far along the midrib [× L]
+BASAL_EVERY = 0.025
+#: the basal search keeps off this band along the margin [× L] (but to end in it)
+BASAL_EDGE = 0.05
+#: a basal lateral ends where it turns further than this from the heading it left with [deg]
+BASAL_TURN_DEG = 60.0
 
 #: the colour channels a vein may show in (CIELAB): its lightness, or its yellowness — the
 #: midrib of a back-lit oak leaf is a yellow band with darker flanks, no lighter than the blade
@@ -295,10 +304,11 @@ def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list]:
         & ~near_main & inner
     cands = _lateral_starts(mains, ring, L)
     d_main = cv2.distanceTransform(np.where(main_px > 0, 0, 255).astype(np.uint8), cv2.DIST_L2, 5)
-    scored = []
+    scored, short = [], []
     for mi, r in cands:
         path = grid.path(pred, grid.index(r))[::-1]  # from the main vein to the margin
         if len(path) < 0.08 * L:
+            short.append((mi, r))  # the margin is near: perhaps beside a main vein's base
             continue
         ix = path.astype(int)
         if float(np.median(d_main[ix[:, 1], ix[:, 0]])) < 0.03 * L:
@@ -307,6 +317,7 @@ def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list]:
         score = float(np.median(v)) / med
         if score > 2.5:
             scored.append((score, mi, path))
+    scored += _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L)
     scored.sort(key=lambda x: -x[0])
     taken = np.zeros(m.shape, np.uint8)  # within 2 % L of a kept lateral
     kept_px = np.zeros(m.shape, np.uint8)  # a kept lateral's own pixels
@@ -329,6 +340,76 @@ def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list]:
         out.append(path)
         parents.append(mi)
     return out, parents
+
+
+def _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L) -> list:
+    """Laterals that leave the midrib near its base (aspen's basal pair, running from the
+    petiole up to the side margins).  There the margin beside the base is so near that the
+    cheapest path to any margin runs to it instead of along the vein: ``short`` are the starts
+    whose path did.  So this search keeps
+    off the margin and off the main veins (every pixel within :data:`BASAL_EDGE` of either
+    costs as much as the blade's off the lines, :data:`_FLOOR`); from each of those starts along
+    the midrib's first :data:`BASAL_ZONE` (one a side every :data:`BASAL_EVERY`) it starts straight out of
+    that strip and ends at the margin at least :data:`BASAL_MIN_REACH` from the vein's start
+    where the path is cheapest per unit of reach.  The path is cut where it turns away from
+    its first heading (:func:`_until_turn`; the vein grower joins it to its main vein in line
+    with its first 2 % L) and scored as the others (median ridge over the blade's); of each side's
+    paths the one with the most evidence (score × length) is kept."""
+    along = (cv2.distanceTransform(blade.astype(np.uint8), cv2.DIST_L2, 5) < BASAL_EDGE * L) | (d_main < BASAL_EDGE * L)
+    cost = grid.cost.copy()
+    cost[along] = np.maximum(cost[along], 1.0 / _FLOOR)
+    grid = _Grid(cost)
+    band_idx = np.flatnonzero(band.reshape(-1))
+    bxy = np.column_stack([band_idx % grid.w, band_idx // grid.w]).astype(float)
+    seen, best = set(), {}
+    for mi, r in short:
+        p = mains[mi]
+        j = int(np.argmin(np.linalg.norm(p - r, axis=1)))
+        t = float(np.linalg.norm(np.diff(p[: j + 1], axis=0), axis=1).sum())
+        tm = p[min(j + 2, len(p) - 1)] - p[max(j - 2, 0)]
+        key = (mi, bool(tm[0] * (r[1] - p[j][1]) - tm[1] * (r[0] - p[j][0]) > 0), int(t // (BASAL_EVERY * L)))
+        if mi > 0 or t > BASAL_ZONE * L or key in seen:
+            continue
+        seen.add(key)
+        n = (r - p[j]) / max(float(np.linalg.norm(r - p[j])), 1e-9)
+        r0 = np.clip(np.round(r + n * BASAL_EDGE * L), 0, [grid.w - 1, grid.h - 1])
+        if not blade[int(r0[1]), int(r0[0])]:
+            continue
+        d, pred = dijkstra(grid.graph, directed=False, indices=grid.index(r0), return_predecessors=True)
+        reach = np.linalg.norm(bxy - r0, axis=1)
+        ok = (np.linalg.norm(bxy - p[0], axis=1) >= BASAL_MIN_REACH * L) & np.isfinite(d[band_idx])
+        if not ok.any():
+            continue
+        k = np.flatnonzero(ok)[int(np.argmin(d[band_idx][ok] / reach[ok]))]  # the cheapest per unit of reach
+        path = _until_turn(grid.path(pred, int(band_idx[k])), L)
+        ix = path.astype(int)
+        if len(path) < 0.08 * L:
+            continue
+        score = float(np.median(R[ix[:, 1], ix[:, 0]])) / med
+        # the starts of one side find the same vein, each cut elsewhere: keep the one with the
+        # most evidence (score × length)
+        if score > 2.5 and score * len(path) > best.get(key[:2], (0.0,))[0]:
+            best[key[:2]] = (score * len(path), (score, mi, path))
+    return [v[1] for v in best.values()]
+
+
+def _until_turn(path: np.ndarray, L: float, max_deg: float = BASAL_TURN_DEG) -> np.ndarray:
+    """``path`` up to where its heading (over 2 % L) has turned further than ``max_deg`` from
+    the heading it left with (its first 5 % L): beyond, the cheapest path has gone on along
+    another vein than the one it followed."""
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
+    i0 = int(np.searchsorted(s, 0.05 * L))
+    if i0 >= len(path) - 1:
+        return path
+    h0 = path[i0] - path[0]
+    a0 = np.arctan2(h0[1], h0[0])
+    step = max(1, int(round(0.02 * L)))
+    for i in range(i0, len(path) - step, step):
+        h = path[i + step] - path[i]
+        turn = abs((np.arctan2(h[1], h[0]) - a0 + np.pi) % (2 * np.pi) - np.pi)
+        if np.degrees(turn) > max_deg:
+            return path[: i + 1]
+    return path
 
 
 def _backward(path: np.ndarray, main: np.ndarray) -> bool:

@@ -226,3 +226,31 @@ def test_a_main_vein_passes_under_a_petiole_lying_on_it():
     L = float(np.linalg.norm(apex - base))
     d = _dist_to_polyline(_dense(pv.mains[0], 2.0), np.array([base, tip]))
     assert d.max() < 0.04 * L and d.mean() < 0.015 * L, (d.max() / L, d.mean() / L)
+
+
+def test_basal_veins_beside_a_near_margin_are_traced():
+    """A broad-based leaf (as aspen's) with a pair of basal veins leaving the midrib at the base
+    for the side margins: beside the base the margin is so near that the cheapest path of the
+    shared tree runs straight to it, so both veins were missed (aspen's lower half had no
+    traced vein); the basal search follows them."""
+    size = 700
+    img, poly = leafimg.photo(size, width=0.62)
+    base, _, _ = leafimg.petiole_line(size)
+    apex = np.array([0.5, 0.45 - 0.31]) * size
+    vein = (120, 215, 150)
+    cv2.line(img, tuple(np.round(base).astype(int)), tuple(np.round(apex).astype(int)), vein, 4, cv2.LINE_AA)
+    drawn = []
+    for side in (-1, 1):
+        d = np.array([side * np.sin(np.radians(40)), -np.cos(np.radians(40))])
+        p0, p1 = base + d * 0.01 * size, base + d * 0.3 * size
+        cv2.line(img, tuple(np.round(p0).astype(int)), tuple(np.round(p1).astype(int)), vein, 3, cv2.LINE_AA)
+        drawn.append(np.array([p0, p1]))
+    mask = np.zeros(img.shape[:2], np.uint8)
+    cv2.fillPoly(mask, [np.round(poly).astype(np.int32)], 255)
+    pv = trace_venation(img, mask, base, apex)
+    L = float(np.linalg.norm(apex - base))
+    for dl in drawn:
+        # a traced lateral runs along it over most of its length (within 1.5 % L)
+        best = max((np.mean(_dist_to_polyline(_dense(lat, 2.0), dl) < 0.015 * L) * float(np.linalg.norm(lat[-1] - lat[0]))
+                    for lat in pv.laterals), default=0.0)
+        assert best > 0.5 * float(np.linalg.norm(dl[1] - dl[0])), (best / L, len(pv.laterals))
