@@ -17,6 +17,7 @@ from leafsim.veins.stages import (
     given_main_veins,
     grow_laterals,
     grow_main_veins,
+    fill_gaps,
     grow_net,
     grow_sublaterals,
     main_targets,
@@ -66,6 +67,7 @@ def grow_veins(
         grow_laterals(g, graph, shape, p, rng, profile, taper)
     if p["veins.sub.enabled"]:
         grow_sublaterals(g, graph, shape, p, rng, taper)
+        fill_gaps(g, graph, shape, p, rng, taper)
     if p["veins.net.enabled"]:
         grow_net(g, graph, shape, p, rng, taper)
     graph.stats = vein_stats(graph, shape, reached, auto)

@@ -324,6 +324,69 @@ def grow_sublaterals(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet,
             graph.veins.append(Vein(SUB, sv, taper_widths(sv, w0, taper), li, b))
 
 
+#: the most sublaterals :func:`fill_gaps` adds to one leaf
+MAX_FILL = 40
+
+
+def fill_gaps(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, rng: np.random.Generator,
+              taper: float) -> int:
+    """Sublaterals into the parts of the blade farther than ``veins.sub.gap`` × length from
+    every vein: a real blade has veins everywhere, and its water supply (Jeong's τ), drying and
+    colour follow them.  The farthest point of the blade (sampled every 1 % of the length) gets
+    one from the nearest vein point through it, on toward the margin to ``veins.sub.reach`` of
+    the ray but at most twice as far as the point, bent as the other sublaterals; repeated until no point is that far (or a point
+    cannot be reached without crossing a vein: then its neighbourhood is given up).  Returns
+    how many were added."""
+    gap = p["veins.sub.gap"] * shape.length
+    if gap <= 0 or not graph.veins:
+        return 0
+    h = 0.01 * shape.length
+    lo, hi = shape.contour.min(0), shape.contour.max(0)
+    gx, gy = np.meshgrid(np.arange(lo[0] + h / 2, hi[0], h), np.arange(lo[1] + h / 2, hi[1], h))
+    pts = np.column_stack([gx.ravel(), gy.ravel()])
+    pts = pts[shape.inside(pts)]
+    sstep = p["veins.lateral.step"] * shape.length * 0.8
+    added = 0
+    while added < MAX_FILL and len(pts):
+        allp = np.vstack([v.points for v in graph.veins])
+        alli = np.concatenate([np.full(len(v.points), vi) for vi, v in enumerate(graph.veins)])
+        allw = np.concatenate([v.widths for v in graph.veins])
+        tree = cKDTree(allp)
+        d, _ = tree.query(pts)
+        k = int(np.argmax(d))
+        if d[k] <= gap:
+            break
+        q = pts[k]
+        # from the nearest vein point that sees it (vein points are a step apart: the nearest
+        # one can lie behind another vein's segment)
+        near = tree.query(q, k=min(8, len(allp)))[1]
+        seen = [i for i in np.atleast_1d(near) if not g.blocked(allp[i], q)]
+        if not seen:
+            pts = pts[np.linalg.norm(pts - q, axis=1) > gap]
+            continue
+        a, src = allp[seen[0]], seen[0]
+        direction = unit(q - a)
+        # the margin ahead, seen from the gap's point (the nearest vein point may be a vein's
+        # end at the margin itself)
+        hit = ray_polygon_hit(q, direction, shape.contour, shape.holes)
+        sv = None
+        if hit is not None:
+            # through the gap, on toward the margin but not beyond twice its distance (a vein
+            # may end in the blade)
+            dq = float(np.linalg.norm(q - a))
+            reach = min((dq + hit) * p["veins.sub.reach"], 2.0 * dq)
+            if reach >= 2 * sstep:
+                sv = _bezier_toward(g, a, a + direction * reach, direction, p["veins.sub.bend"], sstep, rng)
+        if sv is None or np.linalg.norm(sv[-1] - a) < 0.5 * np.linalg.norm(q - a):
+            pts = pts[np.linalg.norm(pts - q, axis=1) > gap]  # unreachable from here: give it up
+            continue
+        g.add(sv)
+        w0 = float(allw[src]) * p["veins.sub.width"]
+        graph.veins.append(Vein(SUB, sv, taper_widths(sv, w0, taper), int(alli[src]), sv[-1]))
+        added += 1
+    return added
+
+
 def grow_net(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, rng: np.random.Generator,
              taper: float) -> None:
     """Tertiary net (Kim's "hair" veins): jittered grid points inside the blade, each joined to

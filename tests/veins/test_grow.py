@@ -97,3 +97,39 @@ def test_crossing_and_outside_metrics_detect_defects():
                    Vein(LATERAL, np.array([[0.5, 0.5], [1.5, 0.5]]), np.ones(2))])
     assert count_crossings(g) == 1
     assert np.isclose(outside_length(g, sq), 0.5)
+
+
+def _farthest_from_veins(shape, graph) -> float:
+    """The largest distance of the blade (sampled every 0.5 % L) to a vein point, × L."""
+    from scipy.spatial import cKDTree
+
+    L = shape.length
+    lo, hi = shape.contour.min(0), shape.contour.max(0)
+    gx, gy = np.meshgrid(np.arange(lo[0], hi[0], 0.005 * L), np.arange(lo[1], hi[1], 0.005 * L))
+    pts = np.column_stack([gx.ravel(), gy.ravel()])
+    pts = pts[shape.inside(pts)]
+    return float(cKDTree(np.vstack([v.points for v in graph.veins])).query(pts)[0].max()) / L
+
+
+def test_gaps_in_the_venation_get_sublaterals():
+    """A blade with no laterals (as where a photo's faint veins were not traced: aspen's lower
+    half, a grapevine lobe beside its petiole) has parts far from every vein; they get
+    sublaterals until none is farther than veins.sub.gap, and only then (a drawn leaf's own
+    venation is left as it was)."""
+    sp = LIB["pokeweed"]
+    sh = shape_of("pokeweed")
+    bare = sp.params.with_overrides({"veins.lateral.enabled": False, "veins.sub.gap": 0.0})
+    g0 = species_veins(sp, sh, bare, 0)
+    assert _farthest_from_veins(sh, g0) > 0.2 and len(g0.of_order(SUB)) == 0
+    for gap in (0.15, 0.1):
+        g = species_veins(sp, sh, bare.with_overrides({"veins.sub.gap": gap}), 0)
+        fills = g.of_order(SUB)
+        assert len(fills) >= 2 and g.stats["crossings"] == 0 and g.stats["outside_length"] == 0
+        # the 1 % L grid the stage samples and the vein points it measures from: within 1 % L
+        assert _farthest_from_veins(sh, g) <= gap + 0.01, (gap, _farthest_from_veins(sh, g))
+        assert all(v.parent >= 0 for v in fills)
+    # the defaults leave a drawn leaf's venation as it grows (none of its parts is that far)
+    full = species_veins(sp, sh, sp.params, 0)
+    assert _farthest_from_veins(sh, full) < sp.params["veins.sub.gap"]
+    off = species_veins(sp, sh, sp.params.with_overrides({"veins.sub.gap": 0.0}), 0)
+    assert len(full.veins) == len(off.veins) and all(np.array_equal(a.points, b.points) for a, b in zip(full.veins, off.veins))
