@@ -93,6 +93,6 @@ def cmd_export(args):
 
         rep["blender_addon"] = str(Path(blender_import.__file__).resolve())
     counts = ", ".join(f"{k} {v['vertices']} vertices / {v['triangles']} triangles" for k, v in rep["meshes"].items())
-    shown = "the last key shown by default" if rep["targets"] else "one frame"
+    shown = "the base mesh; earlier key frames as morph targets" if rep["targets"] else "one frame"
     emit(args, rep, f"{sp.key}: frame {run.state.frame}, {100 * water:.1f} % of the blade's water left ({shown}); "
                     f"{counts}, {rep['targets']} morph targets -> {', '.join(rep['files'])}")

@@ -2,11 +2,12 @@
 
 One node and one mesh per exported surface (blade, veins), a double-sided metallic-roughness
 material each (baked pigment colours as ``COLOR_0``, or the photo as ``baseColorTexture``).
-Several frames become morph targets — one per key frame after the first, with ``POSITION``,
-``NORMAL`` and ``COLOR_0`` deltas, the mesh's default weights on the last one (the state asked
-for) — and one animation whose sampler keys the weights one-hot at
-the frames' times (LINEAR interpolation between two one-hot keys is the linear blend of two
-consecutive frames).  The output depends only on the data (no timestamps), so it is
+Several frames: the base mesh is the **last** key frame (the state the export was asked for, so
+a viewer that does not play morph animations, such as trimesh or a still in an engine, shows
+it), each earlier key frame a morph target with ``POSITION``, ``NORMAL`` and ``COLOR_0`` deltas
+against it, default weights 0, and one animation whose sampler keys the weights one-hot at the
+earlier frames' times and all zero at the last (LINEAR interpolation between two keys is the
+linear blend of two consecutive frames).  The output depends only on the data (no timestamps), so it is
 reproducible byte for byte.
 """
 
@@ -75,8 +76,9 @@ class GltfBuilder:
         return 0
 
     def mesh(self, name: str, frames: list, material: int, target_names: list[str] | None = None) -> int:
-        """A node + mesh from one :class:`~leafsim.export.mesh.Surface` per frame (frame 0 is the base)."""
-        s0 = frames[0]
+        """A node + mesh from one :class:`~leafsim.export.mesh.Surface` per frame (the last is the
+        base, the earlier ones morph targets against it: module docstring)."""
+        s0 = frames[-1]
         attrs = {"POSITION": self.accessor(s0.positions, bounds=True), "NORMAL": self.accessor(s0.normals)}
         if s0.uv is not None:
             attrs["TEXCOORD_0"] = self.accessor(s0.uv)
@@ -90,11 +92,8 @@ class GltfBuilder:
                 "material": material, "mode": 4}
         mesh = {"name": name, "primitives": [prim]}
         if len(frames) > 1:
-            prim["targets"] = [self._target(s0, s) for s in frames[1:]]
-            # the default pose is the last key, the state the export was asked for: a viewer
-            # that does not play the animation (trimesh, a still in an engine) shows the dried
-            # leaf, not the fresh one; the animation's keys start from frame 0 as before
-            mesh["weights"] = [0.0] * (len(frames) - 2) + [1.0]
+            prim["targets"] = [self._target(s0, s) for s in frames[:-1]]
+            mesh["weights"] = [0.0] * (len(frames) - 1)
             if target_names:
                 mesh["extras"] = {"targetNames": list(target_names)}
         self.doc["meshes"].append(mesh)
@@ -113,13 +112,14 @@ class GltfBuilder:
         return t
 
     def animation(self, nodes: list[int], times: list[float]) -> None:
-        """Weights of every node's morph targets keyed one-hot at ``times`` (frame 0: all zero)."""
+        """Weights of every node's morph targets keyed at ``times``: one-hot on target i at key
+        frame i, all zero at the last key frame (the base mesh)."""
         k = len(times) - 1
         t = np.asarray(times, np.float64) - times[0]
         if (np.diff(t) <= 0).any():
             raise LeafsimError("export: key frame times must increase strictly")
         w = np.zeros((k + 1, k), np.float32)
-        w[np.arange(1, k + 1), np.arange(k)] = 1.0
+        w[np.arange(k), np.arange(k)] = 1.0
         sampler = {"input": self.accessor(t, None, bounds=True), "output": self.accessor(w.ravel(), None),
                    "interpolation": "LINEAR"}
         channels = [{"sampler": 0, "target": {"node": n, "path": "weights"}} for n in nodes]
@@ -149,7 +149,7 @@ def build_gltf(frames: list[dict], times: list[float], photo_png: bytes | None =
     key frame), animated over ``times`` when there is more than one frame."""
     g = GltfBuilder()
     tex = g.texture(photo_png) if photo_png is not None else None
-    names = [f"t = {t - times[0]:.4g} s" for t in times[1:]]
+    names = [f"t = {t - times[0]:.4g} s" for t in times[:-1]]  # the morph targets: every key frame but the last
     nodes = [g.mesh(name, [f[name] for f in frames], g.material(name, tex), names) for name in frames[0]]
     if len(frames) > 1:
         g.animation(nodes, times)

@@ -81,18 +81,24 @@ def test_animated_glb_is_valid_and_loads_with_expected_counts(leaf, tmp_path):
     times = doc["accessors"][anim["samplers"][0]["input"]]
     assert times["count"] == 3 and times["max"][0] == pytest.approx(states[-1].time - states[0].time, rel=1e-6)
     assert doc["materials"][0]["doubleSided"] and "pbrMetallicRoughness" in doc["materials"][0]
-    # the default pose is the last key (the state asked for), so a viewer that does not play the
-    # animation shows it: base + last target = the last state exported alone (frame 0 before)
-    assert [m["weights"] for m in doc["meshes"]] == [[0.0, 1.0], [0.0, 1.0]]
-    last = tmp_path / "last.glb"
+    # the base mesh is the last key frame (the state asked for), so a viewer that plays no morph
+    # animation shows it (trimesh; before, the base was frame 0: the fresh leaf); the targets
+    # bring back the earlier frames: base + target 0 = frame 0
+    assert [m["weights"] for m in doc["meshes"]] == [[0.0, 0.0], [0.0, 0.0]]
+    first, last = tmp_path / "first.glb", tmp_path / "last.glb"
+    export_mesh(model, states[0], first, params=params, view=view, veins=True)
     export_mesh(model, states[-1], last, params=params, view=view, veins=True)
-    pose = _accessor(path, prim["attributes"]["POSITION"]) + _accessor(path, prim["targets"][-1]["POSITION"])
-    alone = _accessor(last, _glb_json(last)["meshes"][0]["primitives"][0]["attributes"]["POSITION"])
-    assert np.abs(pose - alone).max() < 1e-6 and np.abs(pose - _accessor(path, prim["attributes"]["POSITION"])).max() > 1e-5
+    alone = {k: trimesh.load(f, process=False).geometry["blade"].vertices for k, f in (("first", first), ("last", last))}
+    assert np.abs(blade.vertices - alone["last"]).max() < 1e-6 and np.abs(alone["first"] - alone["last"]).max() > 1e-5
+    base = _accessor(path, prim["attributes"]["POSITION"])
+    back = base + _accessor(path, prim["targets"][0]["POSITION"])
+    assert np.abs(back - _accessor(first, _glb_json(first)["meshes"][0]["primitives"][0]["attributes"]["POSITION"])).max() < 1e-6
+    w = _accessor(path, anim["samplers"][0]["output"], 1).reshape(3, 2)  # keys × targets
+    assert w.tolist() == [[1.0, 0.0], [0.0, 1.0], [0.0, 0.0]]
 
 
-def _accessor(path, index: int) -> np.ndarray:
-    """The float32 VEC3 data of accessor ``index`` of a .glb file."""
+def _accessor(path, index: int, width: int = 3) -> np.ndarray:
+    """The float32 data of accessor ``index`` of a .glb file, ``width`` components each."""
     data = path.read_bytes()
     n = struct.unpack("<I", data[12:16])[0]
     doc = json.loads(data[20:20 + n])
@@ -100,7 +106,7 @@ def _accessor(path, index: int) -> np.ndarray:
     acc = doc["accessors"][index]
     view = doc["bufferViews"][acc["bufferView"]]
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    return np.frombuffer(binary, np.float32, acc["count"] * 3, start).reshape(-1, 3)
+    return np.frombuffer(binary, np.float32, acc["count"] * width, start).reshape(-1, width)
 
 
 def _winding_against_normals(vertices, faces, normals) -> tuple[int, int]:
@@ -178,8 +184,8 @@ def test_a_photo_export_carries_the_ageing(tmp_path):
     assert_clean(path)
     m = colour_morphs(path)
     assert set(m) == {"blade", "veins"} and m["blade"]["photo_factor"]
-    c0 = np.asarray(m["blade"]["colours"])
-    last = c0 + np.asarray(m["blade"]["deltas"][-1])
+    last = np.asarray(m["blade"]["colours"])  # the base mesh is the last key frame
+    c0 = last + np.asarray(m["blade"]["deltas"][0])  # target 0 brings back frame 0
     assert np.allclose(c0, 1.0, atol=1e-5)  # the fresh leaf is the photo itself
     _, tint = view.colours(states[-1], params)
     n = len(tint)
