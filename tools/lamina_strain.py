@@ -42,8 +42,8 @@ def spring_strain(m, q: np.ndarray, rest: np.ndarray) -> dict:
     out = {}
     for name, sel in kinds.items():
         e = eps[sel & blade]
-        out[name] = {"n": int(e.size), "pct": [round(100 * float(v), 2) for v in np.percentile(e, PCT)],
-                     "compressed": round(float(np.mean(e < -0.005)), 3)}
+        out[name] = {"n": int(e.size), "pct": [round(100 * float(v), 2) for v in np.percentile(e, PCT)] if e.size else None,
+                     "compressed": round(float(np.mean(e < -0.005)), 3) if e.size else None}
     return out
 
 
@@ -74,6 +74,9 @@ def principal(m, q: np.ndarray, rest: np.ndarray) -> dict:
     on_vein = (m.particle_vein_order[m.blade_tri_T] >= 0).any(1)[ok]
     out = {}
     for name, sel in (("between_veins", ~on_vein), ("on_veins", on_vein)):
+        if not sel.any():  # a coarse mesh may have no triangle off the veins
+            out[name] = {"n": 0}
+            continue
         out[name] = {"n": int(sel.sum()),
                      "smaller_pct": [round(float(v), 4) for v in np.percentile(s1[sel], PCT)],
                      "larger_pct": [round(float(v), 4) for v in np.percentile(s2[sel], PCT)],

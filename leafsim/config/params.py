@@ -165,7 +165,7 @@ _f("veins.sub.angle", 45.0, 5.0, 85.0, "deg", "θ_div: angle of a sublateral to 
 _f("veins.sub.bend", 0.25, 0.0, 0.8, "", "Random perpendicular offset of the Bézier control point, relative to the chord.", G, True)
 _f("veins.sub.reach", 0.92, 0.3, 1.0, "", "Sublaterals end at this fraction of the ray to the margin.", G, True)
 _f("veins.sub.width", 0.5, 0.05, 1.0, "× parent", "Width of a sublateral relative to its lateral.", G, True)
-_f("veins.sub.gap", 0.15, 0.0, 0.5, "× length", "No part of the blade is farther than this from a vein: where one is (a photo's faint veins the tracer missed), a sublateral grows from the nearest vein through its farthest point on toward the margin; 0 = off.", G, True)
+_f("veins.sub.gap", 0.15, 0.0, 0.5, "× length", "With sublaterals on: where a part of the blade is farther than this from every vein (a photo's faint veins the tracer missed), a sublateral grows from the nearest vein toward its farthest point and on toward the margin, until no part is (at most 40); 0 = off.", G, True)
 
 G = "Veins: net"
 _b("veins.net.enabled", False, "Grow a tertiary net: scattered points joined to the nearest vein.", G, True)

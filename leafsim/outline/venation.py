@@ -17,7 +17,10 @@ from the blade.  The cost of a pixel is small on strong ridges and large elsewhe
   (a spot, curved both ways, scores nothing); a path is a lateral when its median
   ridge strength is well above the blade's and it is at least 8 % of the leaf length long.
   Laterals closer than 4 % of the leaf length to a stronger one along most of their length
-  are the same vein and are dropped.
+  are the same vein and are dropped;
+* **basal laterals** — beside the midrib's base, where the margin is so near that those paths
+  run straight to it, the strongest path to a far margin instead (:func:`_basal_laterals`;
+  its own search, so it is kept from crossing the others by the vein grower).
 
 Everything is computed on a copy scaled so the leaf is :data:`WORK_LENGTH` px long; the
 polylines come back in photo pixels, smoothed over 1 % of the leaf length.  Used by the
@@ -56,6 +59,9 @@ BASAL_EVERY = 0.025
 BASAL_EDGE = 0.05
 #: a basal lateral ends where it turns further than this from the heading it left with [deg]
 BASAL_TURN_DEG = 60.0
+#: a basal lateral's median ridge strength over the blade's must exceed this (the other
+#: laterals' 2.5: its search reaches the margin from anywhere, so it asks for a clearer vein)
+BASAL_SCORE = 5.0
 
 #: the colour channels a vein may show in (CIELAB): its lightness, or its yellowness — the
 #: midrib of a back-lit oak leaf is a yellow band with darker flanks, no lighter than the blade
@@ -346,15 +352,15 @@ def _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L) -> list:
     """Laterals that leave the midrib near its base (aspen's basal pair, running from the
     petiole up to the side margins).  There the margin beside the base is so near that the
     cheapest path to any margin runs to it instead of along the vein: ``short`` are the starts
-    whose path did.  So this search keeps
-    off the margin and off the main veins (every pixel within :data:`BASAL_EDGE` of either
-    costs as much as the blade's off the lines, :data:`_FLOOR`); from each of those starts along
-    the midrib's first :data:`BASAL_ZONE` (one a side every :data:`BASAL_EVERY`) it starts straight out of
-    that strip and ends at the margin at least :data:`BASAL_MIN_REACH` from the vein's start
-    where the path is cheapest per unit of reach.  The path is cut where it turns away from
-    its first heading (:func:`_until_turn`; the vein grower joins it to its main vein in line
-    with its first 2 % L) and scored as the others (median ridge over the blade's); of each side's
-    paths the one with the most evidence (score × length) is kept."""
+    whose path did.  So this search keeps off the margin and off the main veins (every pixel
+    within :data:`BASAL_EDGE` of either costs at least 1 / :data:`_FLOOR`, as the blade off the
+    lines); from those starts along the midrib's first :data:`BASAL_ZONE` (one search a side every
+    :data:`BASAL_EVERY`) it starts straight out of that strip and ends in the margin band at least
+    :data:`BASAL_MIN_REACH` from the midrib's base, where the path is cheapest per unit of
+    straight-line reach (the strongest vein, not the nearest margin).  The path is cut where it
+    turns away from its heading (:func:`_until_turn`; the vein grower joins it to its main vein
+    in line with its first 2 % L) and scored as the others (median ridge over the blade's); of
+    each side's paths the best scored above :data:`BASAL_SCORE` is kept."""
     along = (cv2.distanceTransform(blade.astype(np.uint8), cv2.DIST_L2, 5) < BASAL_EDGE * L) | (d_main < BASAL_EDGE * L)
     cost = grid.cost.copy()
     cost[along] = np.maximum(cost[along], 1.0 / _FLOOR)
@@ -363,53 +369,56 @@ def _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L) -> list:
     bxy = np.column_stack([band_idx % grid.w, band_idx // grid.w]).astype(float)
     seen, best = set(), {}
     for mi, r in short:
+        if mi > 0:
+            continue
         p = mains[mi]
         j = int(np.argmin(np.linalg.norm(p - r, axis=1)))
         t = float(np.linalg.norm(np.diff(p[: j + 1], axis=0), axis=1).sum())
         tm = p[min(j + 2, len(p) - 1)] - p[max(j - 2, 0)]
-        key = (mi, bool(tm[0] * (r[1] - p[j][1]) - tm[1] * (r[0] - p[j][0]) > 0), int(t // (BASAL_EVERY * L)))
-        if mi > 0 or t > BASAL_ZONE * L or key in seen:
+        key = (bool(tm[0] * (r[1] - p[j][1]) - tm[1] * (r[0] - p[j][0]) > 0), int(t // (BASAL_EVERY * L)))
+        if t > BASAL_ZONE * L or key in seen:
             continue
-        seen.add(key)
         n = (r - p[j]) / max(float(np.linalg.norm(r - p[j])), 1e-9)
         r0 = np.clip(np.round(r + n * BASAL_EDGE * L), 0, [grid.w - 1, grid.h - 1])
         if not blade[int(r0[1]), int(r0[0])]:
-            continue
+            continue  # another start of this bin may land on the blade
+        seen.add(key)
         d, pred = dijkstra(grid.graph, directed=False, indices=grid.index(r0), return_predecessors=True)
         reach = np.linalg.norm(bxy - r0, axis=1)
         ok = (np.linalg.norm(bxy - p[0], axis=1) >= BASAL_MIN_REACH * L) & np.isfinite(d[band_idx])
         if not ok.any():
             continue
-        k = np.flatnonzero(ok)[int(np.argmin(d[band_idx][ok] / reach[ok]))]  # the cheapest per unit of reach
+        k = np.flatnonzero(ok)[int(np.argmin(d[band_idx][ok] / reach[ok]))]
         path = _until_turn(grid.path(pred, int(band_idx[k])), L)
         ix = path.astype(int)
         if len(path) < 0.08 * L:
             continue
         score = float(np.median(R[ix[:, 1], ix[:, 0]])) / med
-        # the starts of one side find the same vein, each cut elsewhere: keep the one with the
-        # most evidence (score × length)
-        if score > 2.5 and score * len(path) > best.get(key[:2], (0.0,))[0]:
-            best[key[:2]] = (score * len(path), (score, mi, path))
-    return [v[1] for v in best.values()]
+        if score > BASAL_SCORE and score > best.get(key[0], (0.0,))[0]:  # one a side: the starts find the same vein
+            best[key[0]] = (score, mi, path)
+    return list(best.values())
 
 
 def _until_turn(path: np.ndarray, L: float, max_deg: float = BASAL_TURN_DEG) -> np.ndarray:
-    """``path`` up to where its heading (over 2 % L) has turned further than ``max_deg`` from
-    the heading it left with (its first 5 % L): beyond, the cheapest path has gone on along
+    """``path`` up to where its heading, over steps of 2 % L of arc length, has turned further
+    than ``max_deg`` from the heading it has between 3 and 10 % L (once it has joined the vein's
+    ridge: its start may jog sideways onto it): beyond, the cheapest path has gone on along
     another vein than the one it followed."""
     s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
-    i0 = int(np.searchsorted(s, 0.05 * L))
-    if i0 >= len(path) - 1:
+    i3, i10 = (int(np.searchsorted(s, f * L)) for f in (0.03, 0.10))
+    if i10 >= len(path) - 1:
         return path
-    h0 = path[i0] - path[0]
+    h0 = path[i10] - path[i3]
     a0 = np.arctan2(h0[1], h0[0])
-    step = max(1, int(round(0.02 * L)))
-    for i in range(i0, len(path) - step, step):
-        h = path[i + step] - path[i]
-        turn = abs((np.arctan2(h[1], h[0]) - a0 + np.pi) % (2 * np.pi) - np.pi)
-        if np.degrees(turn) > max_deg:
+    i = i10
+    while True:
+        k = int(np.searchsorted(s, s[i] + 0.02 * L))
+        if k >= len(path):
+            return path
+        h = path[k] - path[i]
+        if np.degrees(abs((np.arctan2(h[1], h[0]) - a0 + np.pi) % (2 * np.pi) - np.pi)) > max_deg:
             return path[: i + 1]
-    return path
+        i = k
 
 
 def _backward(path: np.ndarray, main: np.ndarray) -> bool:

@@ -65,11 +65,13 @@ def grow_veins(
         given_laterals(g, graph, shape, p, given["laterals"], given["parents"], taper)
     elif p["veins.lateral.enabled"]:
         grow_laterals(g, graph, shape, p, rng, profile, taper)
+    fills = 0
     if p["veins.sub.enabled"]:
         grow_sublaterals(g, graph, shape, p, rng, taper)
-        fill_gaps(g, graph, shape, p, rng, taper)
+        fills = fill_gaps(g, graph, shape, p, rng, taper)
     if p["veins.net.enabled"]:
         grow_net(g, graph, shape, p, rng, taper)
     graph.stats = vein_stats(graph, shape, reached, auto)
     graph.stats["collision_tests"] = g.tests
+    graph.stats["gap_fills"] = fills
     return graph

@@ -116,6 +116,15 @@ def _inside_prefix(shape: LeafShape, pts: np.ndarray) -> np.ndarray:
     return pts[:k]
 
 
+def _segment_inside(shape: LeafShape, a: np.ndarray, b: np.ndarray, n: int = 16) -> bool:
+    """Whether the straight segment a → b stays inside the outline (and out of the holes),
+    sampled at ``n`` points."""
+    from leafsim.base.geometry import points_in_region
+
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    return bool(points_in_region(a + t * (b - a), shape.contour, shape.holes).all())
+
+
 def _until_crossing(g: Grower, pts: np.ndarray) -> np.ndarray:
     """The polyline up to just before it first crosses a vein already in ``g`` (a traced vein
     smoothed near a junction may clip its neighbour; veins never cross)."""
@@ -206,6 +215,10 @@ def given_laterals(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, l
         pts = np.asarray(pts, float)
         mv = graph.veins[parent]
         j = _join_index(mv.points, pts, shape.length)
+        if not _segment_inside(shape, mv.points[j], pts[0]):
+            # in line it would cut across the margin (beside the base, where the outline is
+            # concave): join at the nearest point instead
+            j = int(np.argmin(np.linalg.norm(mv.points - pts[0], axis=1)))
         pts = _until_crossing(g, _inside_prefix(shape, np.vstack([mv.points[j][None], pts])))
         if len(pts) < 3:
             continue
@@ -331,12 +344,14 @@ MAX_FILL = 40
 def fill_gaps(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, rng: np.random.Generator,
               taper: float) -> int:
     """Sublaterals into the parts of the blade farther than ``veins.sub.gap`` × length from
-    every vein: a real blade has veins everywhere, and its water supply (Jeong's τ), drying and
-    colour follow them.  The farthest point of the blade (sampled every 1 % of the length) gets
-    one from the nearest vein point through it, on toward the margin to ``veins.sub.reach`` of
-    the ray but at most twice as far as the point, bent as the other sublaterals; repeated until no point is that far (or a point
-    cannot be reached without crossing a vein: then its neighbourhood is given up).  Returns
-    how many were added."""
+    every vein: a real blade has veins everywhere, and its water and mass (Jeong's τ), drying
+    and colour follow them.  The farthest point of the blade (sampled every 1 % of the length)
+    gets one from the nearest vein point that sees it, aimed through it and on toward the margin
+    to ``veins.sub.reach`` of the ray but at most twice as far as the point, bent as the other
+    sublaterals (so it passes within a quarter of its distance of the point); repeated until no
+    point is that far, :data:`MAX_FILL` were added, or the rest cannot be reached without
+    crossing a vein (a point that cannot is given up with its neighbourhood).  Returns how many
+    were added (``graph.stats["gap_fills"]``)."""
     gap = p["veins.sub.gap"] * shape.length
     if gap <= 0 or not graph.veins:
         return 0
@@ -381,8 +396,11 @@ def fill_gaps(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, rng: n
             pts = pts[np.linalg.norm(pts - q, axis=1) > gap]  # unreachable from here: give it up
             continue
         g.add(sv)
-        w0 = float(allw[src]) * p["veins.sub.width"]
-        graph.veins.append(Vein(SUB, sv, taper_widths(sv, w0, taper), int(alli[src]), sv[-1]))
+        # a sublateral's width: × veins.sub.width of its vein's there, and where it leaves a
+        # main vein also × veins.lateral.width (never as wide as a lateral from there)
+        parent = int(alli[src])
+        w0 = float(allw[src]) * p["veins.sub.width"] * (p["veins.lateral.width"] if graph.veins[parent].order == MAIN else 1.0)
+        graph.veins.append(Vein(SUB, sv, taper_widths(sv, w0, taper), parent, sv[-1]))
         added += 1
     return added
 

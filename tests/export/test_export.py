@@ -98,15 +98,12 @@ def test_animated_glb_is_valid_and_loads_with_expected_counts(leaf, tmp_path):
 
 
 def _accessor(path, index: int, width: int = 3) -> np.ndarray:
-    """The float32 data of accessor ``index`` of a .glb file, ``width`` components each."""
-    data = path.read_bytes()
-    n = struct.unpack("<I", data[12:16])[0]
-    doc = json.loads(data[20:20 + n])
-    binary = data[20 + n + 8:]
-    acc = doc["accessors"][index]
-    view = doc["bufferViews"][acc["bufferView"]]
-    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    return np.frombuffer(binary, np.float32, acc["count"] * width, start).reshape(-1, width)
+    """The float data of accessor ``index`` of a .glb file, ``width`` components each (read as
+    the Blender add-on reads it)."""
+    from leafsim.export.blender_import import _floats, _load
+
+    doc, blob = _load(path)
+    return np.asarray(_floats(doc, blob, index), float).reshape(-1, width)
 
 
 def _winding_against_normals(vertices, faces, normals) -> tuple[int, int]:

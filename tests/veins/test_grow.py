@@ -127,7 +127,12 @@ def test_gaps_in_the_venation_get_sublaterals():
         assert len(fills) >= 2 and g.stats["crossings"] == 0 and g.stats["outside_length"] == 0
         # the 1 % L grid the stage samples and the vein points it measures from: within 1 % L
         assert _farthest_from_veins(sh, g) <= gap + 0.01, (gap, _farthest_from_veins(sh, g))
-        assert all(v.parent >= 0 for v in fills)
+        # each leaves a vein (it starts on its parent's polyline) and is no wider than a lateral there
+        assert g.stats["gap_fills"] == len(fills)
+        for v in fills:
+            par = g.veins[v.parent]
+            assert np.linalg.norm(par.points - v.points[0], axis=1).min() < 1e-12
+            assert v.widths[0] <= par.widths.max() * sp.params["veins.lateral.width"] + 1e-15
     # the defaults leave a drawn leaf's venation as it grows (none of its parts is that far)
     full = species_veins(sp, sh, sp.params, 0)
     assert _farthest_from_veins(sh, full) < sp.params["veins.sub.gap"]
