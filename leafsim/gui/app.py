@@ -73,10 +73,13 @@ DRY_UI_HZ = 3.0
 
 
 def _configure_threads() -> None:
-    """llvmpipe's render threads compete with numba's on small machines: cap them, and make
-    numba's OpenMP workers sleep instead of spinning between parallel regions (measured: spinning
-    workers starve llvmpipe).  Values already set in the environment win."""
-    os.environ.setdefault("LP_NUM_THREADS", "2" if (os.cpu_count() or 1) <= 2 else "4")
+    """llvmpipe's render threads compete with the simulation worker on small machines: leave it
+    a core (:mod:`leafsim.gui.threads`), and make numba's OpenMP workers sleep instead of
+    spinning between parallel regions (measured: spinning workers starve llvmpipe).  Values
+    already set in the environment win."""
+    from leafsim.gui.threads import render_threads
+
+    os.environ.setdefault("LP_NUM_THREADS", render_threads())
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 

@@ -113,7 +113,9 @@ def _table(rows) -> str:
 def run_passes(env: dict, species: str, reps: int) -> str:
     """Both contexts, as a text table (CPU ms per pass, medians)."""
     env = dict(env)
-    env.setdefault("LP_NUM_THREADS", "2" if (os.cpu_count() or 1) <= 2 else "4")
+    from leafsim.gui.threads import render_threads
+
+    env.setdefault("LP_NUM_THREADS", render_threads())
     lines = []
     for where in ("egl", "window"):
         cmd = [sys.executable, "-m", "leafsim.gui.bench_child", f"passes-{where}", "--species", species,
