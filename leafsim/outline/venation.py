@@ -18,9 +18,10 @@ from the blade.  The cost of a pixel is small on strong ridges and large elsewhe
   ridge strength is well above the blade's and it is at least 8 % of the leaf length long.
   Laterals closer than 4 % of the leaf length to a stronger one along most of their length
   are the same vein and are dropped;
-* **basal laterals** — beside the midrib's base, where the margin is so near that those paths
-  run straight to it, the strongest path to a far margin instead (:func:`_basal_laterals`;
-  its own search, so it is kept from crossing the others by the vein grower).
+* **basal laterals** — beside a main vein's base, where the margin is so near that those paths
+  run straight to it, the strongest path to a far margin instead, leaving the main vein along
+  the ray that follows a vein (:func:`_basal_laterals`; its own search, so it is kept from
+  crossing the others by the vein grower).
 
 Everything is computed on a copy scaled so the leaf is :data:`WORK_LENGTH` px long; the
 polylines come back in photo pixels, smoothed over 1 % of the leaf length.  Used by the
@@ -50,13 +51,16 @@ RING_WIDTH = 2
 MAX_TURN_DEG = 150.0
 #: lateral starts from this far along a main vein [× L] (aspen's basal veins leave at its base)
 START_AT = 0.01
-#: laterals leaving the midrib this near its base [× L] are also searched as the strongest
+#: laterals leaving a main vein this near its start [× L] are also searched as the strongest
 #: path to a margin at least BASAL_MIN_REACH away (the margin beside the base is near)
 BASAL_ZONE, BASAL_MIN_REACH = 0.15, 0.25
-#: one basal search a side every this far along the midrib [× L]
+#: one basal search a side every this far along a main vein [× L]
 BASAL_EVERY = 0.025
 #: the basal search keeps off this band along the margin [× L] (but to end in it)
 BASAL_EDGE = 0.05
+#: a basal lateral leaves its main vein's strip along the straightest ridge of rays at these
+#: angles to the main vein [deg], each tried over this length [× L]
+BASAL_ANGLES, BASAL_RAY = (20, 30, 40, 50, 60, 70, 80, 90), 0.06
 #: a basal lateral ends where it turns further than this from the heading it left with [deg]
 BASAL_TURN_DEG = 60.0
 #: a basal lateral's median ridge strength over the blade's must exceed this (the other
@@ -349,54 +353,105 @@ def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list]:
 
 
 def _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L) -> list:
-    """Laterals that leave the midrib near its base (aspen's basal pair, running from the
-    petiole up to the side margins).  There the margin beside the base is so near that the
-    cheapest path to any margin runs to it instead of along the vein: ``short`` are the starts
-    whose path did.  So this search keeps off the margin and off the main veins (every pixel
-    within :data:`BASAL_EDGE` of either costs at least 1 / :data:`_FLOOR`, as the blade off the
-    lines); from those starts along the midrib's first :data:`BASAL_ZONE` (one search a side every
-    :data:`BASAL_EVERY`) it starts straight out of that strip and ends in the margin band at least
-    :data:`BASAL_MIN_REACH` from the midrib's base, where the path is cheapest per unit of
-    straight-line reach (the strongest vein, not the nearest margin).  The path is cut where it
-    turns away from its heading (:func:`_until_turn`; the vein grower joins it to its main vein
-    in line with its first 2 % L) and scored as the others (median ridge over the blade's); of
-    each side's paths the best scored above :data:`BASAL_SCORE` is kept."""
-    along = (cv2.distanceTransform(blade.astype(np.uint8), cv2.DIST_L2, 5) < BASAL_EDGE * L) | (d_main < BASAL_EDGE * L)
+    """Laterals that leave a main vein near its base (aspen's basal pair, running from the
+    petiole up to the side margins; grapevine's veins to its upper lobes, leaving the side main
+    veins beside the petiole).  There the margin beside the base is so near that the cheapest
+    path to any margin runs to it instead of along the vein: ``short`` are the starts whose
+    path did.  So this search keeps off the margin and off the main veins: every pixel within
+    :data:`BASAL_EDGE` of a main vein, or of the margin off a vein's ridge (a ridge over
+    :data:`BASAL_SCORE` × the blade's: a vein may run that near a sinus), costs at least
+    1 / :data:`_FLOOR`, as the blade off the lines.  From those starts along each main vein's
+    first :data:`BASAL_ZONE` (one search a side every :data:`BASAL_EVERY`, from the start that
+    leaves along the strongest ridge) it leaves that strip (:func:`_leave_strip`) and ends in
+    the margin band at least :data:`BASAL_MIN_REACH` from the main vein's start, where the path
+    is cheapest per unit of straight-line reach (the strongest vein, not the nearest margin).
+    The path is cut where it turns away from its heading (:func:`_until_turn`; the vein grower
+    joins it to its main vein in line with its first 2 % L) and scored as the others (median
+    ridge over the blade's); of each side of each main vein the best path scored above
+    :data:`BASAL_SCORE` is kept."""
+    along = (cv2.distanceTransform(blade.astype(np.uint8), cv2.DIST_L2, 5) < BASAL_EDGE * L) & (R < BASAL_SCORE * med) \
+        | (d_main < BASAL_EDGE * L)
     cost = grid.cost.copy()
     cost[along] = np.maximum(cost[along], 1.0 / _FLOOR)
     grid = _Grid(cost)
     band_idx = np.flatnonzero(band.reshape(-1))
     bxy = np.column_stack([band_idx % grid.w, band_idx // grid.w]).astype(float)
-    seen, best = set(), {}
+    bins: dict = {}  # one search a side every BASAL_EVERY: its start the one leaving along the strongest ray
     for mi, r in short:
-        if mi > 0:
-            continue
         p = mains[mi]
         j = int(np.argmin(np.linalg.norm(p - r, axis=1)))
         t = float(np.linalg.norm(np.diff(p[: j + 1], axis=0), axis=1).sum())
         tm = p[min(j + 2, len(p) - 1)] - p[max(j - 2, 0)]
-        key = (bool(tm[0] * (r[1] - p[j][1]) - tm[1] * (r[0] - p[j][0]) > 0), int(t // (BASAL_EVERY * L)))
-        if t > BASAL_ZONE * L or key in seen:
+        key = (mi, bool(tm[0] * (r[1] - p[j][1]) - tm[1] * (r[0] - p[j][0]) > 0), int(t // (BASAL_EVERY * L)))
+        if t > BASAL_ZONE * L:
             continue
-        n = (r - p[j]) / max(float(np.linalg.norm(r - p[j])), 1e-9)
-        r0 = np.clip(np.round(r + n * BASAL_EDGE * L), 0, [grid.w - 1, grid.h - 1])
-        if not blade[int(r0[1]), int(r0[0])]:
-            continue  # another start of this bin may land on the blade
-        seen.add(key)
+        r0, ray = _leave_strip(r, r - p[j], tm, R, med, blade, d_main, L)
+        if r0 is None:
+            continue
+        if key not in bins or ray > bins[key][2]:  # ties: the first start of the bin, as the ring lists them
+            bins[key] = (r, r0, ray)
+    best = {}
+    for key, (r, r0, ray) in bins.items():
+        mi = key[0]
+        p = mains[mi]
         d, pred = dijkstra(grid.graph, directed=False, indices=grid.index(r0), return_predecessors=True)
         reach = np.linalg.norm(bxy - r0, axis=1)
         ok = (np.linalg.norm(bxy - p[0], axis=1) >= BASAL_MIN_REACH * L) & np.isfinite(d[band_idx])
         if not ok.any():
             continue
         k = np.flatnonzero(ok)[int(np.argmin(d[band_idx][ok] / reach[ok]))]
-        path = _until_turn(grid.path(pred, int(band_idx[k])), L)
+        path = grid.path(pred, int(band_idx[k]))
+        if ray > 0:  # the vein itself leaves along the ray: the path starts beside its main vein
+            k0 = max(2, int(np.ceil(np.linalg.norm(r0 - r))))
+            path = np.vstack([r + np.linspace(0.0, 1.0, k0, endpoint=False)[:, None] * (r0 - r), path])
+        path = _until_turn(path, L)
         ix = path.astype(int)
         if len(path) < 0.08 * L:
             continue
         score = float(np.median(R[ix[:, 1], ix[:, 0]])) / med
-        if score > BASAL_SCORE and score > best.get(key[0], (0.0,))[0]:  # one a side: the starts find the same vein
-            best[key[0]] = (score, mi, path)
+        if score > BASAL_SCORE and score > best.get(key[:2], (0.0,))[0]:  # one a side: the starts find the same vein
+            best[key[:2]] = (score, mi, path)
     return list(best.values())
+
+
+def _leave_strip(r, normal, tangent, R, med, blade, d_main, L):
+    """Where a basal lateral starting at ``r`` beside its main vein leaves that vein's strip
+    (:data:`BASAL_EDGE`), and whether it gets there along a vein: along the straight ray from
+    ``r`` on which the ridge is strongest (its median over the first :data:`BASAL_RAY` L), of
+    the rays leaving toward the main vein's tip at :data:`BASAL_ANGLES` to it (``tangent``) on
+    the side of ``normal``, when that median is a vein's (over :data:`BASAL_SCORE` × the
+    blade's ``med``): a vein that leaves at a sharp angle (grapevine's to its upper lobes) runs
+    inside the strip for a while, and a start pushed straight out lands beside it.  Otherwise
+    (no ray on a vein: a start above where the vein leaves, as aspen's at its very base) straight
+    out along ``normal``.  Returns (the first pixel outside the strip or None when the blade
+    ends first, the ray's median ridge over the blade's when along a vein, else 0)."""
+    t = np.asarray(tangent, float) / max(float(np.linalg.norm(tangent)), 1e-9)
+    n = np.asarray(normal, float) - np.dot(normal, t) * t
+    n /= max(float(np.linalg.norm(n)), 1e-9)
+    h, w = R.shape
+    steps = np.arange(1.0, BASAL_RAY * L)
+    best = None
+    for a in np.radians(BASAL_ANGLES):
+        d = np.cos(a) * t + np.sin(a) * n
+        pts = np.round(r + steps[:, None] * d).astype(int)
+        ok = (pts[:, 0] >= 0) & (pts[:, 0] < w) & (pts[:, 1] >= 0) & (pts[:, 1] < h)
+        pts = pts[ok]
+        if not len(pts) or not blade[pts[:, 1], pts[:, 0]].all():
+            continue
+        v = float(np.median(R[pts[:, 1], pts[:, 0]]))
+        if best is None or v > best[0]:
+            best = (v, d)
+    if best is None or best[0] <= BASAL_SCORE * med:
+        q = np.clip(np.round(r + n * BASAL_EDGE * L), 0, [w - 1, h - 1])
+        return (q, 0.0) if blade[int(q[1]), int(q[0])] else (None, 0.0)
+    d = best[1]
+    for k in np.arange(1.0, 4.0 * BASAL_EDGE * L):
+        q = np.round(r + k * d).astype(int)
+        if not (0 <= q[0] < w and 0 <= q[1] < h) or not blade[q[1], q[0]]:
+            return None, 0.0
+        if d_main[q[1], q[0]] >= BASAL_EDGE * L:
+            return q.astype(float), best[0] / med
+    return None, 0.0
 
 
 def _until_turn(path: np.ndarray, L: float, max_deg: float = BASAL_TURN_DEG) -> np.ndarray:

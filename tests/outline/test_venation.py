@@ -254,3 +254,35 @@ def test_basal_veins_beside_a_near_margin_are_traced():
         best = max((np.mean(_dist_to_polyline(_dense(lat, 2.0), dl) < 0.015 * L) * float(np.linalg.norm(lat[-1] - lat[0]))
                     for lat in pv.laterals), default=0.0)
         assert best > 0.5 * float(np.linalg.norm(dl[1] - dl[0])), (best / L, len(pv.laterals))
+
+
+def test_vein_leaving_a_main_vein_at_a_sharp_angle_by_the_base_is_traced():
+    """A palmate leaf's vein to its upper lobe (grapevine's) leaves a side main vein near the
+    base at a sharp angle: the margin beside the base is near, so the shared tree sent its
+    starts there, and the basal search ran from the midrib only; a start pushed straight out
+    of the main vein's strip then landed beside the vein.  The basal search now runs from every
+    main vein and leaves its strip along the ray that follows the vein."""
+    size = 700
+    img, poly = leafimg.photo(size, width=0.62)
+    base, _, _ = leafimg.petiole_line(size)
+    apex = np.array([0.5, 0.45 - 0.31]) * size
+    vein = (120, 215, 150)
+    cv2.line(img, tuple(np.round(base).astype(int)), tuple(np.round(apex).astype(int)), vein, 4, cv2.LINE_AA)
+    mask = np.zeros(img.shape[:2], np.uint8)
+    cv2.fillPoly(mask, [np.round(poly).astype(np.int32)], 255)
+    heading = np.array([np.sin(np.radians(75)), -np.cos(np.radians(75))])  # the main vein: up-right
+    tip = base + heading * 0.45 * size
+    while not mask[int(round(tip[1])), int(round(tip[0]))]:
+        tip -= heading
+    tip -= heading * 0.02 * size  # inside the margin, where a lobe tip would be
+    cv2.line(img, tuple(np.round(base).astype(int)), tuple(np.round(tip).astype(int)), vein, 4, cv2.LINE_AA)
+    L = float(np.linalg.norm(apex - base))
+    a = np.radians(75 - 35)  # the branch: 35 degrees from the main vein, toward the apex
+    p0 = base + heading * 0.08 * L
+    p1 = p0 + np.array([np.sin(a), -np.cos(a)]) * 0.4 * L
+    cv2.line(img, tuple(np.round(p0).astype(int)), tuple(np.round(p1).astype(int)), vein, 3, cv2.LINE_AA)
+    pv = trace_venation(img, mask, base, apex, lobes_px=[tip], main_origin="base")
+    dl = np.array([p0, p1])
+    best = max((np.mean(_dist_to_polyline(_dense(lat, 2.0), dl) < 0.015 * L) * float(np.linalg.norm(lat[-1] - lat[0]))
+                for lat, par in zip(pv.laterals, pv.parents) if par == 1), default=0.0)
+    assert best > 0.5 * float(np.linalg.norm(dl[1] - dl[0])), (best / L, len(pv.laterals), pv.parents)
