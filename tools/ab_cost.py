@@ -3,8 +3,10 @@
 Each quality level is dried to the end (as ``leafsim accuracy`` does: until 2 % of the water is
 left, then 15 % longer) once per round by each tree, in a fresh process, the trees taking
 turns (A B, then B A, ...), so both see the same machine.  Reports the median and p90 ms per
-frame (median over rounds), ms per simulated second, and whether the two trees' dried leaves
-are bit-identical (a SHA-256 of the final positions).
+frame (median over rounds), ms per simulated second, the CPU seconds per dried leaf (the
+child's process time: build and the whole drying; with a drying path the median frame is the
+cheap path frame and hides the own mesh's, so this is the number that compares), and whether
+the two trees' dried leaves are bit-identical (a SHA-256 of the final positions).
 
     git worktree add /tmp/before <commit>
     python tools/ab_cost.py --before /tmp/before --after . --species maple \\
@@ -29,20 +31,28 @@ from pathlib import Path
 import numpy as np
 
 CHILD = r"""
-import hashlib, json, sys
+import hashlib, json, sys, time
 import numpy as np
-from leafsim.measure.accuracy import Setting, run_setting
-from leafsim.pipeline import leaf_shape
 from leafsim.sim.metrics import Probe
-from leafsim.config.presets import QUALITY
-from leafsim.config.species import get_species
+try:
+    from leafsim.measure.accuracy import Setting, run_setting
+    from leafsim.pipeline import leaf_shape
+    from leafsim.config.presets import QUALITY
+    from leafsim.config.species import get_species
+except ImportError:  # a tree from before the package's stage folders (2 December: the solver issue's day)
+    from leafsim.accuracy import Setting, run_setting
+    from leafsim.leaf import leaf_shape
+    from leafsim.sim.presets import QUALITY
+    from leafsim.species import get_species
 species, quality = sys.argv[1], sys.argv[2]
 sp = get_species(species)
 base = sp.params
+cpu0 = time.process_time()
 probe = Probe(leaf_shape(sp, base))
 run = run_setting(sp, base, Setting(quality, "quality", dict(QUALITY[quality])), None, probe)
+cpu = time.process_time() - cpu0
 q = np.ascontiguousarray(run.end["q"], np.float64)
-print(json.dumps({"ms_frame": run.ms_frame, "ms_frame_p90": run.ms_frame_p90, "ms_per_sim_s": run.ms_per_sim_s,
+print(json.dumps({"cpu_s": cpu, "ms_frame": run.ms_frame, "ms_frame_p90": run.ms_frame_p90, "ms_per_sim_s": run.ms_per_sim_s,
                   "frames": run.frames, "particles": run.particles, "sha": hashlib.sha256(q.tobytes()).hexdigest()}))
 """
 
@@ -132,7 +142,8 @@ def main(argv=None) -> int:
             order = list(trees) if r % 2 == 0 else list(reversed(trees))
             for t in order:
                 runs[(lv, t)].append(run_once(trees[t], a.species, lv))
-                print(f"round {r + 1}/{a.rounds} {lv:9s} {t:6s} {runs[(lv, t)][-1]['ms_frame']:8.2f} ms/frame",
+                print(f"round {r + 1}/{a.rounds} {lv:9s} {t:6s} {runs[(lv, t)][-1]['ms_frame']:8.2f} ms/frame "
+                      f"{runs[(lv, t)][-1]['cpu_s']:8.1f} CPU s",
                       file=sys.stderr, flush=True)
     rows = []
     for lv in levels:
@@ -140,11 +151,17 @@ def main(argv=None) -> int:
         med = {t: float(np.median([x["ms_frame"] for x in runs[(lv, t)]])) for t in trees}
         p90 = {t: float(np.median([x["ms_frame_p90"] for x in runs[(lv, t)]])) for t in trees}
         sim = {t: float(np.median([x["ms_per_sim_s"] for x in runs[(lv, t)]])) for t in trees}
+        cpu = {t: [x["cpu_s"] for x in runs[(lv, t)]] for t in trees}
         rows.append({"quality": lv, "particles": f[0]["particles"], "frames": f[0]["frames"],
                      "before_ms_frame": med["before"], "before_ms_frame_p90": p90["before"],
                      "after_ms_frame": med["after"], "after_ms_frame_p90": p90["after"],
                      "before_ms_per_sim_s": sim["before"], "after_ms_per_sim_s": sim["after"],
                      "speedup": med["before"] / med["after"],
+                     "before_cpu_s": float(np.median(cpu["before"])), "after_cpu_s": float(np.median(cpu["after"])),
+                     "before_cpu_s_p90": float(np.percentile(cpu["before"], 90)),
+                     "after_cpu_s_p90": float(np.percentile(cpu["after"], 90)),
+                     "cpu_ratio": float(np.median(cpu["before"]) / np.median(cpu["after"])),
+                     "before_frames": b[0]["frames"], "before_particles": b[0]["particles"],
                      "identical": len({x["sha"] for x in b + f}) == 1, "rounds": a.rounds})
     print(f"{'quality':10s} {'particles':>9s} {'before ms/frame (p90)':>22s} {'after ms/frame (p90)':>21s} "
           f"{'speed-up':>8s} {'ms per sim. s before / after':>29s}  identical")
@@ -152,6 +169,10 @@ def main(argv=None) -> int:
         print(f"{x['quality']:10s} {x['particles']:9d} {x['before_ms_frame']:12.2f} ({x['before_ms_frame_p90']:6.2f}) "
               f"{x['after_ms_frame']:11.2f} ({x['after_ms_frame_p90']:6.2f}) {x['speedup']:8.2f} "
               f"{x['before_ms_per_sim_s']:14.0f} / {x['after_ms_per_sim_s']:<12.0f}  {x['identical']}")
+    print(f"\n{'quality':10s} {'CPU s per dried leaf before (p90)':>34s} {'after (p90)':>16s} {'ratio':>6s}")
+    for x in rows:
+        print(f"{x['quality']:10s} {x['before_cpu_s']:24.1f} ({x['before_cpu_s_p90']:6.1f}) "
+              f"{x['after_cpu_s']:8.1f} ({x['after_cpu_s_p90']:6.1f}) {x['cpu_ratio']:6.2f}")
     if a.json:
         a.json.parent.mkdir(parents=True, exist_ok=True)
         a.json.write_text(json.dumps({"species": a.species, "rows": rows, "load": os.getloadavg()[0]}, indent=1))
