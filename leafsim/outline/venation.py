@@ -56,15 +56,19 @@ START_AT = 0.01
 BASAL_ZONE, BASAL_MIN_REACH = 0.15, 0.25
 #: one basal search a side every this far along a main vein [× L]
 BASAL_EVERY = 0.025
-#: the basal search keeps off this band along the margin [× L] (but to end in it)
+#: the basal search keeps off this band along the margin [× L] (but to end in it, and where a
+#: vein's ridge runs in it) and along the main veins; a basal lateral whose median distance to
+#: the margin is under half of it runs along the margin and is dropped
 BASAL_EDGE = 0.05
-#: a basal lateral leaves its main vein's strip along the straightest ridge of rays at these
-#: angles to the main vein [deg], each tried over this length [× L]
-BASAL_ANGLES, BASAL_RAY = (20, 30, 40, 50, 60, 70, 80, 90), 0.06
+#: a basal lateral leaves its main vein's strip along the ray with the strongest median ridge
+#: (a vein's: over BASAL_SCORE × the blade's) of rays at these angles to the main vein [deg],
+#: each ranked over this length [× L], leaving out pixels this near a main vein [× L]
+BASAL_ANGLES, BASAL_RAY, BASAL_BESIDE = tuple(range(20, 91, 5)), 0.06, 0.015
 #: a basal lateral ends where it turns further than this from the heading it left with [deg]
 BASAL_TURN_DEG = 60.0
 #: a basal lateral's median ridge strength over the blade's must exceed this (the other
-#: laterals' 2.5: its search reaches the margin from anywhere, so it asks for a clearer vein)
+#: laterals' 2.5: its search reaches the margin from anywhere, so it asks for a clearer vein);
+#: a ray or a pixel of the margin band counts as on a vein above it too
 BASAL_SCORE = 5.0
 
 #: the colour channels a vein may show in (CIELAB): its lightness, or its yellowness — the
@@ -369,8 +373,8 @@ def _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L) -> list:
     joins it to its main vein in line with its first 2 % L) and scored as the others (median
     ridge over the blade's); of each side of each main vein the best path scored above
     :data:`BASAL_SCORE` is kept."""
-    along = (cv2.distanceTransform(blade.astype(np.uint8), cv2.DIST_L2, 5) < BASAL_EDGE * L) & (R < BASAL_SCORE * med) \
-        | (d_main < BASAL_EDGE * L)
+    d_edge = cv2.distanceTransform(blade.astype(np.uint8), cv2.DIST_L2, 5)
+    along = (d_edge < BASAL_EDGE * L) & (R < BASAL_SCORE * med) | (d_main < BASAL_EDGE * L)
     cost = grid.cost.copy()
     cost[along] = np.maximum(cost[along], 1.0 / _FLOOR)
     grid = _Grid(cost)
@@ -393,6 +397,8 @@ def _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L) -> list:
     best = {}
     for key, (r, r0, ray) in bins.items():
         mi = key[0]
+        if mi > 0 and ray == 0.0:
+            continue  # beside a side main vein only a vein seen leaving it is searched
         p = mains[mi]
         d, pred = dijkstra(grid.graph, directed=False, indices=grid.index(r0), return_predecessors=True)
         reach = np.linalg.norm(bxy - r0, axis=1)
@@ -408,6 +414,9 @@ def _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L) -> list:
         ix = path.astype(int)
         if len(path) < 0.08 * L:
             continue
+        if float(np.median(d_edge[ix[:, 1], ix[:, 0]])) < 0.5 * BASAL_EDGE * L \
+                or float(np.median(d_main[ix[:, 1], ix[:, 0]])) < 0.03 * L:
+            continue  # it runs along the margin, or along a main vein
         score = float(np.median(R[ix[:, 1], ix[:, 0]])) / med
         if score > BASAL_SCORE and score > best.get(key[:2], (0.0,))[0]:  # one a side: the starts find the same vein
             best[key[:2]] = (score, mi, path)
@@ -416,42 +425,50 @@ def _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L) -> list:
 
 def _leave_strip(r, normal, tangent, R, med, blade, d_main, L):
     """Where a basal lateral starting at ``r`` beside its main vein leaves that vein's strip
-    (:data:`BASAL_EDGE`), and whether it gets there along a vein: along the straight ray from
-    ``r`` on which the ridge is strongest (its median over the first :data:`BASAL_RAY` L), of
-    the rays leaving toward the main vein's tip at :data:`BASAL_ANGLES` to it (``tangent``) on
-    the side of ``normal``, when that median is a vein's (over :data:`BASAL_SCORE` × the
-    blade's ``med``): a vein that leaves at a sharp angle (grapevine's to its upper lobes) runs
-    inside the strip for a while, and a start pushed straight out lands beside it.  Otherwise
-    (no ray on a vein: a start above where the vein leaves, as aspen's at its very base) straight
-    out along ``normal``.  Returns (the first pixel outside the strip or None when the blade
-    ends first, the ray's median ridge over the blade's when along a vein, else 0)."""
+    (:data:`BASAL_EDGE`), and whether it gets there along a vein.  The rays from ``r`` at
+    :data:`BASAL_ANGLES` to the main vein (``tangent``, toward its tip) on the side of
+    ``normal`` are ranked by their median ridge over the first :data:`BASAL_RAY` L (leaving out
+    the pixels beside any main vein, whose own ridge is no evidence): a vein that leaves at a
+    sharp angle (grapevine's to its upper lobes) runs inside the strip for a while, and a start
+    pushed straight out lands beside it.  The strongest ray whose median is a vein's (over
+    :data:`BASAL_SCORE` × the blade's ``med``) and that leaves the strip within 4 ×
+    :data:`BASAL_EDGE` without leaving the blade or meeting another main vein is followed to
+    its first pixel outside the strip.  Otherwise (no ray on a vein: a start above where the
+    vein leaves, as aspen's at its very base) the start is pushed straight out along
+    ``normal``.  Returns (that pixel, or None when it is off the blade; the followed ray's
+    median ridge over the blade's, or 0 when pushed straight out)."""
     t = np.asarray(tangent, float) / max(float(np.linalg.norm(tangent)), 1e-9)
     n = np.asarray(normal, float) - np.dot(normal, t) * t
     n /= max(float(np.linalg.norm(n)), 1e-9)
     h, w = R.shape
     steps = np.arange(1.0, BASAL_RAY * L)
-    best = None
+    beside = BASAL_BESIDE * L
+    rays = []
     for a in np.radians(BASAL_ANGLES):
         d = np.cos(a) * t + np.sin(a) * n
         pts = np.round(r + steps[:, None] * d).astype(int)
-        ok = (pts[:, 0] >= 0) & (pts[:, 0] < w) & (pts[:, 1] >= 0) & (pts[:, 1] < h)
-        pts = pts[ok]
-        if not len(pts) or not blade[pts[:, 1], pts[:, 0]].all():
+        if not ((pts >= 0).all() and (pts[:, 0] < w).all() and (pts[:, 1] < h).all()) or not blade[pts[:, 1], pts[:, 0]].all():
             continue
-        v = float(np.median(R[pts[:, 1], pts[:, 0]]))
-        if best is None or v > best[0]:
-            best = (v, d)
-    if best is None or best[0] <= BASAL_SCORE * med:
-        q = np.clip(np.round(r + n * BASAL_EDGE * L), 0, [w - 1, h - 1])
-        return (q, 0.0) if blade[int(q[1]), int(q[0])] else (None, 0.0)
-    d = best[1]
-    for k in np.arange(1.0, 4.0 * BASAL_EDGE * L):
-        q = np.round(r + k * d).astype(int)
-        if not (0 <= q[0] < w and 0 <= q[1] < h) or not blade[q[1], q[0]]:
-            return None, 0.0
-        if d_main[q[1], q[0]] >= BASAL_EDGE * L:
-            return q.astype(float), best[0] / med
-    return None, 0.0
+        off = d_main[pts[:, 1], pts[:, 0]] >= beside
+        if off.sum() < 0.5 * len(pts):
+            continue  # the ray runs along a main vein
+        rays.append((float(np.median(R[pts[off, 1], pts[off, 0]])), d))
+    for v, d in sorted(rays, key=lambda x: -x[0]):
+        if v <= BASAL_SCORE * med:
+            break
+        left = False  # the walk has left the main vein's own ridge
+        for k in np.arange(1.0, 4.0 * BASAL_EDGE * L):
+            q = np.round(r + k * d).astype(int)
+            if not (0 <= q[0] < w and 0 <= q[1] < h) or not blade[q[1], q[0]]:
+                break
+            dm = d_main[q[1], q[0]]
+            if dm >= BASAL_EDGE * L:
+                return q.astype(float), v / med
+            if left and dm < 0.5 * beside:
+                break  # it meets another main vein
+            left = left or dm >= beside
+    q = np.clip(np.round(r + n * BASAL_EDGE * L), 0, [w - 1, h - 1])
+    return (q, 0.0) if blade[int(q[1]), int(q[0])] else (None, 0.0)
 
 
 def _until_turn(path: np.ndarray, L: float, max_deg: float = BASAL_TURN_DEG) -> np.ndarray:

@@ -56,13 +56,14 @@ def grow_veins(
     taper = p["veins.taper"]
     graph = VeinGraph()
     apex_t, others, auto = main_targets(shape, p, targets, main_origin)
+    traced = None
     if given is not None and given.get("mains"):
-        reached = given_main_veins(g, graph, shape, p, given["mains"], main_origin, taper)
+        reached, traced = given_main_veins(g, graph, shape, p, given["mains"], main_origin, taper)
         auto = False
     else:
         reached = grow_main_veins(g, graph, shape, p, apex_t, others, main_origin, taper)
     if p["veins.lateral.enabled"] and given is not None and given.get("laterals"):
-        given_laterals(g, graph, shape, p, given["laterals"], given["parents"], taper)
+        given_laterals(g, graph, shape, p, given["laterals"], given["parents"], taper, traced)
     elif p["veins.lateral.enabled"]:
         grow_laterals(g, graph, shape, p, rng, profile, taper)
     fills = 0

@@ -158,10 +158,11 @@ def given_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet,
                      taper: float) -> list[np.ndarray]:
     """The main veins traced from the photo (the midrib first), in place of grown ones: a palmate
     leaf's start at the base, a pinnate lobe's on the midrib; each is cut where it would leave
-    the outline.  Returns their ends (the targets "reached")."""
+    the outline.  Returns their ends (the targets "reached") and, per traced main vein, its
+    index in ``graph.veins`` (-1 for one left out: too short inside the outline)."""
     w_main = p["veins.main.width"] * shape.length
     thr = p["veins.main.threshold"]
-    reached = []
+    reached, index = [], [-1] * len(mains)
     for i, pts in enumerate(mains):
         pts = _inside_prefix(shape, np.asarray(pts, float))
         if len(pts) < 3:
@@ -184,9 +185,10 @@ def given_main_veins(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet,
         if len(pts) < 3:
             continue
         g.add(pts)
+        index[i] = len(graph.veins)
         graph.veins.append(Vein(MAIN, pts, taper_widths(pts, w0, taper, 1 - thr), parent, pts[-1].copy()))
         reached.append(pts[-1].copy())
-    return reached
+    return reached, index
 
 
 def _join_index(main: np.ndarray, pts: np.ndarray, L: float) -> int:
@@ -205,14 +207,21 @@ def _join_index(main: np.ndarray, pts: np.ndarray, L: float) -> int:
     return int(near[np.argmax(cos)])
 
 
-def given_laterals(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, laterals, parents, taper: float) -> None:
+def given_laterals(g: Grower, graph: VeinGraph, shape: LeafShape, p: ParamSet, laterals, parents, taper: float,
+                   index=None) -> None:
     """The laterals traced from the photo, each joining its main vein in line with its start
-    (:func:`_join_index`)."""
+    (:func:`_join_index`).  ``index``: the graph index of each traced main vein
+    (:func:`given_main_veins`; default the same index); a lateral whose main vein was left out
+    joins the nearest main vein."""
     n_main = len(graph.veins)
+    index = list(range(n_main)) if index is None else list(index)
     for pts, parent in zip(laterals, parents):
-        if not (0 <= parent < n_main):
-            continue
         pts = np.asarray(pts, float)
+        if not 0 <= parent < len(index):
+            continue
+        parent = index[parent]
+        if not 0 <= parent < n_main:
+            parent = int(np.argmin([np.linalg.norm(v.points - pts[0], axis=1).min() for v in graph.veins[:n_main]]))
         mv = graph.veins[parent]
         j = _join_index(mv.points, pts, shape.length)
         if not _segment_inside(shape, mv.points[j], pts[0]):

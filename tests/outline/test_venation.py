@@ -283,6 +283,10 @@ def test_vein_leaving_a_main_vein_at_a_sharp_angle_by_the_base_is_traced():
     cv2.line(img, tuple(np.round(p0).astype(int)), tuple(np.round(p1).astype(int)), vein, 3, cv2.LINE_AA)
     pv = trace_venation(img, mask, base, apex, lobes_px=[tip], main_origin="base")
     dl = np.array([p0, p1])
-    best = max((np.mean(_dist_to_polyline(_dense(lat, 2.0), dl) < 0.015 * L) * float(np.linalg.norm(lat[-1] - lat[0]))
-                for lat, par in zip(pv.laterals, pv.parents) if par == 1), default=0.0)
+    on = [(np.mean(_dist_to_polyline(_dense(lat, 2.0), dl) < 0.015 * L) * float(np.linalg.norm(lat[-1] - lat[0])), lat)
+          for lat, par in zip(pv.laterals, pv.parents) if par == 1]
+    best, lat = max(on, key=lambda x: x[0], default=(0.0, None))
     assert best > 0.5 * float(np.linalg.norm(dl[1] - dl[0])), (best / L, len(pv.laterals), pv.parents)
+    # and it leaves the main vein where the branch does, not further out
+    assert float(np.linalg.norm(lat[0] - p0)) < 0.04 * L, float(np.linalg.norm(lat[0] - p0)) / L
+

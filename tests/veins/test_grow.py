@@ -138,3 +138,35 @@ def test_gaps_in_the_venation_get_sublaterals():
     assert _farthest_from_veins(sh, full) < sp.params["veins.sub.gap"]
     off = species_veins(sp, sh, sp.params.with_overrides({"veins.sub.gap": 0.0}), 0)
     assert len(full.veins) == len(off.veins) and all(np.array_equal(a.points, b.points) for a, b in zip(full.veins, off.veins))
+
+
+def test_traced_laterals_join_their_own_main_vein_when_one_main_is_left_out():
+    """A traced main vein too short inside the outline is left out of the graph; the laterals
+    of the main veins after it still join their own main vein (their parent index is the
+    trace's, not the graph's)."""
+    from leafsim.veins.grow import grow_veins
+
+    sp = LIB["maple"]
+    sh = shape_of("maple")
+    L = sh.length
+    base = np.asarray(sh.base, float)
+    apex = np.asarray(sh.apex, float)
+    up = (apex - base) / np.linalg.norm(apex - base)
+    side = np.array([up[1], -up[0]])
+    line = lambda a, b, n=40: np.linspace(a, b, n)  # noqa: E731
+    midrib = line(base, base + 0.9 * L * up)
+    stub = np.vstack([base + 1e-4 * L * up, base + 2e-4 * L * up])  # too short: left out
+    right = line(base, base + 0.35 * L * (0.5 * up + 0.87 * side))
+    lat_start = base + 0.2 * L * (0.5 * up + 0.87 * side)
+    lateral = line(lat_start, lat_start + 0.12 * L * up)
+    params = sp.params.with_overrides({"veins.sub.enabled": False})
+    g = grow_veins(sh, params, 0, main_origin="base", given={"mains": [midrib, stub, right], "laterals": [lateral],
+                                                             "parents": [2]})
+    mains = g.of_order(MAIN)
+    lats = g.of_order(LATERAL)
+    assert len(mains) == 2 and len(lats) == 1
+    start = lats[0].points[0]
+    # it starts on the right main vein, not on the midrib
+    d_right = np.linalg.norm(mains[1].points - start, axis=1).min()
+    d_mid = np.linalg.norm(mains[0].points - start, axis=1).min()
+    assert d_right < 1e-9 < d_mid, (d_right / L, d_mid / L)
