@@ -35,6 +35,7 @@ import scipy.sparse as sps
 from scipy.spatial import cKDTree
 
 from leafsim.config.presets import QUALITY
+from leafsim.sim.kernels.transfer import prolong_pair
 from leafsim.sim.model import Model, State
 
 #: neighbours of each MLS fit
@@ -197,8 +198,8 @@ class DryingPath:
         rel = self.R @ (state.particle_water / np.maximum(self.model.particle_water0, 1e-300))
         np.multiply(np.clip(rel, 0.0, 1.0), self.coarse.particle_water0, out=cs.particle_water)
         ms = self.sim.step(cs)
-        state.particle_q[:] = self.P @ cs.particle_q
-        state.particle_qd[:] = self.P @ cs.particle_qd
+        P = self.P
+        prolong_pair(P.indptr, P.indices, P.data, cs.particle_q, cs.particle_qd, state.particle_q, state.particle_qd)
         if self.pinned is not None:
             state.particle_q[self.pinned] = self.model.particle_rest[self.pinned]
             state.particle_qd[self.pinned] = 0.0

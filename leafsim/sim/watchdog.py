@@ -1,6 +1,6 @@
 """Energy and momentum watchdog: a run that is silently wrong stops with a clear error.
 
-Every frame the :class:`Watchdog` measures (O(n) numpy) the kinetic energy split into the
+Every frame the :class:`Watchdog` measures (O(n), compiled) the kinetic energy split into the
 leaf's rigid motion and its internal motion, the linear and angular momentum about the centre
 of mass and the largest internal speed.  A drying leaf deforms at millimetres per second; its
 internal motion is bounded by what the shrinking can drive.  Two signatures of a numerical
@@ -37,6 +37,7 @@ import numpy as np
 from leafsim.base.errors import LeafsimError
 from leafsim.config.params import PARAMS, ParamSet
 from leafsim.config.presets import QUALITY, quality_of
+from leafsim.sim.kernels.rigid import internal_motion, momenta_sums
 
 #: largest RMS (mass-weighted) internal speed of a drying leaf [m/s]
 MAX_RMS_SPEED = 0.25
@@ -71,26 +72,24 @@ SUSPECTS = ("material.turgor_pressure", "dynamics.sun_courant", "dynamics.sun_da
 def momenta(mass: np.ndarray, q: np.ndarray, qd: np.ndarray) -> dict:
     """Kinetic energy (total, rigid, internal) [J], linear momentum (3,) [kg·m/s], angular
     momentum about the centre of mass (3,) [kg·m²/s], largest internal speed [m/s].  The
-    rigid part is the best-fit rigid motion (COM velocity + ω × r with I ω = L)."""
-    M = float(mass.sum())
-    c = (mass[:, None] * q).sum(0) / M
-    v = (mass[:, None] * qd).sum(0) / M
-    r = q - c
-    u = qd - v
-    Lang = (mass[:, None] * np.cross(r, u)).sum(0)
-    r2 = (r * r).sum(1)
-    I = np.eye(3) * float((mass * r2).sum()) - np.einsum("i,ij,ik->jk", mass, r, r)
+    rigid part is the best-fit rigid motion (COM velocity + ω × r with I ω = L).  Three passes
+    of compiled loops (:func:`~leafsim.sim.kernels.rigid.momenta_sums`,
+    :func:`~leafsim.sim.kernels.rigid.internal_motion`): the numpy expressions they replace
+    cost 1.6 ms a check on maple's 6.8 k particles, a tenth of a drying-path frame."""
+    s = np.empty(17)
+    momenta_sums(np.ascontiguousarray(mass, np.float64), q, qd, s)
+    M, c, v, Lang = float(s[0]), s[1:4].copy(), s[4:7].copy(), s[7:10].copy()
+    xx, yy, zz, xy, xz, yz = s[10:16]
+    I = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
     try:
         w = np.linalg.solve(I, Lang)
     except np.linalg.LinAlgError:
         w = np.zeros(3)
-    internal = u - np.cross(w, r)
-    ke = 0.5 * float((mass * (qd * qd).sum(1)).sum())
-    s2 = (internal * internal).sum(1)
-    ke_int = 0.5 * float((mass * s2).sum())
+    ke = float(s[16])
+    ke_int, s2max = internal_motion(np.ascontiguousarray(mass, np.float64), q, qd, c, v, w)
     return {"mass": M, "com_z": float(c[2]), "kinetic": ke, "kinetic_internal": ke_int, "kinetic_rigid": ke - ke_int, "momentum": M * v,
             "angular_momentum": Lang, "omega": w, "rms_internal_speed": float(np.sqrt(2.0 * ke_int / M)),
-            "max_internal_speed": float(np.sqrt(s2.max()))}
+            "max_internal_speed": float(np.sqrt(s2max))}
 
 
 class Watchdog:

@@ -133,3 +133,69 @@ def air_factor(rate: float, damping_rate: float, h: float) -> float:
     """The rigid velocity's factor that turns the internal damping of one substep into the
     air's: e^(−rate·h) / e^(−damping_rate·h)."""
     return math.exp(-(rate - damping_rate) * h)
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def momenta_sums(mass, q, qd, out):
+    """The watchdog's sums in two passes: out = (M, centre of mass (3), mean velocity (3),
+    angular momentum about the centre of mass (3), its inertia tensor xx, yy, zz, xy, xz, yz,
+    kinetic energy) (float64[17])."""
+    M = 0.0
+    cx = cy = cz = vx = vy = vz = ke = 0.0
+    for i in range(q.shape[0]):
+        m = mass[i]
+        M += m
+        cx += m * q[i, 0]
+        cy += m * q[i, 1]
+        cz += m * q[i, 2]
+        vx += m * qd[i, 0]
+        vy += m * qd[i, 1]
+        vz += m * qd[i, 2]
+        ke += m * (qd[i, 0] * qd[i, 0] + qd[i, 1] * qd[i, 1] + qd[i, 2] * qd[i, 2])
+    cx /= M
+    cy /= M
+    cz /= M
+    vx /= M
+    vy /= M
+    vz /= M
+    lx = ly = lz = ixx = iyy = izz = ixy = ixz = iyz = 0.0
+    for i in range(q.shape[0]):
+        m = mass[i]
+        r0 = q[i, 0] - cx
+        r1 = q[i, 1] - cy
+        r2 = q[i, 2] - cz
+        u0 = qd[i, 0] - vx
+        u1 = qd[i, 1] - vy
+        u2 = qd[i, 2] - vz
+        lx += m * (r1 * u2 - r2 * u1)
+        ly += m * (r2 * u0 - r0 * u2)
+        lz += m * (r0 * u1 - r1 * u0)
+        ixx += m * (r1 * r1 + r2 * r2)
+        iyy += m * (r0 * r0 + r2 * r2)
+        izz += m * (r0 * r0 + r1 * r1)
+        ixy -= m * r0 * r1
+        ixz -= m * r0 * r2
+        iyz -= m * r1 * r2
+    vals = (M, cx, cy, cz, vx, vy, vz, lx, ly, lz, ixx, iyy, izz, ixy, ixz, iyz, 0.5 * ke)
+    for k in range(17):
+        out[k] = vals[k]
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def internal_motion(mass, q, qd, c, v, w):
+    """Kinetic energy of the motion left after the rigid part v + w × (x − c), and the largest
+    such speed squared."""
+    ke = 0.0
+    s2max = 0.0
+    for i in range(q.shape[0]):
+        r0 = q[i, 0] - c[0]
+        r1 = q[i, 1] - c[1]
+        r2 = q[i, 2] - c[2]
+        a0 = qd[i, 0] - v[0] - (w[1] * r2 - w[2] * r1)
+        a1 = qd[i, 1] - v[1] - (w[2] * r0 - w[0] * r2)
+        a2 = qd[i, 2] - v[2] - (w[0] * r1 - w[1] * r0)
+        s2 = a0 * a0 + a1 * a1 + a2 * a2
+        ke += mass[i] * s2
+        if s2 > s2max:
+            s2max = s2
+    return 0.5 * ke, s2max
