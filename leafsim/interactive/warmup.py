@@ -94,7 +94,8 @@ class _Counter:
 
 def _exercise() -> None:
     """Compile what a default drying and the window's first frames use: a draft maple built and
-    stepped (dynamics, osmosis, shrink, contacts, colour), one static equilibrium solve, every
+    stepped (dynamics, osmosis, shrink, contacts, colour), the watchdog's momenta and the drying
+    path's prolongation, one static equilibrium solve, every
     pigment kernel, the leaf's colours and the renderer's geometry (no OpenGL needed)."""
     from leafsim.appearance.view import LeafView
     from leafsim.config.presets import quality_overrides
@@ -111,6 +112,15 @@ def _exercise() -> None:
     for _ in range(2):
         run.step()
     run.stats()  # the constraint residual and momenta the stats panel shows
+    # the watchdog's momenta (its first check comes at frame 5) and the drying path's
+    # prolongation (draft runs without a path), with the types the default run passes
+    from leafsim.sim.kernels.transfer import prolong_pair
+    from leafsim.sim.watchdog import momenta
+
+    q = np.ascontiguousarray(run.state.particle_q)
+    momenta(model.particle_cytosol + run.state.particle_water, q, np.ascontiguousarray(run.state.particle_qd))
+    prolong_pair(np.array([0, 1], np.int64), np.array([0], np.int64), np.ones(1), q[:1].copy(), q[:1].copy(),
+                 np.empty((1, 3)), np.empty((1, 3)))
     # the static equilibrium's kernels: a species whose drying finishes with it (dynamics.finish,
     # oak) would otherwise compile them at its hand-over, silently
     static = params.with_overrides({"dynamics.scene": "ground", "dynamics.integrator": "static",

@@ -161,6 +161,8 @@ class DryingPath:
         self.model, self.coarse = model, model.path
         self.effects = tuple(effects)
         self.P = transfer_matrix(self.coarse, model)        # coarse → own (positions, velocities)
+        # its CSR arrays as the compiled prolongation takes them (one signature, compiled by the warm-up)
+        self._P = (self.P.indptr.astype(np.int64), self.P.indices.astype(np.int64), self.P.data.astype(np.float64))
         self.R = transfer_matrix(model, self.coarse)        # own → coarse (relative water)
         self.sim = sim
         self._configure(params, static_finish)
@@ -198,8 +200,10 @@ class DryingPath:
         rel = self.R @ (state.particle_water / np.maximum(self.model.particle_water0, 1e-300))
         np.multiply(np.clip(rel, 0.0, 1.0), self.coarse.particle_water0, out=cs.particle_water)
         ms = self.sim.step(cs)
-        P = self.P
-        prolong_pair(P.indptr, P.indices, P.data, cs.particle_q, cs.particle_qd, state.particle_q, state.particle_qd)
+        if cs.particle_q.shape[0] != self.P.shape[1] or state.particle_q.shape[0] != self.P.shape[0]:
+            raise ValueError(f"drying path: coarse {cs.particle_q.shape[0]} and own {state.particle_q.shape[0]} particles "
+                             f"against a transfer of shape {self.P.shape}")  # the compiled loop does not check
+        prolong_pair(*self._P, cs.particle_q, cs.particle_qd, state.particle_q, state.particle_qd)
         if self.pinned is not None:
             state.particle_q[self.pinned] = self.model.particle_rest[self.pinned]
             state.particle_qd[self.pinned] = 0.0

@@ -74,8 +74,10 @@ def momenta(mass: np.ndarray, q: np.ndarray, qd: np.ndarray) -> dict:
     momentum about the centre of mass (3,) [kg·m²/s], largest internal speed [m/s].  The
     rigid part is the best-fit rigid motion (COM velocity + ω × r with I ω = L).  Three passes
     of compiled loops (:func:`~leafsim.sim.kernels.rigid.momenta_sums`,
-    :func:`~leafsim.sim.kernels.rigid.internal_motion`): the numpy expressions they replace
-    cost 1.6 ms a check on maple's 6.8 k particles, a tenth of a drying-path frame."""
+    :func:`~leafsim.sim.kernels.rigid.internal_motion`; the numpy expressions they replace took
+    16 × as long, docs/performance.md)."""
+    if not (len(mass) == len(q) == len(qd) and q.shape[1:] == qd.shape[1:] == (3,)):
+        raise ValueError(f"momenta: {len(mass)} masses, positions {q.shape}, velocities {qd.shape}: expected n, (n, 3), (n, 3)")
     s = np.empty(17)
     momenta_sums(np.ascontiguousarray(mass, np.float64), q, qd, s)
     M, c, v, Lang = float(s[0]), s[1:4].copy(), s[4:7].copy(), s[7:10].copy()

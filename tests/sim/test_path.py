@@ -73,7 +73,7 @@ def test_phases_of_a_run(oak):
         stages.append("path" if sim.on_path else "dynamics")
         assert st.particle_water.min() >= 0 and np.isfinite(st.particle_q).all()
         if stages[-1] == "path":  # the own mesh shows the coarse mechanics exactly
-            assert np.allclose(st.particle_q, P @ st.path.particle_q, atol=1e-15)
+            assert np.array_equal(st.particle_q, P @ st.path.particle_q)  # the compiled prolongation is scipy's product
     k = stages.index("dynamics")
     assert k > 0 and set(stages[k:]) == {"dynamics"}  # one hand-over, never back
     frac = lambda: st.particle_water.sum() / w0
@@ -304,3 +304,23 @@ def test_static_finish_solves_equilibria_after_the_hand_over_where_the_leaf_is_h
     for over in ({"dynamics.scene": "free"}, {"dynamics.finish": "xpbd"}):
         sim = Simulator(m, p.with_overrides(over))
         assert not sim._dynamics.static
+
+
+def test_prolongation_equals_scipys_product_to_the_last_bit():
+    """The compiled prolongation sums each row in the matrix's stored order, as scipy's product
+    does: equal to the last bit, for unsorted column indices and duplicate entries too."""
+    import scipy.sparse as sps
+
+    from leafsim.sim.kernels.transfer import prolong_pair
+
+    rng = np.random.default_rng(3)
+    n_dst, n_src, k = 300, 120, 12
+    rows = np.repeat(np.arange(n_dst), k)
+    cols = rng.integers(0, n_src, n_dst * k)  # duplicates within a row happen
+    vals = rng.normal(size=n_dst * k)
+    for P in (sps.csr_matrix((vals, (rows, cols)), shape=(n_dst, n_src)),
+              sps.csr_matrix((vals, cols, np.arange(0, n_dst * k + 1, k)), shape=(n_dst, n_src))):  # unsorted, duplicates kept
+        a, b = rng.normal(size=(n_src, 3)), rng.normal(size=(n_src, 3))
+        oa, ob = np.empty((n_dst, 3)), np.empty((n_dst, 3))
+        prolong_pair(P.indptr.astype(np.int64), P.indices.astype(np.int64), P.data, a, b, oa, ob)
+        assert np.array_equal(oa, P @ a) and np.array_equal(ob, P @ b)

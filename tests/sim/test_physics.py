@@ -294,3 +294,32 @@ def test_float32_dynamics_runs_on_float32_copies():
     assert d < 1e-3 * m.length, d / m.length  # measured 8e-6 L
     assert abs(out["float32"]["margin_lift"] - out["float64"]["margin_lift"]) < 1e-3, \
         (out["float32"]["margin_lift"], out["float64"]["margin_lift"])
+
+
+def _momenta_numpy(mass, q, qd):
+    """The watchdog's measures written with numpy (its implementation before the compiled one)."""
+    M = mass.sum()
+    c = (mass[:, None] * q).sum(0) / M
+    v = (mass[:, None] * qd).sum(0) / M
+    r, u = q - c, qd - v
+    L = (mass[:, None] * np.cross(r, u)).sum(0)
+    I = np.eye(3) * (mass * (r * r).sum(1)).sum() - np.einsum("i,ij,ik->jk", mass, r, r)
+    w = np.linalg.solve(I, L)
+    internal = u - np.cross(w, r)
+    ke = 0.5 * (mass * (qd * qd).sum(1)).sum()
+    s2 = (internal * internal).sum(1)
+    return {"kinetic": ke, "kinetic_internal": 0.5 * (mass * s2).sum(), "momentum": M * v, "angular_momentum": L,
+            "omega": w, "max_internal_speed": np.sqrt(s2.max()), "com_z": c[2]}
+
+
+def test_compiled_momenta_agree_with_numpy():
+    rng = np.random.default_rng(7)
+    n = 500
+    mass = rng.uniform(1e-7, 2e-6, n)
+    q = rng.normal(size=(n, 3)) * 0.05
+    qd = rng.normal(size=(n, 3)) * 1e-3 + np.cross([0.1, -0.2, 0.3], q) + [0.01, 0.0, -0.02]
+    got, want = momenta(mass, q, qd), _momenta_numpy(mass, q, qd)
+    for k, v in want.items():
+        assert np.allclose(got[k], v, rtol=1e-12, atol=0), k
+    with pytest.raises(ValueError, match="momenta"):
+        momenta(mass[:-1], q, qd)
