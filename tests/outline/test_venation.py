@@ -228,17 +228,27 @@ def test_a_main_vein_passes_under_a_petiole_lying_on_it():
     assert d.max() < 0.04 * L and d.mean() < 0.015 * L, (d.max() / L, d.mean() / L)
 
 
+#: the light colour of the synthetic veins (BGR)
+VEIN = (120, 215, 150)
+
+
+def _broad_leaf_with_midrib(size: int):
+    """A broad-based synthetic leaf (as aspen's) with a light midrib drawn from base to apex:
+    (image, outline, base, apex, vein colour)."""
+    img, poly = leafimg.photo(size, width=0.62)
+    base, _, _ = leafimg.petiole_line(size)
+    apex = np.array([0.5, 0.45 - 0.31]) * size
+    cv2.line(img, tuple(np.round(base).astype(int)), tuple(np.round(apex).astype(int)), VEIN, 4, cv2.LINE_AA)
+    return img, poly, base, apex, VEIN
+
+
 def test_basal_veins_beside_a_near_margin_are_traced():
     """A broad-based leaf (as aspen's) with a pair of basal veins leaving the midrib at the base
     for the side margins: beside the base the margin is so near that the cheapest path of the
     shared tree runs straight to it, so both veins were missed (aspen's lower half had no
     traced vein); the basal search follows them."""
     size = 700
-    img, poly = leafimg.photo(size, width=0.62)
-    base, _, _ = leafimg.petiole_line(size)
-    apex = np.array([0.5, 0.45 - 0.31]) * size
-    vein = (120, 215, 150)
-    cv2.line(img, tuple(np.round(base).astype(int)), tuple(np.round(apex).astype(int)), vein, 4, cv2.LINE_AA)
+    img, poly, base, apex, vein = _broad_leaf_with_midrib(size)
     drawn = []
     for side in (-1, 1):
         d = np.array([side * np.sin(np.radians(40)), -np.cos(np.radians(40))])
@@ -263,11 +273,7 @@ def test_vein_leaving_a_main_vein_at_a_sharp_angle_by_the_base_is_traced():
     of the main vein's strip then landed beside the vein.  The basal search now runs from every
     main vein and leaves its strip along the ray that follows the vein."""
     size = 700
-    img, poly = leafimg.photo(size, width=0.62)
-    base, _, _ = leafimg.petiole_line(size)
-    apex = np.array([0.5, 0.45 - 0.31]) * size
-    vein = (120, 215, 150)
-    cv2.line(img, tuple(np.round(base).astype(int)), tuple(np.round(apex).astype(int)), vein, 4, cv2.LINE_AA)
+    img, poly, base, apex, vein = _broad_leaf_with_midrib(size)
     mask = np.zeros(img.shape[:2], np.uint8)
     cv2.fillPoly(mask, [np.round(poly).astype(np.int32)], 255)
     heading = np.array([np.sin(np.radians(75)), -np.cos(np.radians(75))])  # the main vein: up-right
