@@ -225,8 +225,16 @@ def build_leaf(sp: Species, params: ParamSet, seed: int, report=None) -> BuiltLe
     coarse = path_params_for(params)
     if coarse is not None:
         report(0.85, "blade: the coarser mesh that carries the drying (dynamics.path)")
-        model = replace(model, path=build_blade(shape, veins, coarse, seed))
+        model = replace(model, path=_with_path(shape, veins, coarse, seed))
     return BuiltLeaf(shape, veins, model)
+
+
+def _with_path(shape: LeafShape, veins: VeinGraph, params: ParamSet, seed: int) -> Model:
+    """The blade of ``params`` with the drying-path mesh its own parameters ask for (the
+    ``fine`` path's mesh has the draft one below it)."""
+    model = build_blade(shape, veins, params, seed)
+    coarse = path_params_for(params)
+    return model if coarse is None else replace(model, path=_with_path(shape, veins, coarse, seed))
 
 
 def path_params_for(params: ParamSet) -> ParamSet | None:

@@ -56,14 +56,17 @@ def save_checkpoint(path, model: Model, state: State, meta: dict, carry: dict | 
     and it would replace the last good checkpoint."""
     where = f"checkpoint {path}: the state to save"
     check_state(state, model, where, physical=False)
-    if isinstance(state.path, State) != (model.path is not None):  # its drying-path mesh's too
-        raise _fail(where, "has no drying-path mesh state" if model.path is not None else "has a drying-path mesh state this model has not")
-    if state.path is not None:
-        check_state(state.path, model.path, f"{where} (drying-path mesh)", physical=False)
     arrays = {f"state_{f.name}": getattr(state, f.name) for f in fields(State) if f.name not in ("pigments", "path")}
     arrays.update({f"carry_{k}": np.asarray(v) for k, v in (carry or {}).items()})
-    if state.path is not None:  # the drying-path mesh's state (leafsim.sim.path)
-        arrays.update({f"path_{f.name}": getattr(state.path, f.name) for f in fields(State) if f.name not in ("pigments", "path")})
+    # the drying-path mesh's state (leafsim.sim.path), and its own path mesh's (dynamics.path = fine)
+    s, m, prefix = state, model, "path_"
+    while s is not None:
+        if isinstance(s.path, State) != (m.path is not None):
+            raise _fail(where, "has no drying-path mesh state" if m.path is not None else "has a drying-path mesh state this model has not")
+        if s.path is not None:
+            check_state(s.path, m.path, f"{where} (drying-path mesh)", physical=False)
+            arrays.update({f"{prefix}{f.name}": getattr(s.path, f.name) for f in fields(State) if f.name not in ("pigments", "path")})
+        s, m, prefix = s.path, m.path, "path_" + prefix
     record = dict(meta, format=FORMAT, frame=state.frame, model=model_fingerprint(model))
     pig = state.pigments
     if pig is not None:
@@ -145,9 +148,7 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
         arrays = {f.name: np.array(data[f"state_{f.name}"]) for f in fields(State) if f.name not in ("pigments", "path")}
         if arrays["scalars"].shape == (2,):  # written before the weather clock: no weather time yet
             arrays["scalars"] = np.append(arrays["scalars"], 0.0)
-        coarse = None
-        if model.path is not None:
-            coarse = State(**{f.name: np.array(data[f"path_{f.name}"]) for f in fields(State) if f.name not in ("pigments", "path")})
+        coarse = _path_state(data, model.path, "path_")
         pig = None
         if "pigments" in meta:
             rec = meta["pigments"]
@@ -165,6 +166,14 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
     state = State(**arrays, pigments=pig, path=coarse)
     check_state(state, model, f"{path}: checkpoint", frame=meta.get("frame"))
     return state
+
+
+def _path_state(data, model: Model | None, prefix: str) -> State | None:
+    """The saved state of the drying-path mesh ``model`` (None: none), with its own path mesh's."""
+    if model is None:
+        return None
+    return State(**{f.name: np.array(data[f"{prefix}{f.name}"]) for f in fields(State) if f.name not in ("pigments", "path")},
+                 path=_path_state(data, model.path, "path_" + prefix))
 
 
 def load_carry(path, model: Model) -> dict:

@@ -41,7 +41,7 @@ from leafsim.sim.model import Model, State
 #: neighbours of each MLS fit
 NEIGHBOURS = 12
 #: the quality level whose mesh and solver settings a ``draft`` path uses
-PATH_LEVELS = {"draft": "draft"}
+PATH_LEVELS = {"draft": "draft", "fine": "fine"}
 #: the effects the path mesh runs (when the leaf's simulator runs them)
 PATH_EFFECTS = ("shrink", "pbd", "gravity", "bending", "ground", "self_collision")
 
@@ -90,8 +90,15 @@ def _fit(Xs: np.ndarray, Xd: np.ndarray, k: int) -> sps.csr_matrix:
 def path_params(params, level: str):
     """The parameters the path mesh runs with: the leaf's, with the mesh and solver settings of
     quality ``level`` but the leaf's own Δt (both meshes keep one clock), no osmosis (its water
-    comes from the own mesh) and no colour."""
+    comes from the own mesh) and no colour.  The ``fine`` level's mesh dries as the default
+    leaf does, on its own drying path (the draft mesh) handed over at the default level and
+    finished with XPBD: ``dynamics.handover`` and ``dynamics.finish`` are the leaf's own mesh's
+    (so the simulator's carried records, :meth:`Simulator.carry`, are the outermost mesh's only)."""
+    from leafsim.config.params import PARAMS
+
     return params.with_overrides({**QUALITY[PATH_LEVELS[level]], "dynamics.dt": params["dynamics.dt"],
+                                  "dynamics.handover": PARAMS["dynamics.handover"].default,
+                                  "dynamics.finish": PARAMS["dynamics.finish"].default,
                                   "effects.osmosis": False, "effects.colour": False})
 
 

@@ -131,6 +131,25 @@ def test_resume_in_the_path_phase_is_bit_identical(tmp_path, capsys):
         assert np.array_equal(a[k], b[k]), k
 
 
+def test_resume_with_a_path_under_the_path_is_bit_identical(tmp_path, capsys):
+    """``dynamics.path = fine``: the checkpoint keeps the default mesh's state and the draft
+    mesh's under it."""
+    base = ["run", "--species", "oak", "--set", "mesh.spacing=0.016", "--set", "dynamics.path=fine",
+            "--set", "dynamics.handover=0", "--checkpoint-every", "7"]
+    ref = tmp_path / "ref"
+    assert main(base + ["--frames", "40", "--out", str(ref)]) == 0
+    out = tmp_path / "out"
+    assert main(base + ["--frames", "20", "--out", str(out)]) == 0
+    saved = np.load(out / "checkpoint.npz")
+    assert "path_particle_q" in saved.files and "path_path_particle_q" in saved.files
+    assert "path_path_path_particle_q" not in saved.files
+    assert main(base + ["--frames", "40", "--out", str(out), "--resume"]) == 0
+    capsys.readouterr()
+    a, b = np.load(ref / "final.npz"), np.load(out / "final.npz")
+    for k in ("particle_q", "particle_qd", "particle_water"):
+        assert np.array_equal(a[k], b[k]), k
+
+
 def test_resume_in_a_static_finish_is_bit_identical(tmp_path, capsys):
     """Oak finishes with static equilibria (dynamics.finish): the checkpoint keeps the solver's
     friction anchors, normal forces and predictor and that the hand-over has happened, so a run
@@ -324,3 +343,32 @@ def test_prolongation_equals_scipys_product_to_the_last_bit():
         oa, ob = np.empty((n_dst, 3)), np.empty((n_dst, 3))
         prolong_pair(P.indptr.astype(np.int64), P.indices.astype(np.int64), P.data, a, b, oa, ob)
         assert np.array_equal(oa, P @ a) and np.array_equal(ob, P @ b)
+
+
+def test_a_finer_mesh_dries_on_the_default_mesh_and_takes_its_shape():
+    """``dynamics.path = fine``: a leaf finer than the default carries its mechanics on the
+    default quality's mesh, which dries as the default leaf does (on the draft mesh until the
+    default hand-over, then on its own); with ``dynamics.handover`` 0 the leaf's own mesh is
+    that mesh's shape prolonged on every frame, while its water stays its own."""
+    sp = get_species("oak")
+    p = sp.params.with_overrides({**FAST, "mesh.spacing": 0.016, "dynamics.path": "fine", "dynamics.handover": 0.0})
+    m = build_leaf(sp, p, 0).model
+    default = build_leaf(sp, sp.params.with_overrides(FAST), 0).model
+    assert np.array_equal(m.path.particle_rest, default.particle_rest)  # the default leaf's mesh
+    assert np.array_equal(m.path.path.particle_rest, default.path.particle_rest) and m.path.path.path is None
+    sim = Simulator(m, p)
+    inner = sim._path.sim
+    assert inner.params["dynamics.path"] == "draft" and inner.params["dynamics.handover"] == 0.15
+    st = sim.state()
+    assert st.path.path is not None and st.path.path.path is None
+    P = transfer_matrix(m.path, m)
+    w0 = m.particle_water0.sum()
+    phases = []
+    while st.particle_water.sum() > 0.1 * w0:
+        sim.step(st)
+        assert sim.on_path and np.array_equal(st.particle_q, P @ st.path.particle_q)
+        assert st.particle_water.min() >= 0 and np.isfinite(st.particle_q).all()
+        phases.append(inner.on_path)
+    k = phases.index(False)  # the default mesh took over from the draft one, once
+    assert k > 0 and not any(phases[k:])
+    assert np.ptp(st.particle_water / m.particle_water0) > 0.01  # the own mesh's water field
