@@ -152,7 +152,7 @@ class Progress:
         text = f"frame {s.frame}, water {100 * self.run.water_left:.0f} %"
         if self.eta is not None:
             now = time.monotonic()
-            self.eta.frame(now, self.run.water_left, self.run.sim.on_path)
+            self.eta.frame(now, self.run.water_left, self.run.sim.on_coarsest)
             left = self.eta.left(now, progress)
             text += "" if left is None else f", {duration(left)} left"
         self.bar.set_postfix_str(text, refresh=False)

@@ -217,19 +217,35 @@ def _frame_costs(rep: dict) -> str:
     leaf's own mesh costs several times a path frame, so a median alone hid where the time went)."""
     phases = rep.get("phases") or {}
     text = f"{rep['ms_per_frame_mean']:.1f} ms a frame on average"
-    if phases.get("path", {}).get("frames") and phases.get("own", {}).get("frames"):
+    if phases.get("path", {}).get("frames") and (phases.get("own", {}).get("frames") or phases.get("middle", {}).get("frames")):
         p, o = phases["path"], phases["own"]
+        mid = phases.get("middle", {})
         text += (f": {p['frames']} on the coarse drying-path mesh at {p['ms_mean']:.1f} ms, "
-                 f"{o['frames']} on the leaf's own mesh at {o['ms_mean']:.1f} ms")
+                 + (f"{mid['frames']} on the default mesh at {mid['ms_mean']:.1f} ms, " if mid.get("frames") else "")
+                 + f"{o['frames']} on the leaf's own mesh at {o['ms_mean']:.1f} ms")
     return text
 
 
-def _phases(stats) -> dict:
-    """Frames and their summed stage milliseconds on the drying path's coarse mesh and on the
-    leaf's own mesh (``on_path`` of each frame's stats)."""
+def _path_depth(model) -> int:
+    """How many drying-path meshes lie under ``model`` (0, 1, or 2 with ``dynamics.path = fine``)."""
+    depth = 0
+    while model.path is not None:
+        depth, model = depth + 1, model.path
+    return depth
+
+
+def _phases(stats, depth: int = 1) -> dict:
+    """Frames and their summed stage milliseconds on the drying path's coarsest mesh, on the
+    leaf's own mesh and, with nested paths (``depth`` 2: ``dynamics.path = fine``), on the
+    default mesh between them (``middle``; ``mesh`` of each frame's stats)."""
+    def mesh(s) -> int:
+        return int(s.get("mesh", 1 if s.get("on_path") else 0))
+
     out = {}
-    for name, on in (("path", True), ("own", False)):
-        ms = [sum(s["ms"].values()) for s in stats if bool(s.get("on_path")) == on]
+    for name, keep in (("path", lambda k: k > 0 and k == depth), ("middle", lambda k: 0 < k < depth), ("own", lambda k: k == 0)):
+        if name == "middle" and depth < 2:
+            continue
+        ms = [sum(s["ms"].values()) for s in stats if keep(mesh(s))]
         out[name] = {"frames": len(ms), "s": round(sum(ms) / 1e3, 3),
                      "ms_mean": round(float(np.mean(ms)), 4) if ms else 0.0}
     return out
@@ -247,7 +263,7 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
         "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
         "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
         "ms_per_frame_mean": round(float(np.mean(ms)), 4) if ms else 0.0,
-        "phases": _phases(stats),
+        "phases": _phases(stats, _path_depth(model)),
         "water_fraction": round(water, 6),
         "weather_hours": round(state.weather_time / 3600.0, 4) if params["environment.drive"] == "weather" else None,
         "until": args.until,

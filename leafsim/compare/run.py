@@ -294,8 +294,10 @@ def _grown_back(leaf: _Leaf, ref: C.Reference, best, note: str) -> Row:
 
         move = centroid(leaf) - centroid(big)
         big.state0.particle_q[:, :2] += move
-        if big.state0.path is not None:  # the drying-path mesh moves with the leaf
-            big.state0.path.particle_q[:, :2] += move
+        inner = big.state0.path
+        while inner is not None:  # the drying-path meshes move with the leaf
+            inner.particle_q[:, :2] += move
+            inner = inner.path
         _, _, best2 = _dry_run(big, None, ref, last=first.frame + GROWN_BACK_MARGIN)
         shift = _register(big, best2[0], ref)
         picture, mask = big.picture(best2[0])

@@ -264,7 +264,7 @@ class SimWorker:
         drying = self._dry
         wf = self.water_fraction(s) if drying else 1.0
         if drying:
-            self._eta.frame(time.monotonic(), wf, self.simulator.on_path)
+            self._eta.frame(time.monotonic(), wf, self.simulator.on_coarsest)
         done = drying and (wf <= DRY_END_FRACTION or self.error is not None or s.frame >= self._dry_until)
         pause = self._pause_at is not None and s.frame >= self._pause_at
         hz = DRY_PUBLISH_HZ if drying else PUBLISH_HZ

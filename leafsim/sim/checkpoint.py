@@ -62,7 +62,8 @@ def save_checkpoint(path, model: Model, state: State, meta: dict, carry: dict | 
     s, m, prefix = state, model, "path_"
     while s is not None:
         if isinstance(s.path, State) != (m.path is not None):
-            raise _fail(where, "has no drying-path mesh state" if m.path is not None else "has a drying-path mesh state this model has not")
+            which = "drying-path mesh" if prefix == "path_" else "drying-path mesh's own path mesh"
+            raise _fail(where, f"has no {which} state" if m.path is not None else f"has a {which} state this model has not")
         if s.path is not None:
             check_state(s.path, m.path, f"{where} (drying-path mesh)", physical=False)
             arrays.update({f"{prefix}{f.name}": getattr(s.path, f.name) for f in fields(State) if f.name not in ("pigments", "path")})
@@ -183,14 +184,29 @@ def load_carry(path, model: Model) -> dict:
     simulator writes.  Call after :func:`load_checkpoint`."""
     path = Path(path)
     data = _open(path)[1]
-    n = model.particle_count
     where = f"{path}: checkpoint"
-    out = {}
     try:
-        for key in data.files:
-            if not key.startswith("carry_"):
+        items = {key.removeprefix("carry_"): np.array(data[key]) for key in data.files if key.startswith("carry_")}
+    except Exception as e:  # a damaged member
+        raise LeafsimError(f"{path}: cannot read checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:80]})") from None
+    return _check_carry(items, model, where)
+
+
+def _check_carry(items: dict, model: Model, where: str) -> dict:
+    """``items`` (record name → array) checked against what ``model``'s simulator writes; the
+    records of its drying-path mesh's simulator (``pathmesh_``, :meth:`Simulator.carry`) against
+    that mesh, in turn."""
+    from leafsim.sim.simulator import CARRY_PATH
+
+    inner = {k.removeprefix(CARRY_PATH): v for k, v in items.items() if k.startswith(CARRY_PATH)}
+    if inner and model.path is None:
+        raise _fail(where, f"holds solver records for a drying-path mesh this model has not ({CARRY_PATH}...)")
+    n = model.particle_count
+    out = {} if not inner else {CARRY_PATH + k: v for k, v in _check_carry(inner, model.path, f"{where} (drying-path mesh)").items()}
+    try:
+        for name, a in items.items():
+            if name.startswith(CARRY_PATH):
                 continue
-            name, a = key.removeprefix("carry_"), np.array(data[key])
             shape = {"path_was_active": (1,), "equilibrium_normal": (n,), "equilibrium_anchor": (n, 2)}.get(name)
             if name == "equilibrium_history_time" and a.ndim >= 1:
                 shape = (min(len(a), 2),)
@@ -210,7 +226,7 @@ def load_carry(path, model: Model) -> dict:
     except LeafsimError:
         raise
     except Exception as e:  # a damaged member
-        raise LeafsimError(f"{path}: cannot read checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:80]})") from None
+        raise _fail(where, f"cannot be read ({type(e).__name__}: {str(e).splitlines()[0][:80]})") from None
     eq = sorted(k for k in out if k.startswith("equilibrium_"))
     every = ["equilibrium_anchor", "equilibrium_history_q", "equilibrium_history_time", "equilibrium_normal"]
     if eq and eq != every:

@@ -92,13 +92,11 @@ def path_params(params, level: str):
     quality ``level`` but the leaf's own Δt (both meshes keep one clock), no osmosis (its water
     comes from the own mesh) and no colour.  The ``fine`` level's mesh dries as the default
     leaf does, on its own drying path (the draft mesh) handed over at the default level and
-    finished with XPBD: ``dynamics.handover`` and ``dynamics.finish`` are the leaf's own mesh's
-    (so the simulator's carried records, :meth:`Simulator.carry`, are the outermost mesh's only)."""
+    finished as ``dynamics.finish`` says: ``dynamics.handover`` is the leaf's own mesh's."""
     from leafsim.config.params import PARAMS
 
     return params.with_overrides({**QUALITY[PATH_LEVELS[level]], "dynamics.dt": params["dynamics.dt"],
                                   "dynamics.handover": PARAMS["dynamics.handover"].default,
-                                  "dynamics.finish": PARAMS["dynamics.finish"].default,
                                   "effects.osmosis": False, "effects.colour": False})
 
 
@@ -138,18 +136,37 @@ def frame_cost(model: Model, params) -> float:
     return float(n) * effective_substeps(params) * int(params["dynamics.iterations"])
 
 
-def work_done(lost: float, lost_end: float, handover: float | None, ratio: float) -> float:
+def work_done(lost: float, lost_end: float, handover, ratio) -> float:
     """The share of a drying's work done once ``lost`` of the water is gone, of the work to
     ``lost_end``: frames come at about the same rate per unit of water lost all along, and
     each one costs ``ratio`` times more once the own mesh has taken over (below ``handover``
-    of the water left; None = no drying path, the work is the water lost)."""
+    of the water left; None = no drying path, the work is the water lost).  Nested paths
+    (``dynamics.path = fine``) give sequences, the leaf's own mesh's first: ``handover[k]`` and
+    ``ratio[k]`` are the k-th path's (a frame on the mesh above it costs ``ratio[k]`` of one on
+    it), and the mesh that carries a frame is the first whose path has handed over."""
     lost, lost_end = max(lost, 0.0), max(lost_end, 1e-12)
-    if handover is None or ratio <= 0.0:
+    if handover is None:
         return min(lost / lost_end, 1.0)
-    x_h = 1.0 - handover
+    hs, rs = np.atleast_1d(np.asarray(handover, float)), np.atleast_1d(np.asarray(ratio, float))
+    if rs.size != hs.size or (rs <= 0.0).any():
+        return min(lost / lost_end, 1.0)
+    # a frame's cost on mesh j (0 = own) against one on the coarsest: the ratios below it
+    cost = np.append(np.cumprod(rs[::-1])[::-1], 1.0)
 
-    def work(x):
-        return min(x, x_h) + ratio * max(x - x_h, 0.0)
+    def carrier(left: float) -> int:
+        below = np.flatnonzero(left <= hs)
+        return int(below[0]) if below.size else hs.size
+
+    cuts = np.unique(np.clip(np.concatenate([[0.0], 1.0 - hs, [1.0]]), 0.0, 1.0))
+
+    def work(x: float) -> float:
+        total = 0.0
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            if x <= a:
+                break
+            hi = min(x, b)
+            total += (hi - a) * cost[carrier(1.0 - 0.5 * (a + hi))]
+        return total
 
     return float(min(max(work(lost) / max(work(lost_end), 1e-12), 0.0), 1.0))
 
@@ -200,6 +217,7 @@ class DryingPath:
         cs = state.path
         cs.particle_q[:] = self.R @ state.particle_q
         cs.particle_qd[:] = self.R @ state.particle_qd
+        self.sim.sync_path(cs)  # and the path mesh's own path mesh (dynamics.path = fine)
 
     def step(self, state: State) -> dict:
         """One frame of the coarse mechanics; the own mesh takes its positions and velocities."""

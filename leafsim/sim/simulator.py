@@ -24,6 +24,9 @@ from leafsim.sim.effects.dynamics import held
 from leafsim.sim.model import Model, State
 from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_allowed, path_params, work_done
 
+#: the prefix of the drying-path mesh's simulator's records in :meth:`Simulator.carry`
+CARRY_PATH = "pathmesh_"
+
 #: the watchdog measures energy and momentum every this many frames
 WATCH_EVERY = 5
 
@@ -130,9 +133,13 @@ class Simulator:
         ``water_left``: the water lost, weighted by what a frame costs on the mesh that carries
         the mechanics then (the drying path's frames are cheap, the own mesh's are not: on maple
         the last 15 % of the water took two thirds of the time)."""
-        p = self._path
-        return work_done(1.0 - water_left, 1.0 - target, None if p is None else p.handover,
-                         0.0 if p is None else p.cost_ratio)
+        paths, sim = [], self
+        while sim._path is not None:  # nested paths (dynamics.path = fine): the own mesh's first
+            paths.append(sim._path)
+            sim = sim._path.sim
+        if not paths:
+            return work_done(1.0 - water_left, 1.0 - target, None, 0.0)
+        return work_done(1.0 - water_left, 1.0 - target, [p.handover for p in paths], [p.cost_ratio for p in paths])
 
     def carry(self) -> dict:
         """What the stages hand from one frame to the next beyond the :class:`State`: whether
@@ -144,6 +151,8 @@ class Simulator:
         d = self._dynamics
         if d is not None and d.static and getattr(d, "equilibrium", None) is not None:
             out.update({f"equilibrium_{k}": v for k, v in d.equilibrium.carry().items()})
+        if self._path is not None:  # the drying-path mesh's simulator's, which may have a path of its own
+            out.update({f"{CARRY_PATH}{k}": v for k, v in self._path.sim.carry().items()})
         return out
 
     def restore(self, carry: dict) -> None:
@@ -151,6 +160,9 @@ class Simulator:
         a key this simulator has no stage for is ignored, a missing one leaves the stage fresh."""
         if "path_was_active" in carry:
             self._path_was_active = bool(carry["path_was_active"][0])
+        inner = {k.removeprefix(CARRY_PATH): v for k, v in carry.items() if k.startswith(CARRY_PATH)}
+        if inner and self._path is not None:
+            self._path.sim.restore(inner)
         d = self._dynamics
         eq = {k.removeprefix("equilibrium_"): v for k, v in carry.items() if k.startswith("equilibrium_")}
         if eq and d is not None and d.static and getattr(d, "equilibrium", None) is not None:
@@ -160,6 +172,21 @@ class Simulator:
     def on_path(self) -> bool:
         """The last step's mechanics ran on the model's drying-path mesh (``dynamics.path``)."""
         return self._path is not None and self._path_was_active
+
+    @property
+    def mechanics_mesh(self) -> int:
+        """Which mesh carried the last step's mechanics: 0 the model's own, 1 its drying-path
+        mesh, 2 that mesh's own path mesh (``dynamics.path = fine``)."""
+        return 1 + self._path.sim.mechanics_mesh if self.on_path else 0
+
+    @property
+    def on_coarsest(self) -> bool:
+        """The last step's mechanics ran on the coarsest mesh there is (the cheap frames before
+        every hand-over; the model has a drying path)."""
+        depth, m = 0, self.model
+        while m.path is not None:
+            depth, m = depth + 1, m.path
+        return depth > 0 and self.mechanics_mesh == depth
 
     @property
     def iterations(self) -> int:

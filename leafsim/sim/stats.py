@@ -37,6 +37,7 @@ def frame_stats(model: Model, state: State, ms: dict, sim=None) -> dict:
     if sim is not None:
         out["iterations"] = sim.iterations
         out["on_path"] = bool(getattr(sim, "on_path", False))  # the mechanics ran on the drying-path mesh
+        out["mesh"] = int(getattr(sim, "mechanics_mesh", 0))  # which: 1 the path mesh, 2 its own path mesh
     return out
 
 

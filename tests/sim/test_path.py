@@ -131,6 +131,22 @@ def test_resume_in_the_path_phase_is_bit_identical(tmp_path, capsys):
         assert np.array_equal(a[k], b[k]), k
 
 
+def test_a_moved_leaf_moves_every_path_mesh_under_it():
+    """``sync_path`` after the caller moved the leaf (a perturbed start, the grown-back leaf of
+    ``leafsim compare``) reaches the path's own path mesh too (review: with ``fine`` the draft
+    mesh kept its place and the next step put the leaf back)."""
+    sp = get_species("oak")
+    p = sp.params.with_overrides({**FAST, "mesh.spacing": 0.016, "dynamics.path": "fine", "dynamics.handover": 0.0})
+    m = build_leaf(sp, p, 0).model
+    sim = Simulator(m, p)
+    st = sim.state()
+    st.particle_q[:, 0] += 0.02
+    sim.sync_path(st)
+    sim.step(st)
+    assert np.median(st.particle_q[:, 0] - m.particle_rest[:, 0]) == pytest.approx(0.02, abs=1e-4)
+    assert np.median(st.path.path.particle_q[:, 0] - m.path.path.particle_rest[:, 0]) == pytest.approx(0.02, abs=1e-4)
+
+
 def test_resume_with_a_path_under_the_path_is_bit_identical(tmp_path, capsys):
     """``dynamics.path = fine``: the checkpoint keeps the default mesh's state and the draft
     mesh's under it."""
@@ -148,6 +164,74 @@ def test_resume_with_a_path_under_the_path_is_bit_identical(tmp_path, capsys):
     a, b = np.load(ref / "final.npz"), np.load(out / "final.npz")
     for k in ("particle_q", "particle_qd", "particle_water"):
         assert np.array_equal(a[k], b[k]), k
+
+
+def test_a_checkpoint_after_the_default_meshs_hand_over_resumes_bit_identically(tmp_path):
+    """``dynamics.path = fine`` on oak (its own finish: static equilibria): saved after the
+    default mesh took over from the draft mesh and solved its first equilibrium, the
+    checkpoint keeps both path meshes' states and the default mesh's solver records, so the
+    resumed run goes on exactly as the uninterrupted one."""
+    from leafsim.sim.checkpoint import load_carry, load_checkpoint, save_checkpoint
+
+    sp = get_species("oak")
+    p = sp.params.with_overrides({**FAST, "mesh.spacing": 0.016, "dynamics.path": "fine", "dynamics.handover": 0.0})
+    assert p["dynamics.finish"] == "static"
+    m = build_leaf(sp, p, 0).model
+    sim = Simulator(m, p)
+    st = sim.state()
+    inner = sim._path.sim
+    while inner.on_path or st.frame == 0:
+        sim.step(st)
+    for _ in range(5):
+        sim.step(st)
+    assert sim.on_path and not inner.on_path and inner.mechanics_mesh == 0 and sim.mechanics_mesh == 1
+    assert len(inner._dynamics.equilibrium.log) >= 1  # the default mesh's static finish has begun
+    ck = tmp_path / "ck.npz"
+    save_checkpoint(ck, m, st, {"species": "oak"}, sim.carry())
+    assert "carry_pathmesh_equilibrium_normal" in np.load(ck).files
+    for _ in range(40):  # past the next equilibrium solve (every 32 frames)
+        sim.step(st)
+    sim2 = Simulator(m, p)
+    st2 = load_checkpoint(ck, m, {"species": "oak"})
+    sim2.restore(load_carry(ck, m))
+    for _ in range(40):
+        sim2.step(st2)
+    for k in ("particle_q", "particle_qd", "particle_water"):
+        assert np.array_equal(getattr(st, k), getattr(st2, k)), k
+    assert np.array_equal(st.path.path.particle_q, st2.path.path.particle_q)
+
+
+def test_progress_and_phases_with_a_path_under_the_path(capsys):
+    """With nested paths the work is weighted by the mesh that carries each frame: the
+    default mesh's frames after its hand-over cost more than the draft mesh's before it, and
+    ``leafsim run`` reports the frames of all three meshes apart."""
+    from leafsim.sim.path import work_done
+
+    # one path: as before; two: the middle phase at its own cost
+    assert work_done(0.5, 0.98, [0.15], [10.0]) == pytest.approx(work_done(0.5, 0.98, 0.15, 10.0))
+    two = [work_done(x, 0.98, [0.0, 0.15], [5.0, 10.0]) for x in (0.5, 0.85, 0.9, 0.98)]
+    assert two[1] == pytest.approx(0.85 / (0.85 + 10.0 * 0.13)) and two[-1] == 1.0 and two == sorted(two)
+    # the own mesh (×5 the default one) takes over at 5 %: the last 3 % cost 50 draft frames each
+    three = work_done(0.95, 0.98, [0.05, 0.15], [5.0, 10.0])
+    assert three == pytest.approx((0.85 + 10.0 * 0.1) / (0.85 + 10.0 * 0.1 + 50.0 * 0.03))
+    sp = get_species("oak")
+    p = sp.params.with_overrides({**FAST, "mesh.spacing": 0.016, "dynamics.path": "fine", "dynamics.handover": 0.0})
+    run = Run(build_leaf(sp, p, 0).model, p, seed=0)
+    assert run.sim.drying_progress(0.15, 0.02) < 0.5  # water-linear would say 0.87
+    base = ["run", "--species", "oak", "--set", "mesh.spacing=0.016", "--set", "dynamics.path=fine", "--set",
+            "dynamics.handover=0.5", "--set", "osmosis.evaporation_top=0.042", "--set", "osmosis.evaporation_bottom=0.0315",
+            "--frames", "30", "--json"]
+    assert main(base) == 0
+    ph = json.loads(capsys.readouterr().out)["phases"]
+    assert set(ph) == {"path", "middle", "own"} and ph["path"]["frames"] == 30 and ph["own"]["frames"] == 0
+    from leafsim.commands.run import _phases
+
+    stats = [{"mesh": k, "on_path": k > 0, "ms": {"dynamics": ms}} for k, ms in ((2, 1.0), (2, 3.0), (1, 20.0), (0, 300.0))]
+    ph = _phases(stats, 2)
+    assert [ph[k]["frames"] for k in ("path", "middle", "own")] == [2, 1, 1] and ph["path"]["ms_mean"] == 2.0
+    one = [{"mesh": 1, "on_path": True, "ms": {"dynamics": 3.0}}, stats[3]]
+    assert _phases(one, 1) == {"path": {"frames": 1, "s": 0.003, "ms_mean": 3.0},
+                                                   "own": {"frames": 1, "s": 0.3, "ms_mean": 300.0}}
 
 
 def test_resume_in_a_static_finish_is_bit_identical(tmp_path, capsys):
