@@ -220,9 +220,12 @@ def _frame_costs(rep: dict) -> str:
     if phases.get("path", {}).get("frames") and (phases.get("own", {}).get("frames") or phases.get("middle", {}).get("frames")):
         p, o = phases["path"], phases["own"]
         mid = phases.get("middle", {})
-        text += (f": {p['frames']} on the coarse drying-path mesh at {p['ms_mean']:.1f} ms, "
-                 + (f"{mid['frames']} on the default mesh at {mid['ms_mean']:.1f} ms, " if mid.get("frames") else "")
-                 + f"{o['frames']} on the leaf's own mesh at {o['ms_mean']:.1f} ms")
+        parts = [f"{p['frames']} on the coarse drying-path mesh at {p['ms_mean']:.1f} ms"]
+        if mid.get("frames"):
+            parts.append(f"{mid['frames']} on the default mesh at {mid['ms_mean']:.1f} ms")
+        if o.get("frames"):
+            parts.append(f"{o['frames']} on the leaf's own mesh at {o['ms_mean']:.1f} ms")
+        text += ": " + ", ".join(parts)
     return text
 
 

@@ -192,7 +192,7 @@ def load_carry(path, model: Model) -> dict:
     return _check_carry(items, model, where)
 
 
-def _check_carry(items: dict, model: Model, where: str) -> dict:
+def _check_carry(items: dict, model: Model, where: str, prefix: str = "") -> dict:
     """``items`` (record name → array) checked against what ``model``'s simulator writes; the
     records of its drying-path mesh's simulator (``pathmesh_``, :meth:`Simulator.carry`) against
     that mesh, in turn."""
@@ -202,7 +202,7 @@ def _check_carry(items: dict, model: Model, where: str) -> dict:
     if inner and model.path is None:
         raise _fail(where, f"holds solver records for a drying-path mesh this model has not ({CARRY_PATH}...)")
     n = model.particle_count
-    out = {} if not inner else {CARRY_PATH + k: v for k, v in _check_carry(inner, model.path, f"{where} (drying-path mesh)").items()}
+    out = {} if not inner else {CARRY_PATH + k: v for k, v in _check_carry(inner, model.path, where, prefix + CARRY_PATH).items()}
     try:
         for name, a in items.items():
             if name.startswith(CARRY_PATH):
@@ -215,13 +215,13 @@ def _check_carry(items: dict, model: Model, where: str) -> dict:
             elif name.startswith("equilibrium_history_"):
                 shape = (2,) if name.endswith("time") else (2, n, 3)
             if shape is None:
-                raise _fail(where, f"holds an unknown solver record {name!r}")
+                raise _fail(where, f"holds an unknown solver record {prefix + name!r}")
             kind = "b" if name == "path_was_active" else "f"
             if a.shape != shape or a.dtype.kind != kind:
-                raise _fail(where, f"solver record {name} is {a.dtype} {a.shape}, expected "
+                raise _fail(where, f"solver record {prefix}{name} is {a.dtype} {a.shape}, expected "
                                    f"{'bool' if kind == 'b' else 'float64'} {shape} for this model")
             if kind == "f" and not np.isfinite(a).all():
-                raise _fail(where, f"solver record {name} holds NaN or infinite values")
+                raise _fail(where, f"solver record {prefix}{name} holds NaN or infinite values")
             out[name] = a
     except LeafsimError:
         raise
@@ -230,25 +230,25 @@ def _check_carry(items: dict, model: Model, where: str) -> dict:
     eq = sorted(k for k in out if k.startswith("equilibrium_"))
     every = ["equilibrium_anchor", "equilibrium_history_q", "equilibrium_history_time", "equilibrium_normal"]
     if eq and eq != every:
-        raise _fail(where, f"holds the static solver's records {', '.join(eq)} without "
-                           f"{', '.join(k for k in every if k not in eq)} (all four or none)")
+        raise _fail(where, f"holds the static solver's records {', '.join(prefix + k for k in eq)} without "
+                           f"{', '.join(prefix + k for k in every if k not in eq)} (all four or none)")
     # the ground's normal forces carry the leaf's weight: none beyond 10⁴ × its fresh weight
     most = 1e4 * float(model.particle_mass0.sum()) * 9.81
     if "equilibrium_normal" in out and ((out["equilibrium_normal"] < 0).any() or (out["equilibrium_normal"] > most).any()):
-        raise _fail(where, f"solver record equilibrium_normal holds normal forces outside [0, {most:.3g}] N "
+        raise _fail(where, f"solver record {prefix}equilibrium_normal holds normal forces outside [0, {most:.3g}] N "
                            "(negative, or beyond 10⁴ × the leaf's weight)")
     ht0 = out.get("equilibrium_history_time")
     if ht0 is not None and ((ht0 < 0).any() or (ht0 > 1e9).any()):
-        raise _fail(where, "solver record equilibrium_history_time holds times outside [0, 1e9] s")
+        raise _fail(where, f"solver record {prefix}equilibrium_history_time holds times outside [0, 1e9] s")
     if "equilibrium_anchor" in out:
         far = np.abs(out["equilibrium_anchor"] - model.particle_rest[:, :2].mean(0)).max()
         if far > MAX_REACH * model.length:
-            raise _fail(where, f"solver record equilibrium_anchor holds an anchor {far:.3g} m from the leaf")
+            raise _fail(where, f"solver record {prefix}equilibrium_anchor holds an anchor {far:.3g} m from the leaf")
     hq, ht = out.get("equilibrium_history_q"), out.get("equilibrium_history_time")
     if (hq is None) != (ht is None) or (hq is not None and len(hq) != len(ht)):
-        raise _fail(where, "solver records equilibrium_history_time and _q do not match")
+        raise _fail(where, f"solver records {prefix}equilibrium_history_time and _q do not match")
     if hq is not None and len(hq) and np.abs(hq - model.particle_rest.mean(0)).max() > MAX_REACH * model.length:
-        raise _fail(where, "solver record equilibrium_history_q holds a particle far from the leaf")
+        raise _fail(where, f"solver record {prefix}equilibrium_history_q holds a particle far from the leaf")
     return out
 
 

@@ -193,7 +193,9 @@ class DryingPath:
 
     def _configure(self, params, static_finish: bool = False) -> None:
         self.handover = float(params["dynamics.handover"])
-        #: how many times a frame on the own mesh costs one on the coarse mesh (progress bars)
+        #: how many times a frame on the own mesh costs one on the coarse mesh (progress bars);
+        #: a static finish's is against a draft-path frame whatever the coarse mesh (``per_draft``)
+        self.per_draft = bool(static_finish)
         if static_finish:  # equilibria every few frames after the hand-over (dynamics.finish)
             self.cost_ratio = static_finish_cost(params["dynamics.static_every"])
         else:

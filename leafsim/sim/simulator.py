@@ -139,7 +139,11 @@ class Simulator:
             sim = sim._path.sim
         if not paths:
             return work_done(1.0 - water_left, 1.0 - target, None, 0.0)
-        return work_done(1.0 - water_left, 1.0 - target, [p.handover for p in paths], [p.cost_ratio for p in paths])
+        ratios = [p.cost_ratio for p in paths]
+        for k in range(len(paths) - 1):  # a static finish's cost is per draft frame: per frame of the mesh under it
+            if paths[k].per_draft:
+                ratios[k] /= max(float(np.prod(ratios[k + 1:])), 1e-12)
+        return work_done(1.0 - water_left, 1.0 - target, [p.handover for p in paths], ratios)
 
     def carry(self) -> dict:
         """What the stages hand from one frame to the next beyond the :class:`State`: whether

@@ -218,6 +218,12 @@ def test_progress_and_phases_with_a_path_under_the_path(capsys):
     p = sp.params.with_overrides({**FAST, "mesh.spacing": 0.016, "dynamics.path": "fine", "dynamics.handover": 0.0})
     run = Run(build_leaf(sp, p, 0).model, p, seed=0)
     assert run.sim.drying_progress(0.15, 0.02) < 0.5  # water-linear would say 0.87
+    # oak finishes static on both meshes: a static finish's cost is per draft frame, so the own
+    # mesh's is taken per default-mesh frame before the ratios multiply (review)
+    outer, inner = run.sim._path, run.sim._path.sim._path
+    assert outer.per_draft and inner.per_draft
+    expect = work_done(0.9, 0.98, [0.0, 0.15], [outer.cost_ratio / inner.cost_ratio, inner.cost_ratio])
+    assert run.sim.drying_progress(0.1, 0.02) == pytest.approx(expect)
     base = ["run", "--species", "oak", "--set", "mesh.spacing=0.016", "--set", "dynamics.path=fine", "--set",
             "dynamics.handover=0.5", "--set", "osmosis.evaporation_top=0.042", "--set", "osmosis.evaporation_bottom=0.0315",
             "--frames", "30", "--json"]
