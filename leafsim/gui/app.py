@@ -600,6 +600,25 @@ class LeafApp:
         self.status.info("species", f"{self.session.species.name} defaults restored ({what})", seconds=30.0)
 
 
+def _check_display() -> None:
+    """One line instead of the window runner's C++ assert and abort (exit 134) when the display
+    cannot be opened (DISPLAY names no running X server, a refused connection)."""
+    import glfw
+
+    before = glfw.ERROR_REPORTING
+    glfw.ERROR_REPORTING = "ignore"  # its error callback would print a second, raw message
+    try:
+        ok = glfw.init()
+        if ok:
+            glfw.terminate()  # the window runner initialises GLFW itself
+    finally:
+        glfw.ERROR_REPORTING = before
+    if not ok:
+        shown = os.environ.get("WAYLAND_DISPLAY") or os.environ.get("DISPLAY")
+        raise LeafsimError(f"gui: cannot open display {shown!r} (no X server there, or it refused the connection); "
+                           "run it on a desktop or under xvfb-run -a -s '-screen 0 1280x800x24' leafsim gui ...")
+
+
 def run_app(species=None, config=None, seed: int = 0, overrides=None, frames=None, screenshot=None,
             play: bool = False, window_frames=None, until_dry: bool = False) -> int:
     """Run the GUI; returns the exit code.
@@ -621,6 +640,7 @@ def run_app(species=None, config=None, seed: int = 0, overrides=None, frames=Non
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise LeafsimError("gui: no display (DISPLAY is not set); run it on a desktop or under "
                            "xvfb-run -a -s '-screen 0 1280x800x24' leafsim gui ...")
+    _check_display()
     session.rebuild_async()
     app = LeafApp(session, frames=frames, play=play, window_frames=window_frames, until_dry=until_dry)
     immapp.run(app.runner_params(), app.addons())

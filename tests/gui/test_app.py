@@ -12,6 +12,7 @@ import math
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -448,6 +449,20 @@ def test_cli_gui_build_error_is_one_line_on_stderr(tmp_path, xdisplay):
                        capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.startswith("leafsim: ") and "limits.max_particles" in r.stderr and r.stderr.count("\n") == 1
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_cli_gui_unreachable_display_is_one_line(tmp_path):
+    """A DISPLAY with no X server behind it: one line and exit 2 (the window runner used to
+    abort with a C++ assert, exit 134, before any window)."""
+    free = next(n for n in range(250, 400) if not Path(f"/tmp/.X11-unix/X{n}").exists() and not Path(f"/tmp/.X{n}-lock").exists())
+    env = {**os.environ, "DISPLAY": f":{free}"}
+    env.pop("WAYLAND_DISPLAY", None)
+    r = subprocess.run([sys.executable, "-m", "leafsim", "gui", "--species", "oak", "--frames", "1",
+                        "--screenshot", str(tmp_path / "x.png")], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=HANG_S)
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert r.stderr.startswith("leafsim: gui: cannot open display") and r.stderr.count("\n") == 1
     assert not (tmp_path / "x.png").exists()
 
 
