@@ -602,7 +602,18 @@ class Renderer:
         if not f.size:
             return 0.0, 1.0
         lo, hi = (float(v) for v in np.percentile(f, [2.0, 98.0]))
-        return (lo, hi) if hi > lo else (float(f.min()), float(max(f.max(), f.min() + 1e-12)))
+        if hi <= lo:
+            lo, hi = float(f.min()), float(f.max())
+        # a field (nearly) the same everywhere, as the water of a fresh leaf or a pigment not made
+        # yet, is drawn on its full scale: fitted to itself it was the lowest colour, a fresh leaf
+        # black, with every tick of the bar reading the same value
+        fraction = opts.view != "mass"  # every other view is a share, 0..1
+        if hi - lo <= (1e-4 if fraction else 1e-6 * max(abs(lo), abs(hi), 1e-300)):
+            c = 0.5 * (lo + hi)
+            if fraction:
+                return min(0.0, c), max(1.0, c)
+            return (0.5 * c, 1.5 * c) if c > 0.0 else (c - 1.0, c + 1.0)
+        return lo, hi
 
     def _albedo_mode(self, opts) -> int:
         if opts.albedo == "colours":

@@ -354,6 +354,29 @@ def test_ground_shadow_falls_away_from_the_sun(off):
         assert other < A
 
 
+def test_heat_range_of_a_uniform_field_is_its_full_scale(off):
+    """A field the same everywhere (a fresh leaf's water, a pigment not made yet) is drawn on
+    its full scale, not fitted to itself: that range was (c, c + 1e-12), which drew the whole
+    leaf in the lowest colour (a fresh leaf black) under a bar whose every tick read c."""
+    leaf = synthetic_leaf()
+    n = len(leaf.positions)
+    for view, value, want in (("water", 1.0, (0.0, 1.0)), ("anthocyanin", 0.0, (0.0, 1.0)),
+                              ("water", 0.5 + 1e-9 * np.arange(n), (0.0, 1.0)), ("mass", 0.2, (0.1, 0.3))):
+        leaf.scalars[view] = np.broadcast_to(np.asarray(value, np.float32), (n,)).copy()
+        off.render_array(leaf, top_camera(), RenderOptions(view=view, ground=False))
+        lo, hi = off.renderer.scalar_range(RenderOptions(view=view))
+        assert (lo, hi) == pytest.approx(want, rel=1e-6), view
+    # the fresh leaf's water is drawn in the bar's top colour, not its bottom one
+    from leafsim.appearance.colormaps import colormap
+
+    leaf.scalars["water"] = np.ones(n, np.float32)
+    img = off.render_array(leaf, top_camera(), RenderOptions(view="water", ground=False)).astype(float)
+    colours = img[leaf_mask(img.astype(np.uint8), img[2, 2].astype(np.uint8))]
+    top, bottom = (colormap("turbo", np.array([v]))[0] for v in (1.0, 0.0))
+    mean = colours.mean(0) / max(colours.mean(0).max(), 1e-6)
+    assert np.abs(mean - top / top.max()).max() < np.abs(mean - bottom / bottom.max()).max()
+
+
 def test_heat_range_ignores_outliers_and_the_bar_matches(off):
     """Fitted heat-map range = 2nd..98th percentile (a few dry margin particles no longer
     paint the rest of the leaf one colour); pixels at the range's ends take the colour bar's
