@@ -87,7 +87,8 @@ class Playback:
         error = w.error or snap.error  # the newest: a failed reset replaces the error it was to clear
         if error:
             self.sim_error = error
-        self.sim_rate = snap.sim_rate if w.running else 0.0
+        # paused, the last published rate is history (it read on, e.g. 0.0614 sim s / s, after a pause)
+        self.sim_rate = snap.sim_rate if w.running and (w.playing or w.drying) else 0.0
         if snap.seq == self._snap_seq:
             return False
         self._snap_seq = snap.seq

@@ -82,6 +82,17 @@ def test_plays_in_background_and_snapshots_stay_consistent(s):
     assert s.frame == f and not s.playback.playing
 
 
+def test_sim_rate_reads_zero_once_paused(s):
+    """The simulated-time rate is the playing leaf's; paused it is 0 (the last published rate
+    used to stay on the status bar and the stats panel)."""
+    s.playback.play(True)
+    assert until(lambda: s.playback.take_snapshot() and s.frame >= 5 and s.playback.sim_rate > 0.0)
+    s.playback.play(False)
+    assert until(lambda: not s.playback.playing)
+    s.playback.take_snapshot()
+    assert s.playback.sim_rate == 0.0
+
+
 def test_live_params_reach_the_worker_while_it_plays(s):
     s.playback.play(True)
     until(lambda: s.playback.take_snapshot() and s.frame >= 2)
