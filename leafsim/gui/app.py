@@ -18,6 +18,7 @@ height, so no widget ever moves; the app keeps running.
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -390,7 +391,13 @@ class LeafApp:
             return
         self.camera.yaw, self.camera.pitch = -90.0, 55.0
         pts = np.stack([r.lo, r.hi])
-        self.camera.frame_bounds(pts, margin=1.05)
+        _, _, w, h = self.leaf_rect_px
+        # the leaf's bounding sphere fits the vertical field of view, and the horizontal one in a
+        # view narrower than tall (1024 × 768 leaves 264 px between the panels: maple's lobes
+        # were cut off on both sides)
+        half_v = math.radians(self.camera.fov) / 2.0
+        half_h = math.atan(min(float(w) / max(float(h), 1.0), 1.0) * math.tan(half_v))
+        self.camera.frame_bounds(pts, margin=1.05 * math.sin(half_v) / math.sin(half_h))
         self.followed = r.center.copy()
 
     def follow_leaf(self) -> None:
@@ -420,8 +427,14 @@ class LeafApp:
         f = min(1.0, 512.0 / max(h, w))
         if f < 1.0:
             img = cv2.resize(img, (max(1, int(w * f)), max(1, int(h * f))), interpolation=cv2.INTER_AREA)
-        whole = img.copy()
-        whole[:, :, 3] = 255  # the side panel shows the whole photo, background included
+        # the side panel: the photo's leaf on the window's grey (its background pixels hold the
+        # cleaned fill colour under alpha 0: shown opaque, hornbeam sat on a mustard rectangle
+        # that hid its outline, oak on a black one)
+        a = img[:, :, 3:4].astype(np.float32) / 255.0
+        grey = np.array([255.0 * c for c in BACKGROUND[:3]], np.float32)
+        whole = np.empty_like(img)
+        whole[:, :, :3] = np.clip(img[:, :, :3].astype(np.float32) * a + grey * (1.0 - a) + 0.5, 0, 255).astype(np.uint8)
+        whole[:, :, 3] = 255
         for name, rgba in (("photo_tex", whole), ("photo_tex_masked", img)):
             t = self.ctx.texture((rgba.shape[1], rgba.shape[0]), 4, np.ascontiguousarray(rgba).tobytes())
             t.repeat_x = t.repeat_y = False

@@ -1,0 +1,25 @@
+"""``Frame view`` fits the whole leaf between the panels, in a view narrower than tall too
+(1024 × 768 leaves 264 px between the panels: maple's side lobes were cut off on both sides)."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("imgui_bundle")
+
+
+@pytest.mark.parametrize("size", [(1280, 800), (1024, 768), (1920, 1080)])
+def test_frame_view_fits_the_leaf_in_the_view(size):
+    from leafsim.gui.app import LeafApp
+    from leafsim.interactive.session import Session
+
+    app = LeafApp(Session("maple", build=False), window_size=size)
+    lo, hi = np.array([-0.06, -0.05, 0.0]), np.array([0.06, 0.07, 0.004])  # a maple-sized box [m]
+    app.renderer = SimpleNamespace(mesh=object(), lo=lo, hi=hi, center=(lo + hi) / 2)
+    app.frame_leaf()
+    corners = np.array([[a, b, c, 1.0] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])])
+    clip = corners @ app.view_proj().T
+    ndc = clip[:, :2] / clip[:, 3:4]
+    assert (clip[:, 3] > 0).all() and np.abs(ndc).max() <= 1.0, (size, ndc)
+    assert np.abs(ndc).max() > 0.3  # and it is not a speck
