@@ -35,7 +35,7 @@ from leafsim.base.resources import default_config
 from leafsim.export.mesh import export_mesh
 from leafsim.gui.exports import ensure_folder, free_path, new_take, user_path
 from leafsim.gui.fonts import load_ui_font
-from leafsim.gui.layout import BACKGROUND, LEFT_W, PANEL_BG, RIGHT_W, STATUS_H, fixed_flags, window_rects
+from leafsim.gui.layout import BACKGROUND, LEFT_W, MIN_WINDOW, PANEL_BG, RIGHT_W, STATUS_H, fixed_flags, window_rects
 from leafsim.gui.panels.controls import ControlsPanel
 from leafsim.gui.panels.stats import StatsPanel
 from leafsim.gui.panels.status_bar import StatusBar
@@ -103,7 +103,9 @@ class LeafApp:
         self.frames = frames
         self.window_frames = window_frames
         self.until_dry = bool(until_dry)
-        self.window_size = tuple(int(v) for v in window_size)
+        # no smaller than the panels and a usable view between them (at 640 x 400 the stats panel
+        # covered the controls and the leaf; at 800 x 600 the view was 90 px wide)
+        self.window_size = tuple(max(int(v), lo) for v, lo in zip(window_size, MIN_WINDOW))
         self.title = title
         self.view = "shaded"
         # relative to the folder the app was started in: short enough to read in the field
@@ -194,6 +196,7 @@ class LeafApp:
         return immapp.AddOnsParams(with_implot=True)
 
     def post_init(self) -> None:
+        _limit_window_size()
         self.ctx = moderngl.create_context()
         self.renderer = Renderer(self.ctx)
         gl = str(self.ctx.info.get("GL_RENDERER", "")).lower()
@@ -611,6 +614,18 @@ class LeafApp:
         self.dirty = True
         what = ", ".join(names) if names else "nothing was changed"
         self.status.info("species", f"{self.session.species.name} defaults restored ({what})", seconds=30.0)
+
+
+def _limit_window_size() -> None:
+    """Ask the window manager to keep the window at least :data:`MIN_WINDOW` (a hint: a desktop's
+    window manager applies it to resizing, a bare X server ignores it)."""
+    try:
+        import glfw
+        from imgui_bundle import glfw_utils
+
+        glfw.set_window_size_limits(glfw_utils.glfw_window_hello_imgui(), *MIN_WINDOW, glfw.DONT_CARE, glfw.DONT_CARE)
+    except Exception:  # noqa: BLE001 - a hint; no window manager, no GLFW window (tests), nothing lost
+        pass
 
 
 def _check_display() -> None:

@@ -12,6 +12,8 @@ from leafsim.appearance.view import PIGMENT_VIEWS
 from leafsim.gui.status import printable
 
 LEFT_W, RIGHT_W, STATUS_H = 380, 330, 34
+#: the smallest window: both panels and a 280 px view between them, and room for the controls
+MIN_WINDOW = (LEFT_W + RIGHT_W + 280, 600)
 BACKGROUND = (0.80, 0.84, 0.88)
 PANEL_BG = (0.11, 0.11, 0.12)
 #: resolution factors of the 3-D view (llvmpipe's cost is per pixel)

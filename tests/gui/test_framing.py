@@ -23,3 +23,17 @@ def test_frame_view_fits_the_leaf_in_the_view(size):
     ndc = clip[:, :2] / clip[:, 3:4]
     assert (clip[:, 3] > 0).all() and np.abs(ndc).max() <= 1.0, (size, ndc)
     assert np.abs(ndc).max() > 0.3  # and it is not a speck
+
+
+def test_window_is_never_smaller_than_its_panels():
+    """A window asked for smaller than both panels and a usable view between them opens at the
+    smallest size (640 x 400 overlapped the panels; 800 x 600 left a 90 px view)."""
+    from leafsim.gui.app import LeafApp
+    from leafsim.gui.layout import LEFT_W, MIN_WINDOW, RIGHT_W
+    from leafsim.interactive.session import Session
+
+    for size, want in (((640, 400), MIN_WINDOW), ((800, 900), (MIN_WINDOW[0], 900)), ((1280, 800), (1280, 800))):
+        app = LeafApp(Session("oak", build=False), window_size=size)
+        rp = app.runner_params()
+        assert tuple(rp.app_window_params.window_geometry.size) == want
+        assert app.window_size == want and want[0] - LEFT_W - RIGHT_W >= 280
