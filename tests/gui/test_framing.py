@@ -1,5 +1,7 @@
-"""``Frame view`` fits the whole leaf between the panels, in a view narrower than tall too
-(1024 × 768 leaves 264 px between the panels: maple's side lobes were cut off on both sides)."""
+"""The window's layout at any size: ``Frame view`` fits the whole leaf between the panels, in a
+view narrower than tall too (1024 × 768 leaves 264 px between the panels: maple's side lobes were
+cut off on both sides); the window is never smaller than its panels; the progress text keeps
+its start."""
 
 from types import SimpleNamespace
 
@@ -37,3 +39,18 @@ def test_window_is_never_smaller_than_its_panels():
         rp = app.runner_params()
         assert tuple(rp.app_window_params.window_geometry.size) == want
         assert app.window_size == want and want[0] - LEFT_W - RIGHT_W >= 280
+
+
+def test_progress_text_is_cut_at_its_end():
+    """The status bar's progress text keeps its start (the species and stage) and ends in
+    '...' when the bar is too narrow (centred, it lost its start)."""
+    from leafsim.gui.panels.status_bar import fit_text
+
+    def measure(s):
+        return SimpleNamespace(x=7.0 * len(s))
+
+    text = "building aspen_senescent: blade: the coarser mesh that carries the drying (dynamics.path)"
+    out = fit_text(text, 210.0, measure)
+    assert out.startswith("building aspen_senescent") and out.endswith("...") and measure(out).x <= 210.0
+    assert len(fit_text(text, 210.0 + 7.0, measure)) >= len(out)
+    assert fit_text("paused  0 sim s / s", 210.0, measure) == "paused  0 sim s / s"

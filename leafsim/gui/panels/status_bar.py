@@ -69,7 +69,10 @@ class StatusBar:
             frac, text = 0.0, f"{state}  {pb.sim_rate:.3g} sim s / s"
         else:
             frac, text = 0.0, "starting"
-        imgui.progress_bar(frac, (width, 0), text)
+        shown = fit_text(text, width - 10.0, imgui.calc_text_size)
+        imgui.progress_bar(frac, (width, 0), shown)
+        if shown != text and imgui.is_item_hovered():
+            imgui.set_tooltip(text)
         if compiling:
             tip("The first run of a leafsim version compiles the simulation kernels (20 s to about a minute on a small "
                 "machine; scripts/setup.sh does it during set-up); they are kept for later runs")
@@ -80,3 +83,19 @@ class StatusBar:
             tip("Fast-forward until 2 % of the water is left; press Stop drying to cancel. The time left is "
                 "estimated from the pace since the press, and in the drying's tail from how fast the water "
                 "has been falling")
+
+
+def fit_text(text: str, width: float, measure) -> str:
+    """``text`` cut at its end with an ellipsis to fit ``width`` pixels (``measure(s).x``): the
+    progress bar centres its text, so a long one lost its start ("e: particles, Delaunay/...",
+    the species and stage unreadable)."""
+    if measure(text).x <= width:
+        return text
+    lo, hi = 0, len(text)
+    while lo < hi:  # the longest start that fits with the ellipsis
+        mid = (lo + hi + 1) // 2
+        if measure(text[:mid].rstrip() + "...").x <= width:
+            lo = mid
+        else:
+            hi = mid - 1
+    return text[:lo].rstrip() + "..."
