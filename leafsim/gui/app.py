@@ -114,7 +114,9 @@ class LeafApp:
         self.record_every = 1
         self.take: Path | None = None     # folder of the take being recorded
         self.recorded = 0
+        self.recorded_frames: list[int] = []  # the simulation frame of each file of the take
         self._last_recorded_frame = -1
+        self._hold_n = 1  # the worker waits at every this many frames while a take is recorded
         self.status = Status()
         self.exit_code = 0
         self.fatal: str | None = None  # why a scripted run (--frames) failed, for stderr
@@ -274,7 +276,7 @@ class LeafApp:
     def _pace(self) -> None:
         """While "Dry to end" runs, draw at most ``DRY_UI_HZ`` frames per second: with a CPU
         rasteriser (llvmpipe) every frame drawn is CPU time the drying does not get."""
-        if self._t_last is not None and self.session.playback.drying:
+        if self._t_last is not None and self.session.playback.drying and self.take is None:  # a take draws every frame
             wait = 1.0 / DRY_UI_HZ - (time.perf_counter() - self._t_last)
             if wait > 0.0:
                 time.sleep(wait)
@@ -320,6 +322,9 @@ class LeafApp:
                 self.exit_code = 2
                 self._exit()
             s.build_error = None
+        if self.take is not None and max(self.record_every, 1) != self._hold_n:  # "every" changed mid-take
+            self._hold_n = max(self.record_every, 1)
+            s.playback.hold_every(self._hold_n)
         if s.playback.take_snapshot():
             self.dirty = True
             if self.take is not None and s.frame >= self._last_recorded_frame + max(self.record_every, 1):
@@ -542,7 +547,9 @@ class LeafApp:
             self.stop_recording(failed=True)
             raise
         self.recorded += 1
+        self.recorded_frames.append(s.frame)
         self._last_recorded_frame = s.frame
+        s.playback.release_hold()  # the worker waited at this frame: on to the next
         take = self.take
         self.status.info("record", f"recording {take.name}: {self.recorded} frames to {take}", path=take,
                          holds=lambda: self.take is take)
@@ -559,11 +566,15 @@ class LeafApp:
             return
         self.status.clear("record")
         self.recorded = 0
+        self.recorded_frames = []
         self._last_recorded_frame = -1
+        self._hold_n = max(self.record_every, 1)
+        self.session.playback.hold_every(self._hold_n)  # playing waits at every n-th frame for it
         self.requests.append(("record", None))
 
     def stop_recording(self, failed: bool = False) -> None:
         take, self.take = self.take, None
+        self.session.playback.hold_every(None)
         if take is not None and not failed:
             self.status.info("record", f"recorded {self.recorded} frames in {take}", path=take)
 

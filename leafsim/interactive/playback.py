@@ -38,6 +38,7 @@ class Playback:
         self._pause_at: int | None = None
         self._dry_wanted = False
         self._speed_wanted: float | None = None
+        self._hold_wanted: int | None = None
         self._snap_seq = -1
         self._epoch = 0
 
@@ -50,6 +51,7 @@ class Playback:
         old = self.worker
         self.worker = SimWorker(run, record, render)
         self.worker.set_speed(self._speed_wanted)
+        self.worker.hold_every(self._hold_wanted)
         self.worker.play(self._play_wanted if old is None else (old.playing and not old.drying))
         if old is None and self._pause_at is not None:
             self.worker.play_until(self._pause_at)
@@ -143,6 +145,17 @@ class Playback:
         self._speed_wanted = speed
         if self.worker is not None:
             self.worker.set_speed(speed)
+
+    def hold_every(self, n: int | None) -> None:
+        """Recording a take: playing waits at every ``n``-th frame until :meth:`release_hold`
+        (:meth:`SimWorker.hold_every`); None: never.  Carries over to a rebuilt leaf's worker."""
+        self._hold_wanted = n
+        if self.worker is not None:
+            self.worker.hold_every(n)
+
+    def release_hold(self) -> None:
+        if self.worker is not None:
+            self.worker.release_hold()
 
     def request_steps(self, n: int = 1) -> None:
         """``n`` frames in the background (the Step button)."""

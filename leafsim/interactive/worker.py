@@ -116,6 +116,9 @@ class SimWorker:
         self._dry_until = 0
         self._eta = DryingEta(DRY_END_FRACTION)  # the time "Dry to end" still needs
         self._pause_at: int | None = None  # play pauses at this frame (scripted runs)
+        self._hold_every: int | None = None  # recording: free play waits at every this many frames
+        self._hold_next = 0  # ... the next frame it waits at
+        self._held = False  # waiting there until the UI has drawn it (release_hold)
         self._steps_done = 0  # steps finished by this worker (0: the first may be compiling)
         self._stop = False
         self._thread: threading.Thread | None = None
@@ -151,7 +154,7 @@ class SimWorker:
 
     def _wanted(self) -> bool:
         return (self._stop or self._steps > 0 or self._reset_wanted > self.epoch
-                or ((self._playing or self._dry) and self.error is None))
+                or ((self._playing or self._dry) and self.error is None and not self._held))
 
     def _run(self) -> None:
         name_thread("leafsim-sim")
@@ -181,7 +184,7 @@ class SimWorker:
                 self._failed(e, reset)
             return t_next
         with self._cond:
-            free = (self._playing or self._dry) and self.error is None
+            free = (self._playing or self._dry) and self.error is None and not self._held
             if not free:
                 self._steps -= 1
             speed = None if self._dry else self._speed
@@ -267,8 +270,12 @@ class SimWorker:
             self._eta.frame(time.monotonic(), wf, self.simulator.on_coarsest)
         done = drying and (wf <= DRY_END_FRACTION or self.error is not None or s.frame >= self._dry_until)
         pause = self._pause_at is not None and s.frame >= self._pause_at
+        hold = self._hold_every is not None and s.frame >= self._hold_next
+        if hold:
+            with self._cond:
+                self._held = True
         hz = DRY_PUBLISH_HZ if drying else PUBLISH_HZ
-        if done or pause or publish_now or self.error is not None or time.perf_counter() - self._t_pub >= 1.0 / hz:
+        if done or pause or hold or publish_now or self.error is not None or time.perf_counter() - self._t_pub >= 1.0 / hz:
             self._publish(ms)  # before the flags change: whoever sees "done" sees its frame
         if pause:
             with self._cond:
@@ -346,6 +353,30 @@ class SimWorker:
             self._speed = None
             self._playing = self.run.state.frame < frame
             self._cond.notify_all()
+
+    def hold_every(self, n: int | None) -> None:
+        """While a take is recorded: free play and "Dry to end" wait at every ``n``-th frame from
+        now until :meth:`release_hold`, so that every one of them is drawn and written (they
+        were recorded per published snapshot: a take "every 1" held frames 0, 3, 8, 12, 31, ...).
+        None: no waiting."""
+        with self._cond:
+            self._hold_every = None if n is None else max(int(n), 1)
+            self._held = False
+            self._hold_next = self.run.state.frame + (self._hold_every or 0)
+            self._cond.notify_all()
+
+    def release_hold(self) -> None:
+        """The frame held at is written: go on to the next one."""
+        with self._cond:
+            if self._held:
+                self._held = False
+                self._hold_next = self.run.state.frame + (self._hold_every or 0)
+                self._cond.notify_all()
+
+    @property
+    def held(self) -> bool:
+        """Waiting at a frame of the take for the UI (:meth:`hold_every`)."""
+        return self._held
 
     @property
     def playing(self) -> bool:
@@ -428,6 +459,9 @@ class SimWorker:
     def _reset_locked(self, state) -> None:
         self.run.state = state
         self.error = None
+        with self._cond:
+            self._held = False
+            self._hold_next = state.frame + (self._hold_every or 0)
         self._dry = False
         self.dry_done = False
         self._rate.clear()

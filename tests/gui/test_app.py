@@ -197,6 +197,34 @@ def test_exports_create_the_folder_and_never_overwrite(tmp_path):
     assert leaf.mean() > 0.03, f"only {leaf.mean():.3%} leaf-green pixels"
 
 
+@pytest.mark.parametrize("dry", [False, True])
+def test_a_take_holds_every_nth_simulation_frame(tmp_path, dry):
+    """A take "every 2" while the leaf plays (or dries to the end) writes simulation frames
+    f0, f0 + 2, f0 + 4, ...: the worker waits at each until it is written (it recorded whichever
+    snapshot was published: every 1 gave frames 0, 3, 8, 12, 31, ...)."""
+    seen = {}
+
+    def body(ctx, app):
+        s = app.session
+        ctx.item_input_value("**/export folder", str(tmp_path))
+        app.record_every = 2
+        ctx.item_click("**/###record")  # Record take
+        ctx.item_click("**/###dry" if dry else PLAY)
+        wait_until(ctx, lambda: app.recorded >= 8, 600)
+        ctx.item_click("**/###record")  # Stop recording
+        seen["frames"] = list(app.recorded_frames)
+        f = s.frame
+        wait_until(ctx, lambda: s.playback.take_snapshot() or s.frame > f + 20, 600)  # it plays on, unheld
+        seen["after"] = s.frame - f
+
+    app = run_gui(body, overrides={"mesh.spacing": 0.05})
+    assert app.error is None
+    fr = seen["frames"]
+    assert len(fr) >= 8 and all(b - a == 2 for a, b in zip(fr, fr[1:])), fr
+    assert len(sorted((tmp_path / "take_001").iterdir())) == len(fr)
+    assert seen["after"] > 0
+
+
 def test_export_mesh_button_writes_a_glb(tmp_path):
     """"Export mesh" writes the leaf on screen as a binary glTF into the export folder (created
     when missing), a second click a second file; trimesh loads it with the blade's counts."""
