@@ -39,11 +39,32 @@ def project(points: np.ndarray, view_proj: np.ndarray, rect) -> np.ndarray:
     return out.reshape(p.shape[:-1] + (2,))
 
 
-def screen_rotation(view_proj: np.ndarray, rect, centre: np.ndarray, scale: float) -> np.ndarray:
+def leaf_axes(rest: np.ndarray, now: np.ndarray) -> np.ndarray:
+    """(3, 2) where the leaf's rest x and y axes point now: the rotation that best carries the
+    rest positions onto the current ones (Kabsch), applied to x̂ and ŷ.  A hanging leaf hangs
+    with its rest xy plane turned upright, and its photo is turned with it."""
+    a = np.asarray(rest, np.float64)
+    b = np.asarray(now, np.float64)
+    ok = np.isfinite(b).all(axis=1)
+    a, b = a[ok], b[ok]
+    if len(a) < 3:
+        return np.eye(3)[:, :2]
+    H = (a - a.mean(0)).T @ (b - b.mean(0))
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+    return R[:, :2]
+
+
+def screen_rotation(view_proj: np.ndarray, rect, centre: np.ndarray, scale: float,
+                    axes: np.ndarray | None = None) -> np.ndarray:
     """The orthogonal 2x2 nearest to the camera's model-xy → screen map at ``centre`` (the
-    leaf seen from the camera, without the foreshortening): polar part of the Jacobian."""
+    leaf seen from the camera, without the foreshortening): polar part of the Jacobian.
+    ``axes`` (3, 2): where the model's x and y point in the world now (:func:`leaf_axes`;
+    default: where they rest)."""
     c = np.asarray(centre, np.float64)
-    pts = np.stack([c, c + [scale, 0, 0], c + [0, scale, 0]])
+    ax = np.eye(3)[:, :2] if axes is None else np.asarray(axes, np.float64)
+    pts = np.stack([c, c + scale * ax[:, 0], c + scale * ax[:, 1]])
     s = project(pts, view_proj, rect)
     J = np.stack([s[1] - s[0], s[2] - s[0]], axis=1) / scale
     U, _, Vt = np.linalg.svd(J)

@@ -66,3 +66,26 @@ def test_uv_round_trip():
     A = np.array([[17.0, -0.8, 0.56], [-0.4, -9.4, 0.95]])
     xy = uv_to_model(A, UV_CORNERS)
     np.testing.assert_allclose((np.c_[xy, np.ones(4)] @ A.T), UV_CORNERS, atol=1e-12)
+
+
+def test_panel_photo_turns_with_a_hanging_leaf():
+    """A leaf turned upright (hanging by its stalk, apex down) is shown apex down in the panel
+    too: the rotation follows the leaf's own axes, not the rest frame's (it showed the stalk at
+    the bottom while the leaf hung stalk up)."""
+    from leafsim.gui.photo import leaf_axes
+    from leafsim.render.camera import OrbitCamera
+
+    rng = np.random.default_rng(0)
+    rest = np.c_[rng.uniform(-0.03, 0.03, 200), rng.uniform(-0.05, 0.05, 200), np.zeros(200)]
+    # hanging: the rest y axis (base -> apex) now points down (-z), x stays x
+    turn = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+    now = rest @ turn.T + [0.0, 0.0, 0.3]
+    ax = leaf_axes(rest, now)
+    np.testing.assert_allclose(ax, turn[:, :2], atol=1e-12)
+    cam = OrbitCamera(yaw=-90.0, pitch=0.0)  # looking at it from the side, horizontally
+    cam.frame_bounds(np.stack([now.min(0), now.max(0)]), margin=1.2)
+    rect = (0, 0, 400, 400)
+    vp = cam.proj(1.0) @ cam.view()
+    R = screen_rotation(vp, rect, now.mean(0), 0.01, ax)
+    apex_dir = R @ np.array([0.0, 1.0])  # the photo's base -> apex on the panel (y down)
+    assert apex_dir[1] > 0.9  # apex down, as the leaf hangs

@@ -6,13 +6,27 @@ from __future__ import annotations
 import numpy as np
 from imgui_bundle import imgui, implot
 
-from leafsim.gui.photo import UV_CORNERS, panel_quad, screen_rotation
+from leafsim.gui.photo import UV_CORNERS, leaf_axes, panel_quad, screen_rotation
 from leafsim.sim.environment import clock_text
 
 
 class StatsPanel:
     def __init__(self, app):
         self.app = app
+        self._axes_key = None
+        self._axes_val = None
+
+    def _axes(self):
+        """Where the leaf's rest x and y point now (its blade's best-fit rotation), per snapshot."""
+        s = self.app.session
+        st, m = s.state, s.model
+        if st is None or m is None or st.particle_q.shape != m.particle_rest.shape:
+            return None
+        key = (id(st), st.frame)
+        if key != self._axes_key:
+            b = m.blade_particles
+            self._axes_key, self._axes_val = key, leaf_axes(m.particle_rest[b], st.particle_q[b])
+        return self._axes_val
 
     def draw(self) -> None:
         app = self.app
@@ -103,7 +117,7 @@ class StatsPanel:
         size = (avail.x, max(avail.y - 4.0, 80.0))
         p0 = imgui.get_cursor_screen_pos()
         r = app.renderer
-        R = screen_rotation(app.view_proj(), app.leaf_rect_px, r.center, max(r.radius, 1e-4))
+        R = screen_rotation(app.view_proj(), app.leaf_rect_px, r.center, max(r.radius, 1e-4), self._axes())
         quad, _ = panel_quad(app.photo_affine, R, (p0.x, p0.y, size[0], size[1]))
         dl = imgui.get_window_draw_list()
         dl.add_image_quad(imgui.ImTextureRef(app.photo_tex.glo), *[tuple(map(float, q)) for q in quad],
