@@ -54,3 +54,24 @@ def test_progress_text_is_cut_at_its_end():
     assert out.startswith("building aspen_senescent") and out.endswith("...") and measure(out).x <= 210.0
     assert len(fit_text(text, 210.0 + 7.0, measure)) >= len(out)
     assert fit_text("paused  0 sim s / s", 210.0, measure) == "paused  0 sim s / s"
+
+
+def test_orbiting_keeps_the_eye_above_the_ground():
+    """With the ground shown the eye never goes below it (from there the stalk and the veins
+    showed through the ground's underside); without it any pitch is allowed."""
+    from leafsim.gui.panels.view import keep_above_ground
+    from leafsim.render.camera import OrbitCamera
+
+    r = SimpleNamespace(mesh=object(), lo=np.array([-0.05, -0.05, 0.0]), radius=0.07)
+    cam = OrbitCamera(yaw=-90.0, pitch=55.0)
+    cam.target = np.array([0.0, 0.0, 0.01])
+    cam.distance = 0.3
+    for _ in range(200):
+        cam.drag(0.0, -5.0)  # drag upwards: the eye goes down
+        keep_above_ground(cam, r)
+    ground = r.lo[2] - 0.004 * r.radius
+    assert cam.eye[2] > ground and cam.pitch < 5.0
+    free = OrbitCamera(yaw=-90.0, pitch=55.0)
+    for _ in range(200):
+        free.drag(0.0, -5.0)
+    assert free.pitch == -89.0

@@ -3,6 +3,7 @@ blink), the caption, the heat map's colour bar; and the mouse (orbit, pan, zoom)
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -91,3 +92,18 @@ class ViewOverlay:
             app.camera.pan(dx, dy, h)
         if io.mouse_wheel:
             app.camera.zoom(io.mouse_wheel)
+        if app.show_ground:
+            keep_above_ground(app.camera, app.renderer)
+
+
+def keep_above_ground(camera, renderer) -> None:
+    """With the ground shown, the eye stays above it: orbiting below it drew the stalk and the
+    veins through the ground's underside (the ground plane lies just under the leaf's lowest
+    point, as the renderer draws it)."""
+    if renderer is None or getattr(renderer, "mesh", None) is None:
+        return
+    gz = float(renderer.lo[2]) - 0.004 * float(renderer.radius)
+    lift = gz + 0.02 * float(renderer.radius) - float(np.asarray(camera.target, np.float64)[2])
+    lowest = math.degrees(math.asin(float(np.clip(lift / max(camera.distance, 1e-12), -1.0, 1.0))))
+    if camera.pitch < lowest:
+        camera.pitch = float(min(lowest, 89.0))
