@@ -613,7 +613,11 @@ class LeafApp:
     def switch_species(self, key: str) -> None:
         res = self.session.set_species(key)
         kept, reset = res["kept"], res["reset"]
-        text = f"switching to {key}"
+        if not (kept or reset):  # only while the new leaf builds (it stayed 30 s after)
+            s = self.session
+            self.status.info("species", f"switching to {key}", holds=lambda: s.building and s.species_key == key)
+            return
+        text = f"switched to {key}"
         if kept:
             text += f"; kept your {len(kept)} change(s): {', '.join(kept)}"
         if reset:

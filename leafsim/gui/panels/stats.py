@@ -50,7 +50,7 @@ class StatsPanel:
         ms = pb.last_ms
         imgui.text(f"step {sum(ms.values()):.2f} ms:")  # the stages wrap to the panel's width
         imgui.same_line()
-        imgui.text_wrapped("  ".join(f"{k[:4]} {v:.1f}" for k, v in ms.items()))
+        imgui.text_wrapped(", ".join(f"{k} {v:.1f}" for k, v in ms.items()))  # whole names ("watc" was the watchdog)
         if app.timing:
             imgui.text_disabled("frame: " + "  ".join(f"{k} {v:.1f}" for k, v in app.timing.items()) + " ms")
         h = pb.history
