@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import shutil
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -28,7 +27,7 @@ from leafsim.base.fileio import atomic_write_bytes, npz_bytes, read_json
 from leafsim.config.species import get_species
 from leafsim.export.mesh import export_mesh
 from leafsim.pipeline import build_leaf
-from leafsim.scene.layout import leaf_dir
+from leafsim.scene.layout import clear_leaf_folder, leaf_dir
 from leafsim.scene.lod import LevelOfDetail, lod_error
 from leafsim.sim.metrics import Probe
 from leafsim.sim.model import Model, State
@@ -252,7 +251,10 @@ def run_leaf(job: LeafJob, out: str | Path) -> dict:
         result.update(name=job.name, ok=True, seconds=time.perf_counter() - t0, cpu_s=time.process_time() - c0)
         return result
     except Exception as e:  # every failure is this leaf's only
-        shutil.rmtree(folder, ignore_errors=True)
+        try:
+            clear_leaf_folder(folder)  # what it wrote so far; never anything else
+        except (OSError, LeafsimError):
+            pass
         msg = str(e) if isinstance(e, LeafsimError) else f"{type(e).__name__}: {e}"
         return {"name": job.name, "ok": False, "error": " ".join(msg.split()), "seconds": time.perf_counter() - t0}
 
@@ -318,8 +320,7 @@ def _lod_check(job: LeafJob, lod, shown: State) -> tuple[bytes, float]:
 
 
 def _write(folder: Path, files: dict) -> None:
-    if folder.exists():
-        shutil.rmtree(folder)  # a stale leaf of an older job: start clean
+    clear_leaf_folder(folder)  # a stale leaf of an older job: start clean (its files only)
     for name, data in files.items():
         p = folder / name
         p.parent.mkdir(parents=True, exist_ok=True)

@@ -32,7 +32,7 @@ from leafsim.base.fileio import atomic_write_bytes, not_an_input, output_target,
 from leafsim.config.params import SEED_MAX
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
-from leafsim.scene.layout import leaf_dir
+from leafsim.scene.layout import leaf_dir, leaf_folder_entries
 from leafsim.sim.run import MAX_RUN_FRAMES
 
 _TOP_KEYS = {"name", "description", "seed", "config", "layout", "overview", "groups"}
@@ -395,6 +395,8 @@ def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None,
         not_an_input(out / name, (scene.path,), "--out")  # a scene file kept in its own output folder
     t0 = time.perf_counter()
     todo = [j for j in scene.jobs if not is_done(j, out)]
+    for j in todo:  # a leaf's folder is replaced only when it holds nothing but leafsim's files
+        leaf_folder_entries(leaf_dir(out, j.name))
     results = []
     if todo and before is not None:
         before()

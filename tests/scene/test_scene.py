@@ -144,6 +144,54 @@ def test_damaged_files_of_a_finished_leaf_make_a_rerun_simulate_it_again(one_wor
         assert _files(out) == ref, damage
 
 
+@pytest.mark.parametrize("foreign", ["folder", "pipe", "file", "symlink", "leaf is a file", "frames is a file"])
+def test_a_leaf_folder_with_anything_of_the_users_is_refused_untouched(one_worker, tmp_path, foreign):
+    """A leaf's folder is replaced only when it holds nothing but leafsim's own files: a folder,
+    named pipe, symlink or other file of the user's there (or a file where the leaf's folder or
+    its frames folder goes) is one line, exit 2, before any leaf runs, and stays as it was (the
+    folder was removed with everything in it)."""
+    import os
+    import shutil
+
+    scene, out1, _ = one_worker
+    out = tmp_path / "out"
+    shutil.copytree(out1, out)
+    leaf = out / "leaves" / "oak-000"
+    (leaf / "done.json").write_text("{}")  # so the leaf is simulated again
+    if foreign == "folder":
+        (leaf / "mydata").mkdir()
+        (leaf / "mydata" / "precious.txt").write_text("precious")
+        thing = leaf / "mydata" / "precious.txt"
+    elif foreign == "pipe":
+        os.mkfifo(leaf / "notes")
+        thing = leaf / "notes"
+    elif foreign == "file":
+        (leaf / "notes.txt").write_text("precious")
+        thing = leaf / "notes.txt"
+    elif foreign == "symlink":
+        (tmp_path / "elsewhere.txt").write_text("precious")
+        (leaf / "state.npz").unlink()
+        (leaf / "state.npz").symlink_to(tmp_path / "elsewhere.txt")
+        thing = tmp_path / "elsewhere.txt"
+    elif foreign == "leaf is a file":
+        shutil.rmtree(leaf)
+        leaf.write_text("precious")
+        thing = leaf
+    else:
+        shutil.rmtree(leaf / "frames")
+        (leaf / "frames").write_text("precious")
+        thing = leaf / "frames"
+    before = {str(p): (p.is_symlink(), p.read_bytes() if p.is_file() and not p.is_fifo() else None)
+              for p in out.rglob("*") if p.name != "done.json"}
+    r = subprocess.run([sys.executable, "-m", "leafsim", "scene", str(scene.path), "--out", str(out), "--workers", "1"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=HANG_S)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert "oak-000" in r.stderr and "leafsim" in r.stderr
+    after = {str(p): (p.is_symlink(), p.read_bytes() if p.is_file() and not p.is_fifo() else None)
+             for p in out.rglob("*") if p.name != "done.json"}
+    assert after == before and (thing.exists() or thing.is_symlink())
+
+
 def test_changed_group_reruns_only_its_leaves(one_worker, tmp_path):
     scene, out1, _ = one_worker
     import shutil
