@@ -272,7 +272,8 @@ def _image(path: Path, key: str, name: str, value: Any) -> Path:
         raise _err(path, key, name, "expected a path string relative to the config's project")
     image = Path(value)
     if not image.is_absolute():
-        base_dir = path.parent.parent if path.parent.name == "configs" else path.parent
+        folder = path.absolute().parent  # as typed, `leaves.json` or `./x.json` has no folder name to test
+        base_dir = folder.parent if folder.name == "configs" else folder
         image = (base_dir / image).resolve()
     if image.is_dir():
         raise _err(path, key, name, f"photo {image} is a folder, expected an image file")

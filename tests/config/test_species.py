@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -119,3 +120,23 @@ def test_user_adds_a_species(tmp_path):
     assert sp.params["veins.main.kappa"] == 2.0 and not sp.has_photo
     sh = leaf_shape(sp)
     assert np.isclose(sh.length, 0.1)
+
+
+def test_a_configs_folder_config_finds_its_photos_however_its_path_is_written(tmp_path, monkeypatch):
+    """A config in a folder called ``configs/`` takes its photo paths from the folder above,
+    also when its path is written without a folder (``leaves.json`` or ``./leaves.json`` from
+    inside it: the rule tested the path as typed, so the photos were looked for in configs/)."""
+    import shutil
+
+    (tmp_path / "configs").mkdir()
+    (tmp_path / "images").mkdir()
+    lib = json.loads((data_dir("configs") / "leaves.json").read_text())
+    oak = lib["species"]["oak"]
+    shutil.copy(data_dir("images") / Path(oak["image"]).name, tmp_path / "images" / "oak.jpg")
+    entry = {k: v for k, v in oak.items() if k not in ("senescent_photo",)}
+    entry["image"] = "images/oak.jpg"
+    (tmp_path / "configs" / "mine.json").write_text(json.dumps({"species": {"myoak": entry}}))
+    monkeypatch.chdir(tmp_path / "configs")
+    for written in ("mine.json", "./mine.json", str(tmp_path / "configs" / "mine.json")):
+        lib2 = load_library(written)
+        assert lib2["myoak"].image == (tmp_path / "images" / "oak.jpg").resolve(), written
