@@ -188,6 +188,14 @@ def _variants(path: Path, key: str, e: Any) -> dict:
     return out
 
 
+def _encodable(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
 def _check_key(path: Path, key: str) -> str:
     """Species keys are printable names (they appear in messages and on the command line)."""
     if not key or not key.isprintable() or key != key.strip():
@@ -208,6 +216,10 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
     for k in ("name", "latin", "description", "photo_note"):
         if k in e and not isinstance(e[k], str):
             raise _err(path, key, k, f"expected a text string, got {_show(e[k])}")
+        if k in e and not _encodable(e[k]):  # a lone surrogate ("\ud800") could not be printed: an internal error
+            raise _err(path, key, k, "expected text that UTF-8 can write (it holds a lone surrogate code point)")
+        if k in ("name", "latin") and k in e and not e[k].isprintable():  # a row of the species table
+            raise _err(path, key, k, f"expected one line of printable text, got {_show(e[k])}")
 
     image = _image(path, key, "image", e["image"]) if e.get("image") is not None else None
     stage = e.get("photo_stage", "young")

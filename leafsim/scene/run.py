@@ -158,6 +158,12 @@ def load_scene(path) -> Scene:
     name = data.get("name", path.stem)
     if not isinstance(name, str):
         raise w.err("name", "expected a string")
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        raise w.err("name", "expected text that UTF-8 can write (it holds a lone surrogate code point)") from None
+    if not name.isprintable():
+        raise w.err("name", f"expected one line of printable text, got {name!r}")
     return Scene(path=path, name=name, seed=seed, layout=_layout(w, data.get("layout", {"kind": "row"})),
                  overview=_overview(w, data.get("overview", {})), jobs=tuple(jobs))
 

@@ -73,6 +73,10 @@ def _entry(**kw):
     ({"species": {"x": _entry(variants={"red": {"image": "a.png"}})}}, "key 'variants.red.image'"),
     ({"species": {"x": _entry(variants={"red": {"params": {"colour.nope": 1}}})}}, "species 'x_red': unknown parameter"),
     ({"species": {"x": _entry(variants={"red": {}}), "x_red": _entry()}}, "'x_red' is defined twice"),
+    # a lone surrogate was an internal error when printed; a newline split the species table's row
+    ({"species": {"x": _entry(name="X\ud800")}}, "key 'name': expected text that UTF-8 can write"),
+    ({"species": {"x": _entry(name="X\nSECOND LINE")}}, "key 'name': expected one line of printable text"),
+    ({"species": {"x": _entry(description="fine\n\ud800")}}, "key 'description': expected text that UTF-8"),
 ])
 def test_bad_entries_name_file_species_and_key(tmp_path, data, needle):
     p = _write(tmp_path, data)

@@ -21,7 +21,7 @@ from leafsim.scene.run import load_scene, run_scene
 TINY = {"mesh.spacing": 0.08}
 
 
-def _scene(tmp_path: Path, name="tiny", overview=False, **over) -> Path:
+def _scene(tmp_path: Path, name="tiny", overview=False, stem=None, **over) -> Path:
     """A tiny scene: two oaks on a coarse mesh shown on a finer one (LOD, one checked, frames
     every 20, an animated glb) and one chestnut; floor layout."""
     data = {
@@ -35,7 +35,7 @@ def _scene(tmp_path: Path, name="tiny", overview=False, **over) -> Path:
         ],
     }
     data.update(over)
-    p = tmp_path / f"{name}.json"
+    p = tmp_path / f"{stem or name}.json"
     p.write_text(json.dumps(data))
     return p
 
@@ -262,6 +262,9 @@ def test_a_leaf_that_blows_up_fails_alone_and_leaves_no_files(tmp_path, monkeypa
 
 BAD = [
     ({"colour": 1}, "key 'colour': unknown key"),
+    # every leaf was simulated and written, then printing the name was an internal error
+    ({"name": "tiny\ud800"}, "key 'name': expected text that UTF-8 can write"),
+    ({"name": "tiny\nsecond"}, "key 'name': expected one line of printable text"),
     ({"groups": [{"name": "a", "species": "birch", "count": 1, "stop": {"frames": 1}}]}, "group 'a', key 'species': unknown species 'birch'"),
     ({"groups": [{"name": "a", "species": "oak", "count": -3, "stop": {"frames": 1}}]}, "group 'a', key 'count': expected an integer in [1, 10000], got -3"),
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "lod": {"simulate": 0.05, "show": 0.07}}]}, "key 'lod.show'"),
@@ -275,7 +278,7 @@ BAD = [
 
 @pytest.mark.parametrize("over,msg", BAD)
 def test_bad_scene_files_give_one_line_errors(tmp_path, over, msg):
-    path = _scene(tmp_path, **over)
+    path = _scene(tmp_path, stem="bad", **over)
     with pytest.raises(LeafsimError) as e:
         load_scene(path)
     text = str(e.value)
