@@ -14,6 +14,9 @@ from leafsim.scene.run import load_scene, run_scene
 def cmd_scene(args):
     if args.out is not None and not args.out.strip():
         raise LeafsimError("--out '': expected a folder name for the scene's files (or leave --out out)")
+    if args.scheduler is not None and not args.scheduler.strip():  # '' ran on the local pool without a word
+        raise LeafsimError("--scheduler '': expected a Dask scheduler address (e.g. tcp://host:8786), or no --scheduler "
+                           "for the local process pool")
     scene = load_scene(args.scene)
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem

@@ -238,6 +238,8 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
     outline_pts, smooth, teeth = _outline(path, key, e["outline"]) if "outline" in e else (None, 0, None)
     if image is None and outline_pts is None:
         raise _err(path, key, None, "needs either 'image' (a photo) or 'outline' (drawn points)")
+    if image is not None and outline_pts is not None:  # the outline was checked, then ignored for the photo's
+        raise _err(path, key, "outline", "and 'image' both give the leaf's outline: expected one of them")
 
     targets = e.get("targets", "auto")
     targets = None if targets == "auto" else _points(path, key, "targets", targets, 1)

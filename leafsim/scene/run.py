@@ -203,8 +203,9 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
     lib[sp].params.with_overrides(params, where=f"{w.path}: {w.ctx}, key 'params'")
     effects = g.get("effects")
     if effects is not None:
-        if not isinstance(effects, list) or any(e not in EFFECTS for e in effects):
-            raise w.err("effects", f"expected a list of effect names from {', '.join(EFFECTS)}, got {effects!r}")
+        if not isinstance(effects, list) or not effects or any(e not in EFFECTS for e in effects):
+            # [] would switch every effect off without a word: the leaves never changed
+            raise w.err("effects", f"expected a non-empty list of effect names from {', '.join(EFFECTS)}, got {effects!r}")
         effects = tuple(effects)
     stop = _stop(w, g.get("stop"))
     lod, check = _lod(w, g.get("lod"))

@@ -77,6 +77,8 @@ def _entry(**kw):
     ({"species": {"x": _entry(name="X\ud800")}}, "key 'name': expected text that UTF-8 can write"),
     ({"species": {"x": _entry(name="X\nSECOND LINE")}}, "key 'name': expected one line of printable text"),
     ({"species": {"x": _entry(description="fine\n\ud800")}}, "key 'description': expected text that UTF-8"),
+    ({"species": {"x": _entry(image=str(data_dir("images") / "autumn_carpinus_like_01_front.png"))}},
+     "key 'outline': and 'image' both give"),
 ])
 def test_bad_entries_name_file_species_and_key(tmp_path, data, needle):
     p = _write(tmp_path, data)

@@ -271,6 +271,7 @@ BAD = [
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1, "season": 1}}]}, "key 'stop': expected exactly one"),
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "params": {"mesh.spacingg": 1}}]}, "unknown parameter 'mesh.spacingg'"),
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "effects": ["wind"]}]}, "key 'effects'"),
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "effects": []}]}, "key 'effects': expected a non-empty list"),
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "output": {"mesh": "obj", "every": 5}}]}, "key 'output.mesh'"),
     ({"layout": {"kind": "floor", "size": [0.1]}}, "key 'layout.size'"),
 ]
@@ -297,11 +298,13 @@ def test_cli_bad_input_exit_2_and_no_files(tmp_path):
     cases.append(([str(_scene(tmp_path)), "--out", str(blocker / "out")], "cannot create the output folder"))
     cases.append(([str(_scene(tmp_path)), "--out", str(blocker)], "exists and is not a folder"))
     cases.append(([str(_scene(tmp_path)), "--workers", "0", "--out", str(tmp_path / "w0")], "--workers 0"))
+    cases.append(([str(_scene(tmp_path)), "--scheduler", "", "--out", str(tmp_path / "s0")], "--scheduler ''"))
     for args, msg in cases:
         r = subprocess.run([sys.executable, "-m", "leafsim", "scene", *args], capture_output=True, text=True, timeout=HANG_S,
                            cwd=tmp_path)
         assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, (args, r.stderr)
     assert not (tmp_path / "w0").exists() and not (tmp_path / "neg").exists() and not (tmp_path / "out").exists()
+    assert not (tmp_path / "s0").exists()
 
 
 def test_shipped_scenes_load_and_say_what_they_promise():
