@@ -119,6 +119,9 @@ def _dry_run(leaf: _Leaf, want_frame: int | None, target: C.Reference | None, la
     tv, frames sampled, the senescent window's record) or None).  The window: every sampled
     stage at which the leaf has visibly turned (less than ``WINDOW_CHLOROPHYLL`` of its
     chlorophyll left, area-weighted), through the dried one."""
+    if want_frame is None and not leaf.sim.effects.get("osmosis", False):  # refused now, not after MAX_FRAMES frames
+        raise LeafsimError(f"{leaf.sp.key}: the drying run (to {DRY_LEFT:g} of the water) cannot dry the leaf with "
+                           "effects.osmosis off: add osmosis to --effects, or give --stage a frame number")
     run = Run(leaf.model, simulator=leaf.sim, state=leaf.state0.copy(), name=leaf.sp.key)
     at, best, tried = None, None, 0
     window: list[float] = []

@@ -96,3 +96,20 @@ def test_vein_agreement_finds_veins_on_the_photo_s_lines_and_not_its_speckles():
         assert on["precision"] > 0.9 and on["recall"] > 0.8, (speckles, on)
         off = vein_agreement(img, blade, np.roll(veins, int(0.06 * L), axis=1), L)
         assert off["precision"] < on["precision"] - 0.3 and off["recall"] < on["recall"] - 0.3, (speckles, off)
+
+
+def test_a_drying_run_without_osmosis_is_refused_at_once():
+    """The dried stage and the senescent row need the leaf to dry: with osmosis off it never
+    does, and compare is refused before its first frame, naming the effect (it ran the whole
+    12 000-frame budget, then said the leaf did not dry); a frame number still runs."""
+    import pytest
+
+    from leafsim.base.errors import LeafsimError
+
+    for key, stage in (("oak", "dried"), ("hornbeam", None)):  # hornbeam's senescent photo: a senescent row
+        sp = get_species(key)
+        with pytest.raises(LeafsimError, match="effects.osmosis off"):
+            run_compare(sp, sp.params.with_overrides({"mesh.spacing": 0.06}), stage=stage, effects=["pbd", "shrink"])
+    sp = get_species("oak")
+    rep = run_compare(sp, sp.params.with_overrides({"mesh.spacing": 0.06}), stage="3", effects=["pbd", "shrink"])
+    assert rep["rows"][-1]["stage"]["frame"] == 3
