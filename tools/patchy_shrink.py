@@ -58,7 +58,8 @@ def patched(a: float, ell_L: float):
         state.spring_rest[:] = np.maximum(r0 - (r0 - state.spring_rest) * fs, self.l_min * r0)
         if m.hinge_count:
             np.multiply(state.hinge_rest, fh, out=state.hinge_rest)
-        ks.vol_targets(m.vol_springs, m.spring_rest0, state.spring_rest, m.vol_rest0, state.vol_rest)
+        ks.tri_ratios(self.tri_springs, r0, state.spring_rest, self.ratios)
+        ks.vol_targets(self.vol_tri, self.ratios, m.vol_rest0, state.vol_rest)
     return apply
 
 

@@ -63,6 +63,7 @@ def test_parallel_vs_serial_rows_under_load(tiny):
     running; the ratios are p90 ÷ the twin's p90 (1 for the twin itself), and the parallel
     shrink writes the serial shrink's rest lengths."""
     from leafsim.sim.effects.shrink import Shrink
+    from leafsim.measure.parallel import parallel_twin
     from leafsim.sim.kernels import shrink as ks
 
     rows = bench.parallel_vs_serial(tiny, rounds=2, busy=1)
@@ -79,7 +80,12 @@ def test_parallel_vs_serial_rows_under_load(tiny):
     sh = Shrink(tiny)
     sh.configure(bench.bench_params(tiny))
     a, b = np.zeros(tiny.spring_count), np.zeros(tiny.spring_count)
-    for fn, out in ((ks.shrink_springs, a), (ks.shrink_springs_par, b)):
+    twin = parallel_twin(ks._shrink_springs)
+    # its own cache entry: numba keys the cache by name and line, not by `parallel`, so a second
+    # decoration of the same function loaded the serial code the first one had cached
+    assert twin._cache._cache_file._index_path != ks.shrink_springs._cache._cache_file._index_path
+    assert twin.targetoptions["parallel"] is True
+    for fn, out in ((ks.shrink_springs, a), (twin, b)):
         fn(tiny.spring_ij, tiny.spring_rest0, sh.sigma, sh.alpha, sh.l_min, tiny.particle_cytosol, st.particle_water,
            tiny.particle_mass0, out)
     assert np.array_equal(a, b) and (a < tiny.spring_rest0).any()

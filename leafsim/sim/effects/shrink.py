@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from leafsim.sim.kernels import PARALLEL_MIN_PARTICLES
 from leafsim.sim.kernels import shrink as ks
 from leafsim.sim.model import (
     LAYER_T,
@@ -60,7 +59,11 @@ class Shrink:
         nT = int((model.particle_layer == LAYER_T).sum())
         self.nT = nT
         self.tri_springs = np.ascontiguousarray(model.vol_springs[np.argsort(model.vol_idx[:, 0])])
-        self.link_tri_springs = self.tri_springs[ij[:, 0] - nT]
+        self.link_tri = np.ascontiguousarray(ij[:, 0] - nT, dtype=np.int64)  # each link's triangle (its V end)
+        self.vol_tri = np.ascontiguousarray(model.vol_idx[:, 0] - nT, dtype=np.int64)
+        if not np.array_equal(np.sort(self.vol_tri), np.arange(len(self.vol_tri))):
+            raise ValueError("shrink: the thickness volumes are not one per V particle, numbered after the T layer")
+        self.ratios = np.empty((len(self.tri_springs), 3))  # scratch: tri_ratios
         # veins stay straight along their length: no bilayer curl on hinges that bend them;
         # elsewhere the curl is resolved in the local vein frame (veinframe.py)
         self.hinge_align = hinge_alignment(model)
@@ -106,16 +109,18 @@ class Shrink:
 
     def apply(self, state: State):
         m = self.model
-        fn = ks.shrink_springs_par if m.particle_count >= PARALLEL_MIN_PARTICLES else ks.shrink_springs
-        fn(m.spring_ij, m.spring_rest0, self.sigma, self.alpha, self.l_min,
-           m.particle_cytosol, state.particle_water, m.particle_mass0, state.spring_rest)
+        ks.shrink_springs(m.spring_ij, m.spring_rest0, self.sigma, self.alpha, self.l_min, m.particle_cytosol,
+                          state.particle_water, m.particle_mass0, state.spring_rest)
         if m.hinge_count:
             ks.hinge_targets(m.hinge_idx, m.hinge_spring_V, m.spring_ij, m.spring_rest0, self.sig_top, self.sig_bot,
                              self.alpha, self.l_min, m.particle_cytosol, state.particle_water, m.particle_water0,
                              m.particle_mass0, m.thickness, BILAYER_GAIN, self.setw, state.hinge_plastic, state.hinge_rest)
             np.multiply(state.hinge_rest, self.hinge_curl, out=state.hinge_rest)
             np.clip(state.hinge_rest, -HINGE_MAX_ANGLE, HINGE_MAX_ANGLE, out=state.hinge_rest)
-            ks.dual_targets(m.hinge_spring_V, m.spring_ij, self.tri_springs, self.nT, m.spring_rest0,
-                            state.hinge_rest, m.thickness, state.spring_rest)
-        ks.link_targets(self.links, self.link_tri_springs, m.spring_rest0, state.spring_rest)
-        ks.vol_targets(m.vol_springs, m.spring_rest0, state.spring_rest, m.vol_rest0, state.vol_rest)
+        # the T springs' shrink, once per triangle, for the springs and volumes above them
+        ks.tri_ratios(self.tri_springs, m.spring_rest0, state.spring_rest, self.ratios)
+        if m.hinge_count:
+            ks.dual_targets(m.hinge_spring_V, m.spring_ij, self.nT, self.ratios, m.spring_rest0, state.hinge_rest,
+                            m.thickness, state.spring_rest)
+        ks.link_targets(self.links, self.link_tri, self.ratios, m.spring_rest0, state.spring_rest)
+        ks.vol_targets(self.vol_tri, self.ratios, m.vol_rest0, state.vol_rest)

@@ -13,8 +13,3 @@ from leafsim.base.cache import configure_numba_cache
 configure_numba_cache()  # before any kernel module below is decorated
 
 FASTMATH = {"nnan", "ninf", "nsz"}  # (numba wants a set; never mutated)
-
-#: below this many particles the serial kernels beat their parallel (``prange``) twins
-#: (measured by ``leafsim bench``: equal at 5.4 k particles, parallel 1-2 % faster at 83 k on this
-#: 2-core box; fork/join per colour dominates on small meshes)
-PARALLEL_MIN_PARTICLES = 30000

@@ -31,8 +31,9 @@ def _shrink_springs(ij, rest0, sigma, alpha, l_min, cyt, water, m0, rest):
         rest[s] = rest0[s] * f
 
 
+#: serial in production (``prange`` runs as ``range``): its parallel twin, compiled by the bench
+#: (:func:`leafsim.measure.parallel.parallel_twin`), lost under load (docs/performance.md)
 shrink_springs = njit(cache=True, nogil=True, parallel=False, fastmath=FASTMATH)(_shrink_springs)
-shrink_springs_par = njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH)(_shrink_springs)
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
@@ -89,42 +90,55 @@ def hinge_targets(hidx, hV, ij, rest0, sig_top, sig_bot, alpha, l_min, cyt, wate
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH)
-def vol_targets(vsp, rest0, rest, vol0, vrest):
+def tri_ratios(tri_springs, rest0, rest, out):
+    """out[k, j] = rest / rest⁰ of the j-th T spring of the triangle under V particle k (already
+    updated in ``rest``): the in-plane shrink the links, top-surface springs and thickness
+    volumes follow, gathered once per triangle instead of once per reader (a triangle is read
+    by three links, up to three hinges and one volume; the readers sum the same quotients in
+    the same order as when each divided for itself, so the rest values are bit-identical)."""
+    for k in range(tri_springs.shape[0]):
+        for j in range(3):
+            t = tri_springs[k, j]
+            out[k, j] = rest[t] / rest0[t]
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def vol_targets(vtri, ratios, vol0, vrest):
     """Thickness constraint rest value (6 × prism volume) follows the isotropic shrink of its
-    triangle: area ∝ f², thickness ∝ f."""
-    for t in range(vsp.shape[0]):
-        f = (rest[vsp[t, 0]] / rest0[vsp[t, 0]] + rest[vsp[t, 1]] / rest0[vsp[t, 1]] + rest[vsp[t, 2]] / rest0[vsp[t, 2]]) / 3.0
+    triangle (``vtri``: the row of :func:`tri_ratios` of each volume): area ∝ f², thickness ∝ f."""
+    for t in range(vtri.shape[0]):
+        k = vtri[t]
+        f = (ratios[k, 0] + ratios[k, 1] + ratios[k, 2]) / 3.0
         vrest[t] = vol0[t] * f * f * f
 
 
-@njit(cache=True, fastmath=FASTMATH, nogil=True)
-def link_targets(links, tri_springs, rest0, rest):
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def link_targets(links, link_tri, ratios, rest0, rest):
     """Rest length of each link V → T vertex: the tissue shrinks isotropically with its
     bottom layer, in the plane and through the thickness, so a link (the triangle's
-    cross-section) scales with the mean ratio f of its triangle's three T springs (already
-    updated in ``rest``): l = l⁰ f."""
+    cross-section) scales with the mean ratio f of its triangle's three T springs
+    (``link_tri``: the row of :func:`tri_ratios` of each link): l = l⁰ f."""
     for k in range(links.shape[0]):
         s = links[k]
+        r = link_tri[k]
         f = 0.0
         for j in range(3):
-            t = tri_springs[k, j]
-            f += rest[t] / rest0[t]
+            f += ratios[r, j]
         rest[s] = rest0[s] * f / 3.0
 
 
-@njit(cache=True, fastmath=FASTMATH, nogil=True)
-def dual_targets(hV, ij, tri_springs, nT, rest0, hrest, h, rest):
+@njit(cache=True, nogil=True, fastmath=FASTMATH)
+def dual_targets(hV, ij, nT, ratios, rest0, hrest, h, rest):
     """Rest length of each V spring (the top surface across hinge e): the dual edge bent to the
     hinge's rest angle θ0 at the current thickness f h, f (d0 − h θ0) (a strip of curvature
     θ0/(f d0) is shorter by that on its upper side), f the in-plane shrink of the T layer under
-    it (the mean ratio of the two triangles' T springs, already updated in ``rest``)."""
+    it (the mean ratio of the two triangles' T springs, rows of :func:`tri_ratios`)."""
     for e in range(hV.shape[0]):
         s = hV[e]
         f = 0.0
         for v in (ij[s, 0], ij[s, 1]):
             for j in range(3):
-                t = tri_springs[v - nT, j]
-                f += rest[t] / rest0[t]
+                f += ratios[v - nT, j]
         f /= 6.0
         d = rest0[s] - h * hrest[e]
         if d < 0.1 * rest0[s]:
