@@ -8,6 +8,8 @@ projected in parallel (Gauss–Seidel between colours, no write conflicts inside
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -251,8 +253,16 @@ class Model:
         """The blade's water now / fresh (``water`` the (n,) particle water [kg]).  "Dry"
         (2 % left, the GUI's "Dry to end", ``--until dry``, the accuracy protocol) means the
         blade: the petiole, a thick rod, holds its water far longer, as a real stalk does."""
-        b = self.blade_particles
-        return float(water[b].sum() / max(float(self.particle_water0[b].sum()), 1e-300))
+        b, w0 = self._blade_water0
+        return float(water[b].sum() / w0)
+
+    @functools.cached_property
+    def _blade_water0(self) -> tuple[np.ndarray, float]:
+        """(blade particle indices, the fresh blade's water, ≥ 1e-300): what every
+        :meth:`water_fraction` needs, computed once (a model's arrays are fixed once built; three
+        calls a frame on a 132 k-particle leaf took 1 ms)."""
+        b = np.flatnonzero(self.blade_particles)
+        return b, max(float(self.particle_water0[b].sum()), 1e-300)
 
     def blade_area(self) -> float:
         """Rest area of the blade's triangles [m²] (the petiole's left out)."""

@@ -111,10 +111,10 @@ def jacobi(indptr, indices, data, diag, b, x, tol, maxit):
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def direct_step(M, w, w0, rate, dt, Lp, Li, Lx, Up, Ui, Ux, perm_r, perm_c, y, rhs, loss):
+def direct_step(M, w, w0, rate, dt, Lp, Li, Lx, Up, Ui, Ux, Ud, perm_r, perm_c, y, rhs, loss):
     """One implicit osmosis step with a factored matrix, in one call: rhs = M c − loss
-    (as :func:`loss_rhs`), solve (Pr A Pc = L U, CSR factors with sorted indices), then
-    w = max(c, 0) M.  ``y`` is (n,) scratch."""
+    (as :func:`loss_rhs`), solve Pr A Pc = L U, then w = max(c, 0) M.  L (unit diagonal) and
+    U are CSR rows without their diagonal (U's is ``Ud``).  ``y`` is (n,) scratch."""
     n = M.shape[0]
     for i in range(n):
         wi = w[i]  # = M c
@@ -122,26 +122,16 @@ def direct_step(M, w, w0, rate, dt, Lp, Li, Lx, Up, Ui, Ux, perm_r, perm_c, y, r
         loss[i] = l
         rhs[i] = wi - l
         y[perm_r[i]] = wi - l
-    for i in range(n):  # L z = Pr b (forward)
+    for i in range(n):  # L z = Pr b (forward; unit diagonal)
         s = y[i]
-        dg = 1.0
         for k in range(Lp[i], Lp[i + 1]):
-            j = Li[k]
-            if j < i:
-                s -= Lx[k] * y[j]
-            elif j == i:
-                dg = Lx[k]
-        y[i] = s / dg
+            s -= Lx[k] * y[Li[k]]
+        y[i] = s
     for i in range(n - 1, -1, -1):  # U v = z (backward)
         s = y[i]
-        dg = 1.0
         for k in range(Up[i], Up[i + 1]):
-            j = Ui[k]
-            if j > i:
-                s -= Ux[k] * y[j]
-            elif j == i:
-                dg = Ux[k]
-        y[i] = s / dg
+            s -= Ux[k] * y[Ui[k]]
+        y[i] = s / Ud[i]
     for i in range(n):  # x = Pc v; round-off guard (M-matrix: exact solution ≥ 0)
         c = y[perm_c[i]]
         if c < 0.0:
