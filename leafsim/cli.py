@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import os
 import re
 import signal
@@ -202,12 +203,27 @@ def command(name: str):
     return getattr(importlib.import_module(f"leafsim.commands.{module}"), func)
 
 
+def _interrupted_json(args, signum: int, what: str) -> None:
+    """``--json`` promises exactly one JSON object, an interrupted command's too: the commands
+    that print theirs only at the end (export, compare, scene, ...) get this one."""
+    from leafsim.commands.common import EMITTED
+
+    if args is None or not getattr(args, "json", False) or EMITTED[0]:
+        return
+    try:
+        print(json.dumps({"command": args.cmd, "interrupted": signal.Signals(signum).name, "message": what},
+                         sort_keys=True), flush=True)
+    except (BrokenPipeError, ValueError):
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version"):
         argv = ["gui"] + argv
     # SIGTERM ends a command like Ctrl-C does (one line, no traceback), not silently
     old_term = signal.signal(signal.SIGTERM, raise_interrupted) if main_thread() else None
+    args = None
     try:
         args = build_parser().parse_args(argv)
         return command(args.cmd)(args) or 0
@@ -217,6 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     except (KeyboardInterrupt, Interrupted) as e:
         signum = e.signum if isinstance(e, Interrupted) else signal.SIGINT
         what = e.message if isinstance(e, Interrupted) and e.message else "interrupted"
+        _interrupted_json(args, signum, what)
         print(f"leafsim: {what} (by {signal.Signals(signum).name})", file=sys.stderr)
         return 128 + int(signum)
     except BrokenPipeError:

@@ -22,10 +22,15 @@ def warn(text: str) -> None:
     print(f"leafsim: warning: {' '.join(text.split())}", file=sys.stderr)
 
 
+#: whether this process printed its ``--json`` object (an interrupted command prints one then)
+EMITTED = [False]
+
+
 def emit(args, obj: dict, text: str) -> None:
     """``--json``: the one JSON object; otherwise the text."""
     if getattr(args, "json", False):
         print(json.dumps(obj, sort_keys=True))
+        EMITTED[0] = True
     else:
         print(text)
 

@@ -130,6 +130,32 @@ def test_sigterm_during_the_build(capsys, monkeypatch):
     assert out == "" and err == "leafsim: interrupted (by SIGTERM)\n"
 
 
+@pytest.mark.parametrize("module,argv", [
+    ("leafsim.commands.export", ["export", "--species", "oak", "--frames", "5", "--out", "X.glb"]),
+    ("leafsim.compare.run", ["compare", "--species", "oak", "--stage", "dried"]),
+])
+def test_an_interrupted_command_still_prints_its_json_object(tmp_path, capsys, monkeypatch, module, argv):
+    """``--json`` prints exactly one JSON object, an interrupted command's too: export and
+    compare printed nothing when stopped (only ``run`` did)."""
+    import importlib
+
+    mod = importlib.import_module(module)
+
+    def build_leaf(*a, **k):
+        os.kill(os.getpid(), signal.SIGTERM)
+        raise AssertionError("SIGTERM did not interrupt")
+
+    monkeypatch.setattr(mod, "build_leaf", build_leaf)
+    monkeypatch.chdir(tmp_path)
+    assert main(argv + ["--json"]) == 143
+    out, err = capsys.readouterr()
+    rep = json.loads(out)
+    assert rep["interrupted"] == "SIGTERM" and rep["command"] == argv[0] and out.count("\n") == 1
+    last = err.strip().splitlines()[-1]  # (a first run says first that it compiles the kernels)
+    assert last.startswith("leafsim: interrupted") and "(by SIGTERM)" in last
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("argv,needle", [
     (["--resume"], "--resume needs --out"),
     (["--checkpoint-every", "5"], "--checkpoint-every needs --out"),
