@@ -224,6 +224,9 @@ def main(argv: list[str] | None = None) -> int:
     # SIGTERM ends a command like Ctrl-C does (one line, no traceback), not silently
     old_term = signal.signal(signal.SIGTERM, raise_interrupted) if main_thread() else None
     args = None
+    from leafsim.commands.common import EMITTED
+
+    EMITTED[0] = False  # this command's object not printed yet (main may run many times in one process)
     try:
         args = build_parser().parse_args(argv)
         return command(args.cmd)(args) or 0

@@ -64,7 +64,7 @@ class StatsStream:
             raise LeafsimError(f"--stats {self.path}: cannot write statistics ({e.strerror or e})") from None
 
     def _keep(self, frame: int) -> None:
-        kept = []
+        kept, last = [], 0
         if self.path.exists():
             for line in self.path.read_text(encoding="utf-8", errors="replace").splitlines():
                 try:
@@ -75,6 +75,11 @@ class StatsStream:
                 if isinstance(k, bool) or not isinstance(k, int) or k > frame:
                     break  # not a line of ours (a frame that is no integer): kept no further
                 kept.append(line + "\n")
+                last = k
+            if kept and last < frame:  # the run that went on from there wrote no statistics
+                raise LeafsimError(f"--stats {self.path}: its frames end at {last}, but the run resumes from frame {frame}: "
+                                   f"frames {last + 1}–{frame} are missing (that run had no --stats); give another "
+                                   f"--stats file to start one at frame {frame + 1}")
         atomic_write_bytes(self.path, "".join(kept).encode(), "statistics")
 
     def write(self, st: dict) -> None:

@@ -117,6 +117,21 @@ def test_resume_continues_a_finished_run(tmp_path, reference, capsys):
     _assert_same(_resume_to_n(out, stats, capsys), reference)
 
 
+def test_resume_refuses_a_statistics_file_with_a_gap(tmp_path, capsys):
+    """A stats file is continued on --resume only when it reaches the checkpoint: a resumed run
+    without --stats in between left it at frame N/2 while the run went on, and the next resume
+    with --stats appended from later on, without a word (frames missing in the middle)."""
+    out, stats = tmp_path / "out", tmp_path / "s.jsonl"
+    assert main(BASE + ["--frames", str(N // 2), "--out", str(out), "--stats", str(stats)]) == 0
+    assert main(BASE + ["--frames", str(N // 2 + 3), "--out", str(out), "--resume"]) == 0
+    before = stats.read_bytes()
+    capsys.readouterr()
+    assert main(BASE + ["--frames", str(N), "--out", str(out), "--stats", str(stats), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"frames {N // 2 + 1}–{N // 2 + 3} are missing" in err and str(stats) in err
+    assert stats.read_bytes() == before
+
+
 def test_sigterm_during_the_build(capsys, monkeypatch):
     import leafsim.commands.shape
 
