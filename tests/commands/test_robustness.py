@@ -240,7 +240,10 @@ def test_a_criterion_the_run_cannot_reach_is_refused_not_run_forever(tmp_path, m
     assert "at frame 40" in err
     # compare's dried stage of a leaf that cannot dry is an error, not a "dried" row at full water
     monkeypatch.setattr(compare_run, "MAX_FRAMES", 30)
-    one_line(*run_cli("compare", *OAK, "--stage", "dried", "--effects", "colour"), "did not dry within 30 frames")
+    one_line(*run_cli("compare", *OAK, "--stage", "dried", "--set", "osmosis.evaporation_top=0",
+                      "--set", "osmosis.evaporation_bottom=0"), "did not dry within 30 frames")
+    # and one whose effects cannot dry it is refused before its first frame
+    one_line(*run_cli("compare", *OAK, "--stage", "dried", "--effects", "colour"), "effects.osmosis off")
 
 
 def test_incomplete_or_absurd_solver_records_are_refused(tmp_path):
