@@ -106,6 +106,11 @@ def species_trace(sp: Species, params: ParamSet | None = None):
         return trace_photo(sp.image, params if params is not None else sp.params, sp.base_px, sp.apex_px)
     except HintError as e:
         raise sp.error(e.key, f"{e.detail.replace('lies outside the photo', f'lies outside the leaf traced in {sp.image}: off the photo')}") from None
+    except LeafsimError as e:  # the photo itself (blank, no leaf, unreadable): say which entry names it
+        text = str(e)
+        if sp.config is not None and str(sp.config) in text:
+            raise
+        raise sp.error("image", text) from None
 
 
 def _check_given_ends(sp: Species, traced) -> None:

@@ -146,3 +146,17 @@ def test_a_configs_folder_config_finds_its_photos_however_its_path_is_written(tm
     for written in ("mine.json", "./mine.json", str(tmp_path / "configs" / "mine.json")):
         lib2 = load_library(written)
         assert lib2["myoak"].image == (tmp_path / "images" / "oak.jpg").resolve(), written
+
+
+def test_a_photo_without_a_leaf_names_the_config_species_and_key(tmp_path):
+    """A blank photo (or one with no leaf) named by a config entry: the one line names the
+    config, the species and its key 'image', not only the picture's path."""
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "white.png"), np.full((200, 200, 3), 255, np.uint8))
+    p = _write(tmp_path, {"species": {"x": {"image": "white.png", "length_m": 0.1}}})
+    sp = get_species("x", p)
+    with pytest.raises(LeafsimError) as e:
+        leaf_shape(sp, sp.params)
+    text = str(e.value)
+    assert text.startswith(f"{p}: species 'x', key 'image': ") and "no leaf found" in text and "\n" not in text
