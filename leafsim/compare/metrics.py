@@ -392,6 +392,23 @@ def _text(img: np.ndarray, lines, x: int, y: int, scale: float = 0.5) -> None:
         cv2.putText(img, line, (x, y + i * int(22 * scale / 0.5)), cv2.FONT_HERSHEY_SIMPLEX, scale, (20, 20, 20), 1, cv2.LINE_AA)
 
 
+def _wrap(lines, width: int, scale: float = 0.5) -> list[str]:
+    """``lines`` broken at spaces so that each fits ``width`` pixels (the montage's long notes ran
+    off its right edge: "...model magent", "...frame 4100, top-")."""
+    out = []
+    for line in lines:
+        words, cur = line.split(" "), ""
+        for w in words:
+            trial = w if not cur else f"{cur} {w}"
+            if cur and cv2.getTextSize(trial, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0] > width:
+                out.append(cur)
+                cur = "  " + w
+            else:
+                cur = trial
+        out.append(cur)
+    return out
+
+
 def _overlay(ref: Reference, picture: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Photo and model half and half, the photo's margin in cyan, the model's in magenta."""
     out = (0.5 * ref.rgb.astype(np.float32) + 0.5 * picture.astype(np.float32)).astype(np.uint8)
@@ -424,14 +441,16 @@ def montage(report: dict, rows, height: int = 460) -> np.ndarray:
         gap = np.full((height, 10, 3), 255, np.uint8)
         pics = np.hstack([panels[0], gap, panels[1], gap, panels[2]])
         W = pics.shape[1]
-        info = np.full((150, W, 3), 255, np.uint8)
-        _text(info, _row_lines(meta), 8, 22)
+        lines = _wrap(_row_lines(meta), W - 16)
+        top = 22 * len(lines) + 12  # the bars below the text, however many lines it took
+        info = np.full((top + 50, W, 3), 255, np.uint8)
+        _text(info, lines, 8, 22)
         fp = np.array([meta["colour_photo"][c] for c in CLASSES])
         fm = np.array([meta["colour_model"][c] for c in CLASSES])
         bw = W - 90
-        info[100:114, 80:80 + bw] = _bar(fp, bw, 14)
-        info[122:136, 80:80 + bw] = _bar(fm, bw, 14)
-        _text(info, ["photo", "model"], 8, 112, 0.42)
+        info[top:top + 14, 80:80 + bw] = _bar(fp, bw, 14)
+        info[top + 22:top + 36, 80:80 + bw] = _bar(fm, bw, 14)
+        _text(info, ["photo", "model"], 8, top + 12, 0.42)
         blocks.append(np.vstack([pics, info]))
     W = max(b.shape[1] for b in blocks)
     blocks = [np.hstack([b, np.full((b.shape[0], W - b.shape[1], 3), 255, np.uint8)]) for b in blocks]
@@ -441,7 +460,8 @@ def montage(report: dict, rows, height: int = 460) -> np.ndarray:
         legend[12:28, x:x + 16] = CLASS_RGB[k]
         _text(legend, [c], x + 20, 25, 0.45)
         x += 30 + 11 * len(c)
-    head = np.full((36, W, 3), 255, np.uint8)
-    _text(head, [f"leafsim compare --species {report['species']} (seed {report['seed']}): photo | model top-down | overlay "
-                 "(photo margin cyan, model magenta)"], 8, 24, 0.55)
+    title = _wrap([f"leafsim compare --species {report['species']} (seed {report['seed']}): photo | model top-down | overlay "
+                   "(photo margin cyan, model magenta)"], W - 16, 0.55)
+    head = np.full((12 + 24 * len(title), W, 3), 255, np.uint8)
+    _text(head, title, 8, 24, 0.55)
     return np.vstack([head, *blocks, legend])

@@ -113,3 +113,18 @@ def test_a_drying_run_without_osmosis_is_refused_at_once():
     sp = get_species("oak")
     rep = run_compare(sp, sp.params.with_overrides({"mesh.spacing": 0.06}), stage="3", effects=["pbd", "shrink"])
     assert rep["rows"][-1]["stage"]["frame"] == 3
+
+
+def test_montage_text_is_wrapped_to_the_picture():
+    """The montage's long lines are broken at spaces to fit its width (they ran off the right
+    edge), keeping every word."""
+    import cv2
+
+    from leafsim.compare.metrics import _wrap
+
+    line = ("best of 110 stages every 50 frames; grown back: the fresh leaf × 1.113 in length, so that at the "
+            "matched stage it has the photo's size (first pass at photo size: frame 4100, top-down area kept 0.808)")
+    out = _wrap([line, "short"], 400)
+    assert len(out) > 2 and out[-1] == "short"
+    assert all(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0][0] <= 400 for t in out)
+    assert " ".join(t.strip() for t in out[:-1]).split() == line.split()
