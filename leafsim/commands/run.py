@@ -69,6 +69,8 @@ def check_run_args(args) -> Path | None:
             raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
         check_output(args.stats, "--stats file")
         if out is not None:
+            if os.path.realpath(args.stats) == os.path.realpath(out):  # refused now, before --out is made
+                raise LeafsimError(f"--stats {args.stats}: that is the --out folder (expected a file elsewhere)")
             mine = {os.path.realpath(out / n) for n in ("final.npz", CHECKPOINT)}
             stats = os.path.realpath(args.stats)
             if stats in mine or (args.every and Path(stats).parent == Path(os.path.realpath(out))

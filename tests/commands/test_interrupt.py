@@ -273,3 +273,13 @@ def test_a_nan_frame_keeps_the_last_good_checkpoint(tmp_path, monkeypatch, capsy
     ck = np.load(out / "checkpoint.npz")
     assert json.loads(str(ck["meta"]))["frame"] == 6 and np.isfinite(ck["state_particle_q"]).all()
     assert not (out / "final.npz").exists()
+
+
+def test_stats_at_the_out_folder_is_refused_before_the_folder_is_made(tmp_path, capsys):
+    """``--out D --stats D`` is one line and leaves nothing (the folder was made, then the
+    statistics could not be written into a folder)."""
+    d = tmp_path / "SX"
+    assert main(["run", "--species", "oak", "--frames", "2", "--out", str(d), "--stats", str(d)]) == 2
+    err = capsys.readouterr().err
+    assert "that is the --out folder" in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
