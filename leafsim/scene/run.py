@@ -363,14 +363,20 @@ def _local_results(jobs: list, out: Path, workers: int):
                 yield {"name": futs[f].name, "ok": False, "error": f"worker process failed: {type(e).__name__}: {e}"}
 
 
-def _dask_results(jobs: list, out: Path, address: str):
-    """Yield results of ``jobs`` from the Dask cluster at ``address`` (its workers must see ``out``)."""
-    from distributed import Client, as_completed
+def _dask_client(address: str):
+    """A client of the Dask scheduler at ``address``; LeafsimError when it cannot connect."""
+    from distributed import Client
 
     try:
-        client = Client(address, timeout="20s")
+        return Client(address, timeout="20s")
     except Exception as e:
         raise LeafsimError(f"--scheduler {address}: cannot connect to the Dask scheduler ({type(e).__name__}: {e})") from None
+
+
+def _dask_results(jobs: list, out: Path, client):
+    """Yield results of ``jobs`` from the Dask cluster of ``client`` (its workers must see ``out``)."""
+    from distributed import as_completed
+
     try:
         futs = client.map(run_leaf, jobs, out=str(out.resolve()), pure=False, key=[f"leaf-{j.name}-{j.key}" for j in jobs])
         names = {f.key: j.name for f, j in zip(futs, jobs)}
@@ -390,10 +396,21 @@ def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None,
     (also written as ``run.json``: the only file with timings).  ``before()`` runs once the
     arguments are checked, when there are leaves to simulate (the CLI compiles the kernels
     there, so the workers load them)."""
-    from tqdm import tqdm
-
     if workers < 1:
         raise LeafsimError(f"--workers {workers}: expected at least 1")
+    # the scheduler is reached before anything is created (an address it cannot reach left OUT/leaves/)
+    client = _dask_client(scheduler) if scheduler else None
+    try:
+        return _run_scene(scene, out, workers, scheduler, client, progress, render, before)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def _run_scene(scene: Scene, out, workers: int, scheduler: str | None, client, progress: bool, render: bool,
+               before: Callable[[], None] | None) -> dict:
+    from tqdm import tqdm
+
     out = check_out_dir(out)
     # what the composition writes, checked before any leaf is simulated
     for name, what in (("placement.json", "placement"), ("summary.json", "summary"), ("run.json", "run report"),
@@ -409,7 +426,7 @@ def run_scene(scene: Scene, out, workers: int = 1, scheduler: str | None = None,
         before()
         t0 = time.perf_counter()
     if todo:
-        gen = _dask_results(todo, out, scheduler) if scheduler else _local_results(todo, out, min(workers, len(todo)))
+        gen = _dask_results(todo, out, client) if client is not None else _local_results(todo, out, min(workers, len(todo)))
         with tqdm(total=len(todo), desc=scene.name, unit="leaf", disable=None if progress else True) as bar:
             for r in gen:
                 results.append(r)

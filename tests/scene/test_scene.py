@@ -299,12 +299,15 @@ def test_cli_bad_input_exit_2_and_no_files(tmp_path):
     cases.append(([str(_scene(tmp_path)), "--out", str(blocker)], "exists and is not a folder"))
     cases.append(([str(_scene(tmp_path)), "--workers", "0", "--out", str(tmp_path / "w0")], "--workers 0"))
     cases.append(([str(_scene(tmp_path)), "--scheduler", "", "--out", str(tmp_path / "s0")], "--scheduler ''"))
+    # reached before anything is made (it left OUT/leaves/ behind)
+    cases.append(([str(_scene(tmp_path)), "--scheduler", "notaurl", "--out", str(tmp_path / "s1")],
+                  "cannot connect to the Dask scheduler"))
     for args, msg in cases:
         r = subprocess.run([sys.executable, "-m", "leafsim", "scene", *args], capture_output=True, text=True, timeout=HANG_S,
                            cwd=tmp_path)
         assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, (args, r.stderr)
     assert not (tmp_path / "w0").exists() and not (tmp_path / "neg").exists() and not (tmp_path / "out").exists()
-    assert not (tmp_path / "s0").exists()
+    assert not (tmp_path / "s0").exists() and not (tmp_path / "s1").exists()
 
 
 def test_shipped_scenes_load_and_say_what_they_promise():
