@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay
 
-from leafsim.base.geometry import points_in_region
+from leafsim.base.geometry import distance_to_outline, points_in_region
 from leafsim.blade.sample import Points
 from leafsim.sim.model import (
     KIND_CONTOUR,
@@ -26,7 +26,8 @@ def triangulate(P: Points, contour, r: float, holes=()):
     e2 = ((b - a) ** 2).sum(1) + ((c - b) ** 2).sum(1) + ((a - c) ** 2).sum(1)
     quality = 4 * np.sqrt(3) * np.abs(ar) / np.maximum(e2, 1e-300)
     on_contour = (kinds[tri] == KIND_CONTOUR).all(1)
-    keep &= ~(on_contour & (quality < 0.15))  # hull-fill slivers along the outline
+    sliver = keep & on_contour & (quality < 0.15)
+    keep &= ~(sliver & _crosses_air(allp, tri, sliver, contour, holes, r))  # hull-fill slivers along the outline
     keep &= np.abs(ar) > 1e-6 * r * r  # degenerate (collinear) triangles
     tri = tri[keep]
     flip = ar[keep] < 0
@@ -137,3 +138,25 @@ def morton_order(p2: np.ndarray) -> np.ndarray:
         return v
 
     return spread(g[:, 0]) | (spread(g[:, 1]) << np.uint64(1))
+
+
+def _crosses_air(allp: np.ndarray, tri: np.ndarray, which: np.ndarray, contour, holes, r: float) -> np.ndarray:
+    """(m,) for the triangles ``which``: an edge leaves the blade (points at 1/4, 1/2 and 3/4 of
+    it more than 0.05 r outside), as a hull-fill sliver bridging a notch of the outline does.
+    A sliver of outline points that lies inside (a chord across a shallow bend) is blade: dropped
+    too, it left a slit from the margin into the blade (hornbeam's double teeth: 2.4 mm deep,
+    along which the draft mesh's teeth came apart)."""
+    out = np.zeros(len(tri), bool)
+    idx = np.flatnonzero(which)
+    if not len(idx):
+        return out
+    t = tri[idx]
+    pts = []
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        a, b = allp[t[:, i]], allp[t[:, j]]
+        pts += [a + f * (b - a) for f in (0.25, 0.5, 0.75)]
+    P = np.stack(pts, axis=1)  # (k, 9, 2)
+    flat = P.reshape(-1, 2)
+    inside = points_in_region(flat, contour, holes) | (distance_to_outline(flat, contour, holes) < 0.05 * r)
+    out[idx] = ~inside.reshape(len(idx), -1).all(1)
+    return out
