@@ -173,22 +173,30 @@ class ControlsPanel:
             app.render_scale = SCALES[si]
         _, app.heat_fit = imgui.checkbox("heat map: fit range to the data", app.heat_fit)
         tip("Colour the heat maps over the field's own 2nd..98th percentile (on) or over 0..100 % (off)")
+        # a drawn species has no photo: the photo's controls are greyed out and say why (they were
+        # live and did nothing)
+        no_photo = app.session.ready and app.session.photo_rgba is None
+        why = "\n(this species has no photo: its outline is drawn)" if no_photo else ""
+        imgui.begin_disabled(no_photo)
         ai = ALBEDOS.index(app.albedo)
         ch, ai = imgui.combo("photo albedo", ai, list(ALBEDOS))
         if ch:
             app.albedo = ALBEDOS[ai]
             app.dirty = True
+        _disabled_tip("The blade's colour from the species photo: detail (its fine hues on living tissue), the photo "
+                      "itself, or the pigment colours alone" + why)
         imgui.set_next_item_width(90)
         ci = COMPARES.index(app.photo_compare)
         ch, ci = imgui.combo("photo compare", ci, list(COMPARES))
         if ch:
             app.photo_compare = COMPARES[ci]
-        tip("Show the species photo over the leaf where the fresh leaf lay: overlay (opacity) or blink")
+        _disabled_tip("Show the species photo over the leaf where the fresh leaf lay: overlay (opacity) or blink" + why)
         imgui.same_line()
         imgui.set_next_item_width(-1)
         _, alpha = imgui.slider_float("###photo alpha", app.photo_alpha, 0.0, 1.0, "opacity %.2f",
                                       imgui.SliderFlags_.always_clamp)
         app.photo_alpha = finite_or(alpha, app.photo_alpha)
+        imgui.end_disabled()
 
     def export_rows(self) -> None:
         app = self.app
@@ -226,3 +234,9 @@ class ControlsPanel:
             app.guard(app.export_mesh, topic="mesh")
         imgui.end_disabled()
         tip("Write the leaf on screen as a glTF 2.0 binary (.glb: closed two-layer shell, veins, pigment colours)")
+
+
+def _disabled_tip(text: str) -> None:
+    """A tooltip that also shows over a greyed-out item."""
+    if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip | imgui.HoveredFlags_.allow_when_disabled):
+        imgui.set_tooltip(text)
