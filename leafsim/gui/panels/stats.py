@@ -54,7 +54,11 @@ class StatsPanel:
         if app.timing:
             imgui.text_disabled("frame: " + "  ".join(f"{k} {v:.1f}" for k, v in app.timing.items()) + " ms")
         h = pb.history
-        imgui.text(f"water {1e3 * s.total_water():.4g} g, blade {100 * s.water_fraction():.1f} %")  # kg in the model
+        # the blade's water and share, the stalk's apart (one total beside the blade's share misread)
+        w, b = s.state.particle_water, s.model.blade_particles
+        stalk = 1e3 * float(w[~b].sum())
+        imgui.text(f"water: blade {1e3 * float(w[b].sum()):.4g} g ({100 * s.water_fraction():.1f} %)"
+                   + (f", stalk {stalk:.3g} g" if (~b).any() else ""))
         if h["residual"]:
             imgui.text(f"residual {h['residual'][-1]:.3g}   kinetic {h['kinetic'][-1]:.3g} J")
         self.plots()
