@@ -649,7 +649,10 @@ class Renderer:
             _set(v, k, val)
         ctx = self.ctx
         ctx.enable(moderngl.BLEND)
-        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        # colour blended, coverage kept: the target's alpha stays 1 under a vein (blended like the
+        # colour it fell to a² + 1 − a, and the GUI's half-size view, drawn as a texture over the
+        # window, showed the veins pale and dashed)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
         self._target.depth_mask = False
         self._variant_vao("vein", **defs).render(moderngl.TRIANGLES)
         self._target.depth_mask = True

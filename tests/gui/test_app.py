@@ -480,6 +480,27 @@ def test_cli_gui_build_error_is_one_line_on_stderr(tmp_path, xdisplay):
     assert not (tmp_path / "x.png").exists()
 
 
+def test_a_reduced_render_scale_draws_the_leaf_in_its_own_colours(tmp_path, xdisplay):
+    """The half-size view (drawn as a texture over the window) shows the leaf as the full-size one
+    does: its veins had left the texture's alpha below 1 (blended like the colour), and the
+    window's grey showed through them, pale and dashed (the leaf's pixels 6 levels bluer on
+    average; now within 1)."""
+    import cv2
+
+    shots = {}
+    for scale in ("1.0", "0.5"):
+        out = tmp_path / f"s{scale}.png"
+        env = {**os.environ, "DISPLAY": xdisplay, "LEAFSIM_RENDER_SCALE": scale}
+        r = subprocess.run([sys.executable, "-m", "leafsim", "gui", "--species", "maple", "--frames", "20",
+                            "--screenshot", str(out)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=HANG_S)
+        assert r.returncode == 0, r.stderr[-2000:]
+        img = cv2.imread(str(out)).astype(int)[:, 390:940]  # the view between the panels
+        leaf = (img[..., 1] - img[..., 2]) > 20
+        assert leaf.mean() > 0.05
+        shots[scale] = img[leaf].mean(axis=0)
+    assert np.abs(shots["0.5"] - shots["1.0"]).max() < 2.5, shots  # 6.0 levels of blue before
+
+
 def test_cli_gui_unreachable_display_is_one_line(tmp_path):
     """A DISPLAY with no X server behind it: one line and exit 2 (the window runner used to
     abort with a C++ assert, exit 134, before any window)."""
