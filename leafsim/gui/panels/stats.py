@@ -73,14 +73,14 @@ class StatsPanel:
         sl = slice(None, None, step)
         x = np.ascontiguousarray(x[sl])
         pw = imgui.get_content_region_avail().x
-        fit = implot.AxisFlags_.auto_fit
-        # a fresh leaf (one record, after a reset or a species switch) has nothing to fit: the
-        # frame axis starts at 0..10 instead of the fit of one point (−0.4..0.4) or the old leaf's
-        xfit = fit if len(x) > 1 else 0
+        # the axes are set to this frame's data every frame: implot's auto-fit takes the extents
+        # of the frame before, and at "Dry to end"'s 3 redraws a second the curves ended hundreds
+        # of frames short of the text above them.  A fresh leaf (one record, after a reset or a
+        # species switch) shows frames 0..10
+        x_lo, x_hi = (float(x[0]), max(float(x[-1]), float(x[0]) + 1.0)) if len(x) > 1 else (0.0, 10.0)
         if implot.begin_plot("water / initial", (pw, 170)):
-            implot.setup_axes("frame", "", xfit, 0)
-            if not xfit:
-                implot.setup_axis_limits(implot.ImAxis_.x1, 0.0, 10.0, imgui.Cond_.always)
+            implot.setup_axes("frame", "", 0, 0)
+            implot.setup_axis_limits(implot.ImAxis_.x1, x_lo, x_hi, imgui.Cond_.always)
             implot.setup_axis_limits(implot.ImAxis_.y1, 0.0, 1.05, imgui.Cond_.once)
             # below the plot, in a row: inside, it covered the curves and was cut at the edge
             implot.setup_legend(implot.Location_.south, implot.LegendFlags_.outside | implot.LegendFlags_.horizontal)
@@ -96,13 +96,16 @@ class StatsPanel:
                 for label, y in (("T", t), ("V", v)):
                     implot.plot_line(label, x, np.ascontiguousarray(y[sl]))
             implot.end_plot()
+        r = np.nan_to_num(np.asarray(h["residual"], np.float64), nan=1.0)[sl]
+        ok = (r > 0) & np.isfinite(r)  # the fresh leaf (frame 0) has none
+        lr = np.log10(r[ok])
+        y_lo, y_hi = (float(lr.min()), float(lr.max())) if lr.size else (-3.0, 0.0)
+        pad = max(0.05 * (y_hi - y_lo), 0.1)
         if implot.begin_plot("log10 max |C| / l (constraint residual)", (pw, 130), implot.Flags_.no_legend):
-            implot.setup_axes("frame", "", xfit, fit)
-            if not xfit:
-                implot.setup_axis_limits(implot.ImAxis_.x1, 0.0, 10.0, imgui.Cond_.always)
-            r = np.nan_to_num(np.asarray(h["residual"], np.float64), nan=1.0)[sl]
-            ok = r > 0  # the fresh leaf (frame 0) has none
-            implot.plot_line("residual", np.ascontiguousarray(x[ok]), np.log10(r[ok]))
+            implot.setup_axes("frame", "", 0, 0)
+            implot.setup_axis_limits(implot.ImAxis_.x1, x_lo, x_hi, imgui.Cond_.always)
+            implot.setup_axis_limits(implot.ImAxis_.y1, y_lo - pad, y_hi + pad, imgui.Cond_.always)
+            implot.plot_line("residual", np.ascontiguousarray(x[ok]), lr)
             implot.end_plot()
 
     def photo(self) -> None:
