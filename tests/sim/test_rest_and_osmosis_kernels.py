@@ -3,6 +3,7 @@ factors against scipy's solve: the compiled loops gather the triangles' shrink o
 LU factors without their diagonals (leafsim.sim.effects.shrink / .osmosis)."""
 
 import numpy as np
+import pytest
 import scipy.sparse.linalg as spla
 
 from leafsim.config.params import ParamSet
@@ -61,3 +62,122 @@ def test_osmosis_factors_solve_the_system(tiny):
     c = spla.spsolve(osm.A.tocsc(), rhs)
     np.testing.assert_allclose(st.particle_water, np.maximum(c, 0.0) * osm.M, rtol=1e-10, atol=1e-18)
     assert not np.array_equal(st.particle_water, w)
+
+
+@pytest.fixture(scope="module")
+def small():
+    """The bench's maple-like blade at 0.02 L (3.5 k particles): large enough for a separator
+    under 5 % of the unknowns."""
+    from leafsim.measure.models import build_bench_model
+
+    return build_bench_model(0.02)
+
+
+def _split_osmosis(model):
+    osm = Osmosis(model)
+    osm.configure(ParamSet({"osmosis.solver": "halves"}))
+    assert osm.split, "the leaf should cut into two halves and a separator"
+    return osm
+
+
+def test_split_osmosis_factors_keep_the_halves_apart(small):
+    """One level of nested dissection: two halves that share no entry in L or U, a separator
+    ordered last, and a permutation that visits every particle once."""
+    osm = _split_osmosis(small)
+    Lp, Li, Lx, Up, Ui, Ux, Ud, perm, bounds, cuts = osm.factors
+    n = small.particle_count
+    _, b1, b2 = (int(b) for b in bounds)
+    assert 0 < b1 < b2 < n and min(b1, b2 - b1) >= n // 4 and n - b2 <= n // 20
+    assert np.array_equal(np.sort(perm), np.arange(n))
+    part = lambda ix: np.where(ix < b1, 0, np.where(ix < b2, 1, 2))  # noqa: E731
+    rL, rU = part(np.repeat(np.arange(n), np.diff(Lp))), part(np.repeat(np.arange(n), np.diff(Up)))
+    assert ((part(Li) == rL) | (rL == 2)).all() and ((part(Ui) == rU) | (part(Ui) == 2)).all()
+    assert (part(Li)[rL == 0] == 0).all() and (part(Ui)[rU == 2] == 2).all()
+    for r in range(n - b2):  # the separator rows' cuts split their columns by half
+        cols = Li[Lp[b2 + r]:Lp[b2 + r + 1]]
+        k = cuts[:, r] - Lp[b2 + r]
+        assert (cols[:k[1]] < b1).all() and ((cols[k[1]:k[2]] >= b1) & (cols[k[1]:k[2]] < b2)).all()
+        assert (cols[k[2]:] >= b2).all()
+
+
+def test_split_osmosis_solves_the_system_on_one_thread_or_two(small):
+    """The two-half solve gives scipy's solution, conserves water as the serial one does, and
+    returns the same bits on one thread as on two (the thread count is chosen by timing and
+    must never change a result)."""
+    import numba
+
+    osm = _split_osmosis(small)
+    ref = Osmosis(small)
+    ref.configure(ParamSet())
+    assert not ref.split
+    st, st_ref = _dried(small), _dried(small)
+    w = st.particle_water.copy()
+    most = numba.get_num_threads()
+    outs = []
+    for k in sorted({1, min(2, most)}):
+        s = _dried(small)
+        osm.threads.pick = lambda m, k=k: k  # force the count
+        for _ in range(5):
+            osm.apply(s)
+        outs.append(s.particle_water.copy())
+        assert numba.get_num_threads() == most  # restored after each solve
+    for o in outs[1:]:
+        assert np.array_equal(o, outs[0])
+    osm.threads.pick = lambda m: 1
+    osm.apply(st)
+    c = spla.spsolve(osm.A.tocsc(), w - osm.loss)
+    np.testing.assert_allclose(st.particle_water, np.maximum(c, 0.0) * osm.M, rtol=1e-10, atol=1e-18)
+    for _ in range(5):
+        ref.apply(st_ref)
+    np.testing.assert_allclose(outs[0], st_ref.particle_water, rtol=1e-12, atol=1e-18)
+    lost = w.sum() - outs[0].sum()
+    assert lost > 0 and abs(lost - (w.sum() - st_ref.particle_water.sum())) <= 1e-12 * w.sum()
+
+
+def test_thread_count_follows_the_faster_timing():
+    """Two threads are timed three times, then one; the faster count is kept and the other
+    tried at growing intervals (16, 32, ... 256 solves) while it loses, and taken at once when
+    a try wins; with one thread available nothing is tried."""
+    from leafsim.sim.effects.osmosis import _Threads
+
+    t = _Threads()
+    assert t.pick(1) == 1
+
+    def drive(t, calls, ms):
+        picks = []
+        for _ in range(calls):
+            k = t.pick(2)
+            picks.append(k)
+            t.record(k, ms[k])
+        return picks
+
+    busy = {1: 0.022, 2: 0.030}  # the other core busy: one thread faster
+    quiet = {1: 0.022, 2: 0.012}
+    picks = drive(t, 1200, busy)
+    assert picks[:6] == [2, 2, 2, 1, 1, 1]
+    tries = [i + 1 for i, k in enumerate(picks) if k == 2][3:]  # calls (1-based) that tried two
+    gaps = np.diff([7] + tries)  # the 7th call keeps the faster count
+    assert list(gaps[:5]) == [16, 32, 64, 128, 256] and (gaps[5:] == 256).all()
+    picks = drive(t, 600, quiet)  # the load goes: taken at the next try, then kept
+    first = picks.index(2)
+    assert first < 256 and picks[first:first + 16] == [2] * 16
+    picks = drive(t, 100, busy)  # it comes back: the kept count's own timings show it
+    assert picks[-50:].count(2) <= 1
+
+
+def test_split_osmosis_conserves_water_without_loss(small):
+    """No evaporation, water across the thickness: the two-half solve conserves the total to
+    round-off over 300 steps and evens out the concentration, as the serial one does."""
+    p = ParamSet({"osmosis.solver": "halves", "osmosis.evaporation_top": 0.0, "osmosis.evaporation_bottom": 0.0,
+                  "osmosis.diffusion": 1e-2, "osmosis.through_thickness": True})
+    osm = Osmosis(small)
+    osm.configure(p)
+    assert osm.split
+    st = small.state()
+    st.particle_water[:] *= np.random.default_rng(0).uniform(0.2, 1.8, small.particle_count)
+    tot0, c0 = st.particle_water.sum(), (st.particle_water / osm.M).std()
+    for _ in range(300):
+        osm.apply(st)
+        assert st.particle_water.min() >= 0.0
+    assert st.particle_water.sum() == pytest.approx(tot0, rel=1e-12)
+    assert (st.particle_water / osm.M).std() < 0.5 * c0

@@ -1,9 +1,10 @@
-"""Osmosis kernels: conservative symmetric water flux (SPEC §6), CSR matvec and PCG."""
+"""Osmosis kernels: conservative symmetric water flux (SPEC §6), CSR matvec and PCG, and the
+factored direct step, serial or in two halves on two threads."""
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from leafsim.sim.kernels import FASTMATH
 
@@ -134,6 +135,74 @@ def direct_step(M, w, w0, rate, dt, Lp, Li, Lx, Up, Ui, Ux, Ud, perm_r, perm_c, 
         y[i] = s / Ud[i]
     for i in range(n):  # x = Pc v; round-off guard (M-matrix: exact solution ≥ 0)
         c = y[perm_c[i]]
+        if c < 0.0:
+            c = 0.0
+        w[i] = c * M[i]
+
+
+@njit(nogil=True, fastmath=False)
+def _forward_part(y, Lp, Li, Lx, r0, r1, cut0, cut1, acc):
+    """L's rows r0..r1 of one half (they read only that half's columns), then that half's share
+    of every separator row's sum: Σ L[r, k] y[k] over the half's columns, into ``acc``."""
+    for i in range(r0, r1):
+        s = y[i]
+        for k in range(Lp[i], Lp[i + 1]):
+            s -= Lx[k] * y[Li[k]]
+        y[i] = s
+    for r in range(acc.shape[0]):
+        s = 0.0
+        for k in range(cut0[r], cut1[r]):
+            s += Lx[k] * y[Li[k]]
+        acc[r] = s
+
+
+@njit(nogil=True, fastmath=False)
+def _backward_rows(y, Up, Ui, Ux, Ud, r0, r1):
+    """U's rows r1−1 down to r0 (unit-free: divided by U's diagonal ``Ud``)."""
+    for i in range(r1 - 1, r0 - 1, -1):
+        s = y[i]
+        for k in range(Up[i], Up[i + 1]):
+            s -= Ux[k] * y[Ui[k]]
+        y[i] = s / Ud[i]
+
+
+@njit(cache=True, nogil=True, parallel=True, fastmath=False)
+def direct_step_split(M, w, w0, rate, dt, Lp, Li, Lx, Up, Ui, Ux, Ud, perm, bounds, cuts, y, rhs, loss, acc):
+    """:func:`direct_step` on a matrix ordered by one level of nested dissection: two halves
+    [0, b₁) and [b₁, b₂) with no entry between them, then their separator [b₂, n).  Forward,
+    each half's rows and its share of the separator rows' sums run on their own thread, then
+    the separator's rows; backward, the separator's rows, then each half on its own thread.
+    ``perm`` maps a particle to its row (rows and columns alike); ``cuts`` (3, n − b₂) are the
+    separator rows' first entry in the first half's, the second half's and the separator's
+    columns; ``acc`` (2, n − b₂) is scratch.  With one numba thread the halves run in turn."""
+    n = M.shape[0]
+    b1 = bounds[1]
+    b2 = bounds[2]
+    for i in range(n):
+        wi = w[i]
+        l = _loss(wi, rate[i], dt, w0[i])
+        loss[i] = l
+        rhs[i] = wi - l
+        y[perm[i]] = wi - l
+    for p in prange(2):
+        if p == 0:
+            _forward_part(y, Lp, Li, Lx, 0, b1, cuts[0], cuts[1], acc[0])
+        else:
+            _forward_part(y, Lp, Li, Lx, b1, b2, cuts[1], cuts[2], acc[1])
+    for i in range(b2, n):
+        r = i - b2
+        s = y[i] - acc[0, r] - acc[1, r]
+        for k in range(cuts[2, r], Lp[i + 1]):
+            s -= Lx[k] * y[Li[k]]
+        y[i] = s
+    _backward_rows(y, Up, Ui, Ux, Ud, b2, n)
+    for p in prange(2):
+        if p == 0:
+            _backward_rows(y, Up, Ui, Ux, Ud, 0, b1)
+        else:
+            _backward_rows(y, Up, Ui, Ux, Ud, b1, b2)
+    for i in range(n):
+        c = y[perm[i]]
         if c < 0.0:
             c = 0.0
         w[i] = c * M[i]
