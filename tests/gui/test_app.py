@@ -649,3 +649,33 @@ def test_random_sliders_rebuilds_and_species_switches_while_playing():
     assert seen["errors"] == [] and seen["nan_unreported"] == 0
     assert seen["frames"] > 0 and seen["sim_advanced"] and seen["finite"] and seen["rendered"]
 
+
+
+def test_the_heat_maps_colour_bar_sits_on_a_card():
+    """The heat map's colour bar, ticks and label are drawn on a light card: where a wide leaf
+    reached under them (maple's right lobe, zoomed in) the numbers were unreadable."""
+    from imgui_bundle import hello_imgui
+
+    from leafsim.gui.panels.view import LEGEND_CARD
+
+    seen = {}
+
+    def body(ctx, app):
+        s = app.session
+        wait_until(ctx, lambda: s.ready and app.renderer is not None and app.renderer.mesh is not None, 600)
+        app.view = "water"
+        app.camera.zoom(8.0)  # the leaf fills the view and runs under the bar
+        ctx.yield_(4)
+        seen["rect"] = app.leaf_rect_px
+
+    run_gui(body, species="maple")
+    img = np.asarray(hello_imgui.final_app_window_screenshot())[:, :, :3].astype(float)
+    x0, y0, w, h = (int(round(v)) for v in seen["rect"])
+    x, y, height = x0 + w - 70, y0 + 44, h * 0.33
+    card = img[int(y + 0.25 * height):int(y + 0.75 * height), x - 8:x - 2].reshape(-1, 3)  # left of the bar
+    under = img[int(y + height + 40):int(y + height + 60), x - 8:x - 2].reshape(-1, 3)  # just below the card
+    ground = img[y0 + h - 40, x0 + w - 12]  # the view's lower right corner: no leaf there
+    assert (np.abs(under - ground).max(axis=1) > 30).mean() > 0.5  # the leaf reaches the card
+    a, c = LEGEND_CARD[3], 255.0 * np.array(LEGEND_CARD[:3])
+    # whatever lies under it, the card's pixels are within (1 − alpha) of its colour
+    assert np.abs(card - c).max() <= (1 - a) * 255 + 2, card.mean(axis=0)

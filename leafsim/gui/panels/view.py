@@ -15,6 +15,10 @@ from leafsim.gui.photo import overlay_grid
 from leafsim.sim.environment import clock_text
 
 
+#: the heat map's colour bar sits on this card (RGBA)
+LEGEND_CARD = (0.97, 0.97, 0.95, 0.82)
+
+
 class ViewOverlay:
     def __init__(self, app):
         self.app = app
@@ -40,6 +44,11 @@ class ViewOverlay:
         label, unit, k = HEAT_UNITS[app.view]
         opts = app.render_options()
         lo, hi = app.renderer.scalar_range(opts)
+        tw = imgui.calc_text_size(label).x
+        # a light card behind the bar, its ticks and its label: they stay legible where the leaf
+        # reaches under them (a wide leaf's lobe ran under the bar, its numbers unreadable)
+        dl.add_rect_filled((min(x - 10, x + 54 - tw), y - 42), (x + 66, y + height + 28),
+                           imgui.get_color_u32(LEGEND_CARD), 6.0)
         n = 32
         for i in range(n):  # top = high
             c0 = colormap(opts.colormap, 1.0 - i / n)
@@ -55,7 +64,6 @@ class ViewOverlay:
             ty = y + height * (1.0 - t)
             dl.add_line((x + 18, ty), (x + 23, ty), ink)
             dl.add_text((x + 26, ty - 7), ink, f"{v:.3g}")
-        tw = imgui.calc_text_size(label).x
         dl.add_text((x + 60 - tw, y - 36), ink, label)
         dl.add_text((x, y - 20), ink, f"[{unit}]")
         if not opts.scalar_range:
