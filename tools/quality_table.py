@@ -1,10 +1,14 @@
-"""Write configs/quality.json (the measured error and cost of each `--quality` level) from an
-accuracy study's report whose rows include every level's settings.
+"""Write configs/quality.json (the measured error and cost of each `--quality` level) from the
+limit studies of maple, oak and grapevine (`leafsim accuracy --limit`, docs/accuracy/limit_*/limit.json).
 
-    .venv/bin/python tools/quality_table.py [docs/accuracy/maple_default/accuracy.json]
+    .venv/bin/python tools/quality_table.py [--check]
 
-A level is matched to the study row whose overrides give the same values of every quality
-key (within 1 %: the study's reference mesh is the default spacing × 0.71); a level the study did not run is left out (shown as "not measured").
+Each study dried the leaf at the defaults ("default", the level the declared defaults are) and at
+`--quality balanced` and `--quality draft` to the protocol's end, and scored each against the
+converged limit of three static meshes.  Per level and species the file keeps the worst relative
+error over the study's measures, the CPU seconds per dried leaf and the particles.  A level a
+study did not run is left out ("not measured").  ``--check`` compares instead of writing (exit 1
+when configs/quality.json is not what the studies give).
 """
 
 from __future__ import annotations
@@ -15,38 +19,38 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
-from leafsim.config.params import ParamSet
-from leafsim.config.presets import QUALITY, QUALITY_FILE, QUALITY_KEYS
+from leafsim.config.params import ParamSet  # noqa: E402
+from leafsim.config.presets import QUALITY, QUALITY_FILE, QUALITY_SPECIES, quality_of  # noqa: E402
 
-KEEP = ("particles", "ms_frame", "ms_per_sim_s", "worst_rel", "position_rel", "height_rel", "margin_lift_rel",
-        "area_3d_rel", "area_top_rel", "water_rel", "time_to_dry_rel")
+KEEP = ("worst_rel", "cpu_s", "particles", "position_rel", "height_rel", "margin_lift_rel", "water_rel")
 
 
-def _same(a, b) -> bool:
-    """Equal settings: numbers within 1 % (the study's 0.01988 is the level's 0.0199), others exactly
-    (``dynamics.path``)."""
-    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
-        return abs(a - b) <= 0.01 * abs(b)
-    return a == b
+def build() -> dict:
+    default = quality_of(ParamSet())
+    out = {"_about": "Measured by the limit studies docs/accuracy/limit_{" + ",".join(QUALITY_SPECIES) + "}/limit.json "
+                     "(leafsim accuracy --limit): per level and species the worst relative error against the converged "
+                     "limit, the CPU seconds per dried leaf (a shared 2-core machine) and the particles; docs/accuracy.md. "
+                     "Written by tools/quality_table.py."}
+    for species in QUALITY_SPECIES:
+        rep = json.loads((ROOT / "docs" / "accuracy" / f"limit_{species}" / "limit.json").read_text())
+        rows = {r["name"]: r for r in rep["rows"]}
+        for level in QUALITY:
+            r = rows.get("default" if level == default else f"quality {level}")
+            if r is not None:
+                out.setdefault(level, {})[species] = {k: r[k] for k in KEEP} | {"study_row": r["name"]}
+    return out
 
 
 def main():
-    src = Path(sys.argv[1] if len(sys.argv) > 1 else ROOT / "docs" / "accuracy" / "maple_default" / "accuracy.json").resolve()
-    rep = json.loads(src.read_text())
-    rows = [rep["reference"]] + rep["rows"]
-    out = {"_about": f"Measured by the accuracy study in {src.relative_to(ROOT)} ({rep['species']}, seed {rep['seed']}) "
-                     "against its reference; docs/accuracy.md. Relative errors; cost in ms per frame and per simulated "
-                     "second on a shared 2-core machine."}
-    for level, settings in QUALITY.items():
-        for r in rows:
-            p = ParamSet(r["overrides"])
-            if all(_same(p[k], settings[k]) for k in QUALITY_KEYS):
-                out[level] = {k: r.get(k, 0.0) for k in KEEP}
-                out[level]["study_row"] = r["name"]
-                break
+    out = build()
+    text = json.dumps(out, indent=1) + "\n"
     path = ROOT / "configs" / QUALITY_FILE
-    path.write_text(json.dumps(out, indent=1) + "\n")
-    print(json.dumps(out, indent=1))
+    if "--check" in sys.argv[1:]:
+        same = path.is_file() and path.read_text() == text
+        print("configs/quality.json is " + ("what the studies give" if same else "stale: run tools/quality_table.py"))
+        sys.exit(0 if same else 1)
+    path.write_text(text)
+    print(text, end="")
 
 
 if __name__ == "__main__":

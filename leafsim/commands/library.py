@@ -7,7 +7,7 @@ import json
 from leafsim.base.errors import LeafsimError
 from leafsim.commands.common import emit
 from leafsim.config.params import PARAMS, ParamSet, markdown_table
-from leafsim.config.presets import quality_of, quality_table
+from leafsim.config.presets import quality_lines, quality_of, quality_table
 from leafsim.config.species import load_library
 
 
@@ -17,11 +17,6 @@ def cmd_species(args):
     for r in rows:
         lines.append(f"{r['key']:16s} {r['name']:32s} {r['length_m']:6.3f}m  {r['photo'] or '(drawn outline)'}")
     emit(args, {"species": rows}, "\n".join(lines))
-
-
-def _quality_measured(m: dict) -> str:
-    return (f"worst error {100 * m['worst_rel']:.0f} % of the reference, {m['ms_per_sim_s']:.0f} ms per simulated second "
-            f"({m['particles']} particles, maple)")
 
 
 def cmd_params(args):
@@ -34,7 +29,7 @@ def cmd_params(args):
              "group": p.group, "rebuild": p.rebuild, "choices": list(p.choices), "help": p.help} for p in PARAMS.values()]
     text = "\n".join(f"{r['name']:36s} {str(r['default']):>10s} {r['unit']:10s} {'rebuild' if r['rebuild'] else 'live':7s} {r['help']}" for r in rows)
     quality, default = quality_table(), quality_of(ParamSet())
-    text += "\n\n--quality (measured by the accuracy study, docs/accuracy.md; the defaults are " + f"{default}):\n" + "\n".join(
-        f"  {k:10s} {json.dumps(v['settings']):60s} " + (_quality_measured(v["measured"]) if v["measured"] else "not measured")
-        for k, v in quality.items())
+    text += ("\n\n--quality (measured against each species' converged limit, docs/accuracy.md; the defaults are "
+             f"{default}):\n" + "\n".join(f"  {k:10s} {json.dumps(v['settings'])}" for k, v in quality.items())
+             + "\n" + "\n".join(f"  {line}" for line in quality_lines(quality, default)))
     emit(args, {"params": rows, "quality": quality}, text)

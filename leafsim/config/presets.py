@@ -27,18 +27,14 @@ THESIS_PRESET = {
 
 PRESETS = {"thesis": THESIS_PRESET}
 
-#: quality levels: points of the accuracy study's Pareto front (docs/accuracy.md).  "fine" is the
-#: declared defaults, chosen as the fastest point within 10 % of a reference one √2 refinement
-#: finer on every metric for maple, grapevine and oak (mesh 0.0199 L, 40 substeps with the inertia
-#: scaled × 64, dynamics.mass_scaling); re-measured on the model with stalks and traced veins it is
-#: 9 % (maple), 5 % (oak, with its own shrinkage and static finish) and 21 % (grapevine, a mesh dependence:
-#: docs/accuracy.md).  "balanced"
-#: is the previous default, a √2 coarser mesh (20 substeps from the scaling), ≈ 3.5× cheaper at
-#: ≈ 18 % worst; "draft" takes a quarter of balanced's substeps with the inertia × 256 (the same
-#: n √M).  The measured error and cost of each are in configs/quality.json, written by
-#: tools/quality_table.py from one study (docs/accuracy/maple_default).  "fine" dries most of the
-#: water with its mechanics on the draft mesh (dynamics.path, leafsim.sim.path): as close to the
-#: reference as the direct run for 2.5–3.3× less CPU (docs/performance.md).
+#: quality levels.  "fine" is the declared defaults: mesh 0.0199 L, 40 substeps with the inertia
+#: scaled × 64 (dynamics.mass_scaling), most of the water dried with its mechanics on the draft
+#: mesh (dynamics.path, leafsim.sim.path).  "balanced", the default before it, is a √2 coarser
+#: mesh on its own (20 substeps from the scaling); "draft" takes a quarter of its substeps with the
+#: inertia × 256 (the same n √M).  Their error against the converged limit and their CPU per dried
+#: leaf, measured on maple, oak and grapevine, are in configs/quality.json (tools/quality_table.py,
+#: from docs/accuracy/limit_*): fine is 9–13 % from the limit at worst; balanced costs more than
+#: draft for no less error on maple and oak (docs/accuracy.md).
 _QUALITY_CHANGES = {
     "draft": {"mesh.spacing": 0.028, "dynamics.substeps": 10, "dynamics.mass_scaling": 256.0, "dynamics.path": "own"},
     "balanced": {"mesh.spacing": 0.028, "dynamics.path": "own"},
@@ -50,6 +46,8 @@ _QUALITY_CHANGES = {
 QUALITY_KEYS = ("mesh.spacing", "dynamics.path", "dynamics.substeps", "dynamics.iterations", "dynamics.tolerance", "dynamics.dt",
                 "dynamics.mass_scaling", "osmosis.every")
 QUALITY_FILE = "quality.json"
+#: the species whose limit studies measured the levels (configs/quality.json)
+QUALITY_SPECIES = ("maple", "oak", "grapevine")
 
 
 def _levels() -> dict:
@@ -79,8 +77,10 @@ def quality_of(params) -> str | None:
 
 
 def quality_table(config_dir=None) -> dict:
-    """Each quality level's settings with its measured error and cost (from configs/quality.json;
-    ``measured`` is None for a level the study has not measured)."""
+    """Each quality level's settings with its measured error and cost (from configs/quality.json:
+    ``measured`` maps a species to its worst relative error against the converged limit
+    ``worst_rel``, CPU seconds per dried leaf ``cpu_s`` and ``particles``; None for a level no
+    study has measured)."""
     import json
     from pathlib import Path
 
@@ -89,3 +89,32 @@ def quality_table(config_dir=None) -> dict:
     path = Path(config_dir or data_dir("configs")) / QUALITY_FILE
     measured = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
     return {k: {"settings": v, "measured": measured.get(k)} for k, v in QUALITY.items()}
+
+
+def quality_lines(table: dict, default: str | None) -> list[str]:
+    """One line per level of :func:`quality_table` for a tooltip or a terminal: its error from the
+    converged limit and CPU per dried leaf on each measured species, and where another level is
+    as accurate for no more CPU (on maple and oak, draft is for balanced)."""
+    lines = []
+    for level, v in table.items():
+        m = v["measured"]
+        name = f"{level} (default)" if level == default else level
+        if not m:
+            lines.append(f"{name}: not measured")
+            continue
+        sp = [s for s in QUALITY_SPECIES if s in m]
+        err = " / ".join(f"{100 * m[s]['worst_rel']:.0f}" for s in sp)
+        cpu = " / ".join(f"{m[s]['cpu_s']:.0f}" for s in sp)
+        line = f"{name}: {err} % from the converged limit at worst, {cpu} CPU s per dried leaf ({' / '.join(sp)})"
+        beaten = {}
+        for s in sp:
+            a = m[s]
+            for other, w in table.items():
+                b = (w["measured"] or {}).get(s)
+                if other != level and b and b["cpu_s"] <= a["cpu_s"] and b["worst_rel"] <= a["worst_rel"] and (
+                        b["cpu_s"] < a["cpu_s"] or b["worst_rel"] < a["worst_rel"]):
+                    beaten.setdefault(other, []).append(s)
+        for other, where in beaten.items():
+            line += f"; {other} is as accurate for less CPU on {' and '.join(where)}"
+        lines.append(line)
+    return lines

@@ -88,6 +88,38 @@ def test_quality_levels_set_every_quality_key_and_are_recognised():
         assert quality_of(ParamSet(o)) == name
     assert quality_of(ParamSet({"dynamics.substeps": 7})) is None
     t = quality_table()
-    assert set(t) == set(QUALITY) and all(v["measured"] is None or v["measured"]["ms_per_sim_s"] > 0 for v in t.values())
+    assert set(t) == set(QUALITY)
+    for v in t.values():  # per measured species: the error from the limit and the CPU per dried leaf
+        for m in (v["measured"] or {}).values():
+            assert m["cpu_s"] > 0 and 0 <= m["worst_rel"] < 10 and m["particles"] > 0
     with pytest.raises(LeafsimError, match="expected one of draft"):
         quality_overrides("best")
+
+
+def test_quality_file_is_what_the_limit_studies_give():
+    """configs/quality.json is tools/quality_table.py's digest of the shipped limit studies (the
+    GUI's quality tooltip and `leafsim params` quote it; it had gone stale)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    r = subprocess.run([sys.executable, str(root / "tools" / "quality_table.py"), "--check"], cwd=root,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_quality_lines_name_a_level_another_one_beats():
+    """A level that costs more CPU for no less error than another, on a species, says so."""
+    from leafsim.config.presets import quality_lines
+
+    m = lambda e, c: {"worst_rel": e, "cpu_s": c, "particles": 1}  # noqa: E731
+    table = {"draft": {"measured": {"maple": m(0.30, 16), "oak": m(0.12, 4)}},
+             "balanced": {"measured": {"maple": m(0.34, 50), "oak": m(0.10, 12)}},
+             "fine": {"measured": {"maple": m(0.13, 77), "oak": m(0.09, 10)}},
+             "reference": {"measured": None}}
+    lines = quality_lines(table, "fine")
+    assert lines[0].startswith("draft: 30 / 12 % from the converged limit") and "as accurate" not in lines[0]
+    assert lines[1].endswith("; draft is as accurate for less CPU on maple; fine is as accurate for less CPU on oak")
+    assert lines[2].startswith("fine (default): 13 / 9 %") and "as accurate" not in lines[2]
+    assert lines[3] == "reference: not measured"

@@ -10,7 +10,7 @@ from imgui_bundle import imgui
 
 from leafsim.base.errors import LeafsimError
 from leafsim.config.params import ParamSet
-from leafsim.config.presets import quality_of, quality_table
+from leafsim.config.presets import quality_lines, quality_of, quality_table
 from leafsim.gui.layout import ALBEDOS, COMPARES, SCALES, VIEWS, tip
 from leafsim.gui.status import printable
 from leafsim.gui.widgets import params_panel
@@ -111,12 +111,9 @@ class ControlsPanel:
         ch, i = imgui.combo("quality", names.index(now), names)
         if ch and names[i] != "custom":
             app.guard(app.set_params, table[names[i]]["settings"], topic="quality")
-        lines = []
-        for k, v in table.items():
-            m = v["measured"]
-            lines.append(f"{k}{' (default)' if k == quality_of(ParamSet()) else ''}: " + (f"worst error {100 * m['worst_rel']:.0f} % of the reference, "
-                                     f"{m['ms_per_sim_s']:.0f} ms per simulated second" if m else "not measured"))
-        tip("Mesh and solver settings from the accuracy study (docs/accuracy.md); measured on maple:\n" + "\n".join(lines))
+        lines = quality_lines(table, quality_of(ParamSet()))
+        tip("Mesh and solver settings, measured against each species' converged limit (docs/accuracy.md):\n"
+            + "\n".join(lines))
 
     def playback_rows(self) -> None:
         app = self.app
