@@ -181,3 +181,29 @@ def test_split_osmosis_conserves_water_without_loss(small):
         assert st.particle_water.min() >= 0.0
     assert st.particle_water.sum() == pytest.approx(tot0, rel=1e-12)
     assert (st.particle_water / osm.M).std() < 0.5 * c0
+
+
+def test_split_osmosis_falls_back_where_no_cut_pays(tiny, small):
+    """A leaf too small to cut (the tiny blade's separators are over 5 % of its unknowns) gets
+    the plain factored solve; a leaf flat along x (every particle at one x) is cut along y
+    instead of giving up (the x cut put everything on one side)."""
+    from leafsim.sim.effects.osmosis import _dissection
+
+    osm = Osmosis(tiny)
+    osm.configure(ParamSet({"osmosis.solver": "halves"}))
+    assert not osm.split and len(osm.factors) == 9  # the serial factors
+    st = _dried(tiny)
+    w = st.particle_water.copy()
+    osm.apply(st)
+    c = spla.spsolve(osm.A.tocsc(), w - osm.loss)
+    np.testing.assert_allclose(st.particle_water, np.maximum(c, 0.0) * osm.M, rtol=1e-10, atol=1e-18)
+    ref = Osmosis(small)
+    ref.configure(ParamSet())
+    xyz = small.particle_rest.copy()
+    xyz[:, 0] = 0.0
+    cut = _dissection(ref.A, xyz)
+    assert cut is not None
+    order, bounds = cut
+    assert np.array_equal(np.sort(order), np.arange(small.particle_count))
+    y_first = xyz[order[:bounds[1]], 1].max()
+    assert (xyz[order[bounds[1]:bounds[2]], 1] > y_first).all()  # the halves lie on either side along y
