@@ -113,13 +113,12 @@ def _csr_factors(A: sp.csr_matrix, order: np.ndarray | None = None) -> tuple:
     return Lp, Li, Lx, Up, Ui, Ux, Ud, *perm
 
 
-def _split_factors(A: sp.csr_matrix, xyz: np.ndarray) -> tuple | None:
-    """The factors of :func:`_csr_factors` in the order of :func:`_dissection`, with what the
+def _split_factors(A: sp.csr_matrix, cut: tuple[np.ndarray, np.ndarray] | None) -> tuple | None:
+    """The factors of :func:`_csr_factors` in the order ``cut`` of :func:`_dissection`, with what the
     two-thread solve (:func:`.kernels.osmosis.direct_step_split`) needs: (Lp, Li, Lx, Up, Ui,
     Ux, Ud, perm, bounds, cuts).  None when the cut is lopsided, or when SuperLU moved a row
     or the factors couple the two halves (neither happens with diagonal pivots on an SPD
     matrix; checked, not assumed)."""
-    cut = _dissection(A, xyz)
     if cut is None:
         return None
     order, bounds = cut
@@ -240,6 +239,7 @@ class Osmosis:
         self.K_link = self._conductance(model, model.spring_layer == 2)
         self.key = None
         self.split = False
+        self._cuts = {}  # osmosis.through_thickness -> _dissection's cut (or None)
         self.threads = _Threads()
         self.loss = np.zeros(n)
         self.rhs = np.zeros(n)
@@ -301,7 +301,9 @@ class Osmosis:
             self.diag = A.diagonal().copy()
             self.factors, self.split = None, False
             if solver == "halves":  # falls back to the serial factor when the cut is lopsided
-                self.factors = _split_factors(A, self.model.particle_rest)
+                if through not in self._cuts:  # the cut depends on the pattern only: a new Δt or D keeps it
+                    self._cuts[through] = _dissection(A, self.model.particle_rest)
+                self.factors = _split_factors(A, self._cuts[through])
                 self.split = self.factors is not None
                 if self.split:
                     self.acc = np.zeros((2, A.shape[0] - int(self.factors[8][2])))
