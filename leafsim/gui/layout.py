@@ -35,9 +35,14 @@ def fixed_flags():
 
 
 def tip(text: str) -> None:
-    """A tooltip for the last item (a path in it may hold bytes that are not UTF-8)."""
+    """A tooltip for the last item (a path in it may hold bytes that are not UTF-8), wrapped at
+    46 ems (the quality levels' lines ran past a 1280-pixel window)."""
     if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
-        imgui.set_tooltip(printable(text))
+        imgui.begin_tooltip()
+        imgui.push_text_wrap_pos(imgui.get_font_size() * 46.0)
+        imgui.text_unformatted(printable(text))
+        imgui.pop_text_wrap_pos()
+        imgui.end_tooltip()
 
 
 def window_rects():

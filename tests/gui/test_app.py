@@ -679,3 +679,25 @@ def test_the_heat_maps_colour_bar_sits_on_a_card():
     a, c = LEGEND_CARD[3], 255.0 * np.array(LEGEND_CARD[:3])
     # whatever lies under it, the card's pixels are within (1 − alpha) of its colour
     assert np.abs(card - c).max() <= (1 - a) * 255 + 2, card.mean(axis=0)
+
+
+def test_the_quality_tooltip_is_wrapped_inside_the_window():
+    """The quality levels' tooltip (four long lines: each level's error and CPU on three
+    species) is wrapped: unwrapped it was 1274 px wide, the whole 1280 px window."""
+    from imgui_bundle import imgui
+
+    seen = {}
+
+    def body(ctx, app):
+        wait_until(ctx, lambda: app.session.ready, 600)
+        ctx.mouse_move_to_pos((100, 89))  # the quality combo
+        ctx.yield_(5)
+        ctx.sleep(1.5)  # the hover delay
+        ctx.yield_(3)
+        w = imgui.internal.find_window_by_name("##Tooltip_00")
+        seen.update(found=w is not None and w.was_active, width=w.size.x if w else 0,
+                    font=imgui.get_font_size(), display=imgui.get_io().display_size.x)
+
+    run_gui(body, species="maple")
+    assert seen["found"], "no tooltip over the quality combo"
+    assert seen["width"] <= 48 * seen["font"] and seen["width"] < 0.6 * seen["display"], seen
