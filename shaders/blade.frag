@@ -8,11 +8,15 @@ in vec3 v_tint;     // albedo multiplier
 in vec4 v_chroma;   // detail albedo: young chromaticity at the vertex, living weight
 in vec2 v_uv;
 in float v_scalar;
+in vec4 v_depth;    // sub-grid mottle: optical depth per band, surface reflectance
+in vec3 v_mottle;   // the depth's change per unit of the mottle field
+in vec2 v_rest;     // where the vertex samples the mottle field (metres)
 
 // Compile-time switches (the renderer builds one program per combination; a software
 // rasteriser runs both sides of a branch on a uniform, so switches must not be uniforms):
 // LS_MODE 0 colours, 1 texture, 2 detail, 3 heat map; LS_CMAP 0 turbo, 1 viridis;
-// LS_SHADOW 1 = self-shadowing from the shadow map; LS_CUTOUT 1 = discard outside the photo mask.
+// LS_SHADOW 1 = self-shadowing from the shadow map; LS_CUTOUT 1 = discard outside the photo mask;
+// LS_MOTTLE 1 = the sub-grid mottle (colour.mottle).
 #ifndef LS_MODE
 #define LS_MODE 0
 #endif
@@ -25,6 +29,9 @@ in float v_scalar;
 #ifndef LS_CUTOUT
 #define LS_CUTOUT 0
 #endif
+#ifndef LS_MOTTLE
+#define LS_MOTTLE 0
+#endif
 uniform vec2 u_range;
 uniform sampler2D u_tex;       // sRGB photo (decoded by the sampler)
 uniform vec3 u_tex_mean;       // mean linear colour of the photo's leaf area
@@ -36,6 +43,10 @@ uniform vec3 u_sky_col;
 uniform float u_translucency;
 uniform float u_specular;
 uniform float u_shininess;
+
+uniform sampler2D u_noise;      // the mottle field: uniform on [-1, 1], mean 0, periodic
+uniform float u_mottle_scale;   // its texture coordinates per metre
+uniform vec3 u_base;            // reflectance of pigment-free tissue (linear)
 
 uniform sampler2DShadow u_shadow;
 uniform mat4 u_light_mat;
@@ -68,6 +79,15 @@ void main() {
     vec3 albedo = photo_detail(v_col * v_tint, texture(u_tex, v_uv).rgb, u_tex_mean, v_chroma);
 #else
     vec3 albedo = v_col * v_tint;
+#endif
+#if LS_MOTTLE
+    // Beer-Lambert at this point over the mesh's interpolated pigments: the depths are linear in
+    // the pigment amounts, so the vertex values interpolate exactly; n moves every reaction on
+    float n = texture(u_noise, v_rest * u_mottle_scale).r;
+    vec3 x = max(v_depth.rgb, vec3(0.0));
+    vec3 here = v_depth.a + u_base * exp(-max(x + n * v_mottle, vec3(0.0)));
+    vec3 mean = v_depth.a + u_base * exp(-x);
+    albedo *= here / max(mean, vec3(1e-4));
 #endif
 #if LS_SHADOW
     float sh = shadow_pcf4(u_shadow, u_light_mat, v_pos + L * u_shadow_offset, 1.5);

@@ -6,6 +6,9 @@ in vec3 in_tint;
 in vec4 in_chroma;
 in vec2 in_uv;
 in float in_scalar;
+in vec4 in_depth;
+in vec3 in_mottle;
+in vec2 in_rest;
 
 uniform mat4 u_viewproj;
 
@@ -16,6 +19,9 @@ out vec3 v_tint;
 out vec4 v_chroma;
 out vec2 v_uv;
 out float v_scalar;
+out vec4 v_depth;
+out vec3 v_mottle;
+out vec2 v_rest;
 
 void main() {
     v_pos = in_pos;
@@ -25,5 +31,8 @@ void main() {
     v_chroma = in_chroma;
     v_uv = in_uv;
     v_scalar = in_scalar;
+    v_depth = in_depth;
+    v_mottle = in_mottle;
+    v_rest = in_rest;
     gl_Position = u_viewproj * vec4(in_pos, 1.0);
 }

@@ -62,6 +62,14 @@ class RenderMesh:
         Second (top) layer particles, drawn by the "particles" debug view.
     scalars : dict str -> (n,) float32
         Per-vertex fields for heat-map views, e.g. ``"mass"``, ``"water"``.
+    mottle : (n, 7) float32 or None
+        The sub-grid mottle (``colour.mottle``): optical depth per RGB band, surface
+        reflectance, and the depth's change per unit of the mottle field
+        (:func:`leafsim.appearance.reflectance.mottle_depths`). None: no mottle.
+    mottle_rest : (n, 2) float32 or None
+        Where each vertex samples the mottle field (metres: rest position plus the leaf's offset).
+    mottle_size : float
+        The field's correlation length in metres; 0 = no mottle.
     """
 
     positions: np.ndarray
@@ -77,6 +85,9 @@ class RenderMesh:
     spring_kind: np.ndarray | None = None
     top_positions: np.ndarray | None = None
     scalars: dict = field(default_factory=dict)
+    mottle: np.ndarray | None = None
+    mottle_rest: np.ndarray | None = None
+    mottle_size: float = 0.0
 
     @property
     def vertex_count(self) -> int:
@@ -108,7 +119,12 @@ def validate_mesh(mesh) -> None:
     _check("tint", (3,))
     _check("chroma", (4,))
     _check("vein_colours", (3,))
-    for name in ("colours", "tint", "chroma", "vein_colours"):
+    _check("mottle", (7,))
+    _check("mottle_rest", (2,))
+    size = float(getattr(mesh, "mottle_size", 0.0) or 0.0)
+    if not (np.isfinite(size) and size >= 0.0):
+        raise LeafsimError(f"render mesh: mottle_size must be a finite length >= 0 m, got {size}")
+    for name in ("colours", "tint", "chroma", "vein_colours", "mottle", "mottle_rest"):
         a = getattr(mesh, name, None)
         if a is not None and not np.all(np.isfinite(np.asarray(a, dtype=np.float64))):
             raise LeafsimError(f"render mesh: {name} must be finite")

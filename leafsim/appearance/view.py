@@ -171,6 +171,28 @@ class LeafView:
         out[:, 3] = np.clip(np.asarray(pig.chlorophyll, np.float64)[T] / np.maximum(c0, 1e-6), 0.0, 1.0)
         return out
 
+    def mottle(self, state: State, params):
+        """(the renderer's sub-grid mottle data (nT, 7) float32, its correlation length in metres,
+        0 when ``colour.mottle`` is 0) or (None, 0.0) without pigments
+        (:func:`~leafsim.appearance.reflectance.mottle_depths`, with the photo's fitted pigment
+        contents where the young colour is the photo's, as :meth:`colours` has them)."""
+        from leafsim.appearance.reflectance import mottle_depths
+
+        pig = state.pigments
+        if pig is None:
+            return None, 0.0
+        contents = self.photo_contents(params) if (self.photo_colour and self.pigments0 is not None) else None
+        size = float(params["colour.mottle_size"]) if float(params["colour.mottle"]) > 0.0 else 0.0
+        return mottle_depths(pig, params, contents)[self.T], size
+
+    def mottle_rest(self, state: State) -> np.ndarray:
+        """(nT, 2) float32: where each vertex samples the mottle field, its rest position in
+        metres shifted by the leaf's own offset (from its pigment seed)."""
+        from leafsim.appearance.mottle import leaf_offset
+
+        seed = state.pigments.seed if state.pigments is not None else 0
+        return (self.model.particle_rest[self.T][:, :2] + leaf_offset(seed)).astype(np.float32)
+
     def scalar_fields(self, state: State) -> dict:
         """Per layer-T vertex heat-map fields: ``mass`` per area [kg/m²] now, ``water`` (now / initial) and
         the pigment fields (relative to the summer content)."""
@@ -195,6 +217,7 @@ class LeafView:
         kind_map[SPRING_LINK], kind_map[SPRING_VEIN] = R_LINK, R_VEIN
         colours, tint = self.colours(state, params)
         vein_colours = self.vein_colours(state, params, colours)
+        mottle, mottle_size = self.mottle(state, params)
         stalk = ~m.blade_particles
         veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()
                  if not (self.blade_only and stalk[idx].any())]
@@ -212,6 +235,9 @@ class LeafView:
             spring_kind=kind_map[m.spring_type],
             top_positions=state.particle_q[V].astype(np.float32),
             scalars=self.scalar_fields(state),
+            mottle=mottle,
+            mottle_rest=self.mottle_rest(state),
+            mottle_size=mottle_size,
         )
 
     def update(self, state: State, params) -> dict:
@@ -227,6 +253,9 @@ class LeafView:
         vein = self.vein_colours(state, params, colours)
         if vein is not None:
             out["vein_colours"] = vein
+        mottle, size = self.mottle(state, params)
+        if mottle is not None:
+            out["mottle"], out["mottle_size"] = mottle, size
         return out
 
 

@@ -13,6 +13,8 @@ import moderngl
 import numpy as np
 
 from leafsim.appearance.mesh import NO_CHROMA, validate_mesh
+from leafsim.appearance.mottle import mottle_field, mottle_scale
+from leafsim.appearance.reflectance import BASE_REFLECTANCE
 from leafsim.appearance.texture import clean_texture
 from leafsim.base.errors import LeafsimError
 from leafsim.base.resources import shader_dir as default_shader_dir
@@ -91,6 +93,7 @@ class Renderer:
         self._blur_vao = ctx.vertex_array(self.programs["blur"], [(self._ground_vbo, "2f", "in_xy")])
         self._mask = None  # ground shadow coverage: (texture, fbo) twice (blur ping-pong)
         self._white = ctx.texture((1, 1), 4, b"\xff\xff\xff\xff")
+        self._noise = None  # the sub-grid mottle field (made on first use)
         self._shadow_tex = None
         self._shadow_fbo = None
         self._objects: list = []
@@ -155,7 +158,7 @@ class Renderer:
             p.release()
         self._variants = {}
         for o in (*self._ground_vaos.values(), self._blur_vao, self._ground_vbo, self._white, self._shadow_fbo,
-                  self._shadow_tex, *(self._mask or ())):
+                  self._shadow_tex, self._noise, *(self._mask or ())):
             if o is not None:
                 o.release()
 
@@ -183,6 +186,11 @@ class Renderer:
         uv = np.zeros((n, 2), np.float32) if uv is None else np.ascontiguousarray(uv, dtype=np.float32)
         self.scalars = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in (getattr(mesh, "scalars", None) or {}).items()}
         self._scalar_name = None
+        mottle = getattr(mesh, "mottle", None)
+        self.mottle = np.zeros((n, 7), np.float32) if mottle is None else np.ascontiguousarray(mottle, dtype=np.float32).copy()
+        rest = getattr(mesh, "mottle_rest", None)
+        rest = np.zeros((n, 2), np.float32) if rest is None else np.ascontiguousarray(rest, dtype=np.float32)
+        self.mottle_size = float(getattr(mesh, "mottle_size", 0.0) or 0.0) if mottle is not None else 0.0
         top = getattr(mesh, "top_positions", None)
         self.top = None if top is None else np.ascontiguousarray(top, dtype=np.float32).copy()
         self.k = 0 if self.top is None else self.top.shape[0]
@@ -195,11 +203,15 @@ class Renderer:
         self.vbo_chroma = self._buf(self.chroma, dynamic=True)
         self.vbo_uv = self._buf(uv)
         self.vbo_scalar = self._buf(np.zeros(n, np.float32), dynamic=True)
+        self.vbo_depth = self._buf(np.ascontiguousarray(self.mottle[:, :4]), dynamic=True)
+        self.vbo_mottle = self._buf(np.ascontiguousarray(self.mottle[:, 4:]), dynamic=True)
+        self.vbo_rest = self._buf(rest)
         self.ibo_tri = self._buf(self.tri)
         self._specs["blade"] = ([
             (self.vbo_pos, "3f", "in_pos"), (self.vbo_nrm, "3f", "in_nrm"), (self.vbo_col, "3f", "in_col"),
             (self.vbo_tint, "3f", "in_tint"), (self.vbo_chroma, "4f", "in_chroma"), (self.vbo_uv, "2f", "in_uv"),
-            (self.vbo_scalar, "1f", "in_scalar")],
+            (self.vbo_scalar, "1f", "in_scalar"), (self.vbo_depth, "4f", "in_depth"), (self.vbo_mottle, "3f", "in_mottle"),
+            (self.vbo_rest, "2f", "in_rest")],
             self.ibo_tri)
         self.vao_shadow = self._vao("shadow", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_uv, "2f", "in_uv")],
                                     self.ibo_tri)
@@ -275,7 +287,7 @@ class Renderer:
 
     # --- per frame ------------------------------------------------------------------------
     def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None, chroma=None,
-               vein_colours=None) -> None:
+               vein_colours=None, mottle=None, mottle_size=None) -> None:
         """Write new per-frame data into the GL buffers.
 
         Parameters
@@ -296,6 +308,10 @@ class Renderer:
         vein_colours : (n, 3) float, optional
             Linear RGB albedo of the vein tissue per vertex (a mesh populated without them
             keeps drawing its veins in the blade's albedo).
+        mottle : (n, 7) float, optional
+            The sub-grid mottle's optical depths (:class:`~leafsim.appearance.mesh.RenderMesh`).
+        mottle_size : float, optional
+            The mottle field's correlation length in metres; 0 turns the mottle off.
         """
         if self.mesh is None:
             raise LeafsimError("renderer: update() before populate()")
@@ -308,6 +324,11 @@ class Renderer:
         c = None if chroma is None else np.asarray(chroma, dtype=np.float32)
         if c is not None and (c.shape != (self.n, 4) or not np.all(np.isfinite(c))):
             raise LeafsimError(f"renderer: chroma must be finite, ({self.n}, 4), got {c.shape}")
+        mt = None if mottle is None else np.asarray(mottle, dtype=np.float32)
+        if mt is not None and (mt.shape != (self.n, 7) or not np.all(np.isfinite(mt))):
+            raise LeafsimError(f"renderer: mottle must be finite, ({self.n}, 7), got {mt.shape}")
+        if mottle_size is not None and not (np.isfinite(mottle_size) and mottle_size >= 0.0):
+            raise LeafsimError(f"renderer: mottle_size must be a finite length >= 0 m, got {mottle_size}")
         self.pos[:] = pos
         vertex_normals(self.pos, self.tri, self.nrm)
         self.vbo_pos.write(self.pos)
@@ -326,6 +347,12 @@ class Renderer:
             self.chroma[:] = c
             self.vbo_chroma.write(self.chroma)
             recolour = True
+        if mt is not None:
+            self.mottle[:] = mt
+            self.vbo_depth.write(np.ascontiguousarray(self.mottle[:, :4]))
+            self.vbo_mottle.write(np.ascontiguousarray(self.mottle[:, 4:]))
+        if mottle_size is not None:
+            self.mottle_size = float(mottle_size)
         if vein_colours is not None and self.vein_col is not None:
             self.vein_col[:] = vein_colours
             recolour = True
@@ -573,9 +600,15 @@ class Renderer:
             mode, cmap = 3, 0 if opts.colormap == "turbo" else 1
         else:
             mode, cmap = self._albedo_mode(opts), 0
+        mottle = not heat and self.mottle_size > 0.0
         defs = dict(LS_MODE=mode, LS_CMAP=cmap, LS_SHADOW=int(self_shadow and not heat),
-                    LS_CUTOUT=int(bool(opts.texture_cutout) and mode == 1))
+                    LS_CUTOUT=int(bool(opts.texture_cutout) and mode == 1), LS_MOTTLE=int(mottle))
         b = self._variant("blade", **defs)
+        if mottle:
+            self._mottle_texture().use(location=3)
+            _set(b, "u_noise", 3)
+            _set(b, "u_mottle_scale", mottle_scale(self.mottle_size))
+            _set(b, "u_base", tuple(float(v) for v in BASE_REFLECTANCE))
         if heat:
             if self._scalar_name != opts.view:
                 self.vbo_scalar.write(self.scalars[opts.view])
@@ -590,6 +623,19 @@ class Renderer:
         _set(b, "u_light_mat", light_mat)
         _set(b, "u_shadow_offset", 12.0 * 2.3 * self.radius / opts.shadow_size)
         self._variant_vao("blade", **defs).render(moderngl.TRIANGLES)
+
+    def _mottle_texture(self):
+        """The periodic mottle field (:func:`leafsim.appearance.mottle.mottle_field`) as a
+        single-channel float texture, repeated and mipmapped (made once per renderer): a
+        minified leaf averages the flecks out instead of shimmering."""
+        if self._noise is None:
+            f = mottle_field()
+            t = self.ctx.texture((f.shape[1], f.shape[0]), 1, np.ascontiguousarray(f).tobytes(), dtype="f4")
+            t.build_mipmaps()
+            t.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            t.repeat_x = t.repeat_y = True
+            self._noise = t
+        return self._noise
 
     def scalar_range(self, opts) -> tuple[float, float]:
         """The (lo, hi) a heat map of ``opts.view`` is drawn with (what a colour bar must show):

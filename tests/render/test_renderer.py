@@ -669,3 +669,47 @@ def test_veins_stay_hidden_under_a_leaf_lying_on_them(off, leaf):
                                   vein_lines=[(i + n, w, o) for i, w, o in leaf.vein_lines])
         img = off.render_array(top, cam, opts).astype(int)
         assert ((img[..., 0] - img[..., 1]) - (bare[..., 0] - bare[..., 1]) > 30).sum() > 20
+
+
+def _mottled(mesh, chlorophyll: float, size: float = 0.003):
+    """``mesh`` coloured by pigments with ``chlorophyll`` left (half the way to browning) and the
+    sub-grid mottle's depths (colour.mottle at its default), sampled at the rest positions."""
+    from leafsim.appearance.reflectance import mottle_depths, pigments_to_rgb
+    from leafsim.config.params import ParamSet
+    from leafsim.sim.pigments import init_pigments
+
+    p = ParamSet()
+    pig = init_pigments(mesh.vertex_count, p, seed=0)
+    pig.chlorophyll[:] = chlorophyll
+    pig.browning[:] = 0.5 * (1.0 - chlorophyll)
+    return RenderMesh(**{**mesh.__dict__, "colours": pigments_to_rgb(pig, p), "mottle": mottle_depths(pig, p),
+                         "mottle_rest": np.asarray(mesh.positions[:, :2], np.float32), "mottle_size": size})
+
+
+def test_mottle_flecks_turning_tissue_only_and_moves_with_it(off, leaf):
+    """The sub-grid mottle (colour.mottle): a half-turned blade of one colour at every vertex is
+    drawn flecked (the pixels' spread), a fresh one exactly as without it, and the flecks are
+    fixed to the tissue: the leaf moved by 8 px draws the same flecks 8 px on."""
+    opts = RenderOptions(veins=False, shadows=False, ground=False)
+    cam = top_camera()
+    box = (slice(H // 2 - 40, H // 2 + 40), slice(W // 2 - 25, W // 2 + 25))  # inside the blade
+    fresh = _mottled(leaf, 1.0)
+    plain = RenderMesh(**{**fresh.__dict__, "mottle": None})
+    assert np.array_equal(off.render_array(fresh, cam, opts), off.render_array(plain, cam, opts))
+    half = _mottled(leaf, 0.4)
+    flecked = off.render_array(half, cam, opts)[box].astype(float)
+    smooth = off.render_array(RenderMesh(**{**half.__dict__, "mottle_size": 0.0}), cam, opts)[box].astype(float)
+    assert smooth.std(axis=(0, 1)).max() < 1.0  # one colour, evenly lit
+    red_green = flecked[..., 0] - flecked[..., 1]  # yellower flecks beside greener ones
+    assert red_green.std() > 6.0, red_green.std()
+    # the mean colour stays near the smooth one (the pigments keep their mean; the colour of
+    # the mean is not the mean colour, so not exactly)
+    assert np.abs(flecked.mean(axis=(0, 1)) - smooth.mean(axis=(0, 1))).max() < 12
+    px_per_m = H / (2 * cam.distance * math.tan(math.radians(cam.fov) / 2))
+    moved = RenderMesh(**{**half.__dict__, "positions": (half.positions + np.float32([8 / px_per_m, 0, 0])).astype(np.float32)})
+    shifted = off.render_array(moved, cam, opts)[box[0], slice(W // 2 - 17, W // 2 + 33)].astype(float)
+    assert np.abs(shifted - flecked).mean() < 0.15 * np.abs(flecked - flecked.mean(axis=(0, 1))).mean() + 1.0
+    with pytest.raises(LeafsimError, match="mottle"):
+        off.render_array({"positions": half.positions, "mottle": half.mottle[:, :4]}, cam, opts)
+    with pytest.raises(LeafsimError, match="mottle_size"):
+        off.render_array({"positions": half.positions, "mottle_size": -1.0}, cam, opts)
