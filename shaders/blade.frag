@@ -8,9 +8,10 @@ in vec3 v_tint;     // albedo multiplier
 in vec4 v_chroma;   // detail albedo: young chromaticity at the vertex, living weight
 in vec2 v_uv;
 in float v_scalar;
-in vec4 v_depth;    // sub-grid mottle: optical depth per band, surface reflectance
-in vec3 v_mottle;   // the depth's change per unit of the mottle field
-in vec2 v_rest;     // where the vertex samples the mottle field (metres)
+in vec4 v_conc;     // sub-grid mottle: pigment concentrations (common.glsl, mottle_ratio)
+in vec4 v_state;    // the reactions' states
+in vec2 v_extra;    // necrosis concentration, surface reflectance
+in vec2 v_rest;     // where the tissue samples the mottle field (rest position, metres)
 
 // Compile-time switches (the renderer builds one program per combination; a software
 // rasteriser runs both sides of a branch on a uniform, so switches must not be uniforms):
@@ -46,6 +47,8 @@ uniform float u_shininess;
 
 uniform sampler2D u_noise;      // the mottle field: uniform on [-1, 1], mean 0, periodic
 uniform float u_mottle_scale;   // its texture coordinates per metre
+uniform float u_mottle;         // colour.mottle a
+uniform vec3 u_absorb[5];       // absorption per pigment and band
 uniform vec3 u_base;            // reflectance of pigment-free tissue (linear)
 
 uniform sampler2DShadow u_shadow;
@@ -81,13 +84,9 @@ void main() {
     vec3 albedo = v_col * v_tint;
 #endif
 #if LS_MOTTLE
-    // Beer-Lambert at this point over the mesh's interpolated pigments: the depths are linear in
-    // the pigment amounts, so the vertex values interpolate exactly; n moves every reaction on
+    // the pigments interpolate linearly over the triangle; the field moves them on per pixel
     float n = texture(u_noise, v_rest * u_mottle_scale).r;
-    vec3 x = max(v_depth.rgb, vec3(0.0));
-    vec3 here = v_depth.a + u_base * exp(-max(x + n * v_mottle, vec3(0.0)));
-    vec3 mean = v_depth.a + u_base * exp(-x);
-    albedo *= here / max(mean, vec3(1e-4));
+    albedo *= mottle_ratio(v_conc, v_state, v_extra, n, u_mottle, u_absorb, u_base);
 #endif
 #if LS_SHADOW
     float sh = shadow_pcf4(u_shadow, u_light_mat, v_pos + L * u_shadow_offset, 1.5);

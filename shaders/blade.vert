@@ -6,8 +6,9 @@ in vec3 in_tint;
 in vec4 in_chroma;
 in vec2 in_uv;
 in float in_scalar;
-in vec4 in_depth;
-in vec3 in_mottle;
+in vec4 in_conc;
+in vec4 in_state;
+in vec2 in_extra;
 in vec2 in_rest;
 
 uniform mat4 u_viewproj;
@@ -19,8 +20,9 @@ out vec3 v_tint;
 out vec4 v_chroma;
 out vec2 v_uv;
 out float v_scalar;
-out vec4 v_depth;
-out vec3 v_mottle;
+out vec4 v_conc;
+out vec4 v_state;
+out vec2 v_extra;
 out vec2 v_rest;
 
 void main() {
@@ -31,8 +33,9 @@ void main() {
     v_chroma = in_chroma;
     v_uv = in_uv;
     v_scalar = in_scalar;
-    v_depth = in_depth;
-    v_mottle = in_mottle;
+    v_conc = in_conc;
+    v_state = in_state;
+    v_extra = in_extra;
     v_rest = in_rest;
     gl_Position = u_viewproj * vec4(in_pos, 1.0);
 }

@@ -24,6 +24,22 @@ vec3 photo_detail(vec3 base, vec3 t, vec3 tex_mean, vec4 chroma) {
     return f * c * (dot(b, W) / max(dot(c, W), 1e-6));
 }
 
+// The sub-grid mottle (colour.mottle; leafsim/appearance/reflectance.py, mottle_pigments):
+// at field value n every reaction's progress p goes to p + a n p (1 - p), so each pigment's
+// amount changes by a n (1 - state) c (chlorophyll and carotenoids are lost, browning and
+// necrosis made). conc = (c_chl, c_car, c_ant, c_brn), state = (C, K, B, N) in [0, 1],
+// extra = (c_nec, surface reflectance), all interpolated over the triangle as the pigments
+// are; k = the absorption per pigment and band, base = pigment-free tissue. Returns the
+// Beer-Lambert reflectance there over the one of the interpolated pigments (1 where n g = 0).
+vec3 mottle_ratio(vec4 conc, vec4 state, vec2 extra, float n, float a, vec3 k[5], vec3 base) {
+    vec3 x = max(conc.x * k[0] + conc.y * k[1] + conc.z * k[2] + conc.w * k[3] + extra.x * k[4], vec3(0.0));
+    vec3 g = a * (-(1.0 - state.x) * conc.x * k[0] - (1.0 - state.y) * conc.y * k[1]
+                  + (1.0 - state.z) * conc.w * k[3] + (1.0 - state.w) * extra.x * k[4]);
+    vec3 here = extra.y + base * exp(-max(x + n * g, vec3(0.0)));
+    vec3 mean = extra.y + base * exp(-x);
+    return here / max(mean, vec3(1e-4));
+}
+
 // Turbo colour map (polynomial fit by Ruofei Du of Google's turbo); returns sRGB.
 vec3 cmap_turbo(float x) {
     const vec4 kr4 = vec4(0.13572138, 4.61539260, -42.66032258, 132.13108234);

@@ -15,9 +15,14 @@ in vec4 v_chroma;
 in vec3 v_vein;
 in vec2 v_uv;
 flat in int v_order;
+in vec4 v_conc;
+in vec4 v_state;
+in vec2 v_extra;
+in vec2 v_rest;
 
 // Compile-time switches (see blade.frag): LS_TEX 1 = albedo from the photo (else v_vein),
-// LS_CUTOUT 1 = photo mask cut-out, LS_SHADOW 1 = self-shadowing.
+// LS_CUTOUT 1 = photo mask cut-out, LS_SHADOW 1 = self-shadowing, LS_MOTTLE 1 = the blade's
+// sub-grid mottle on the photo albedos (the ribbon redraws the blade under it).
 #ifndef LS_TEX
 #define LS_TEX 0
 #endif
@@ -27,6 +32,14 @@ flat in int v_order;
 #ifndef LS_SHADOW
 #define LS_SHADOW 0
 #endif
+#ifndef LS_MOTTLE
+#define LS_MOTTLE 0
+#endif
+uniform sampler2D u_noise;
+uniform float u_mottle_scale;
+uniform float u_mottle;
+uniform vec3 u_absorb[5];
+uniform vec3 u_base;
 uniform int u_absolute;        // vein colours are absolute linear RGB
 uniform sampler2D u_tex;
 uniform vec3 u_tex_mean;       // mean linear colour of the photo's leaf area (LS_TEX 2)
@@ -81,7 +94,12 @@ void main() {
     if (t.a < 0.5) discard;
 #endif
     vec3 base = t.rgb * v_tint;
-#else
+#endif
+#if LS_TEX && LS_MOTTLE
+    // sampled along the centre line, as the photo is
+    base *= mottle_ratio(v_conc, v_state, v_extra, texture(u_noise, v_rest * u_mottle_scale).r, u_mottle, u_absorb, u_base);
+#endif
+#if !LS_TEX
     vec3 base = v_vein;   // vertex colours: the vein tissue's own
 #endif
     vec3 vc = u_vein_cols[clamp(v_order, 0, 3)];

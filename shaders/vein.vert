@@ -11,6 +11,10 @@ in vec4 in_chroma;    // detail albedo: young chromaticity under the vein, livin
 in vec3 in_vein;      // the vein tissue's own albedo (linear colour x tint): the vertex-colour albedo's
 in vec2 in_uv;
 in float in_order;
+in vec4 in_conc;      // the blade's sub-grid mottle pigments under the vein (blade.vert)
+in vec4 in_state;
+in vec2 in_extra;
+in vec2 in_rest;
 
 uniform mat4 u_viewproj;
 uniform vec3 u_eye;
@@ -34,6 +38,10 @@ out vec4 v_chroma;
 out vec3 v_vein;
 out vec2 v_uv;
 flat out int v_order;
+out vec4 v_conc;
+out vec4 v_state;
+out vec2 v_extra;
+out vec2 v_rest;
 
 void main() {
     float hw = in_hw * u_width_scale;
@@ -72,6 +80,10 @@ void main() {
     v_vein = in_vein;
     v_uv = in_uv;
     v_order = int(in_order + 0.5);
+    v_conc = in_conc;
+    v_state = in_state;
+    v_extra = in_extra;
+    v_rest = in_rest;
     // Depth only: the ribbon is tested as if it lay nearer the eye by half its width and two
     // pixels, at most u_pull_max, so the blade cannot cover it where the surface bulges above
     // a straight segment between two vein points (a lobe curved across a 2.4 mm segment sags

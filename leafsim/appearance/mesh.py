@@ -62,14 +62,16 @@ class RenderMesh:
         Second (top) layer particles, drawn by the "particles" debug view.
     scalars : dict str -> (n,) float32
         Per-vertex fields for heat-map views, e.g. ``"mass"``, ``"water"``.
-    mottle : (n, 7) float32 or None
-        The sub-grid mottle (``colour.mottle``): optical depth per RGB band, surface
-        reflectance, and the depth's change per unit of the mottle field
-        (:func:`leafsim.appearance.reflectance.mottle_depths`). None: no mottle.
+    mottle : (n, 10) float32 or None
+        The sub-grid mottle (``colour.mottle``): each vertex's pigment concentrations and
+        reaction states (:func:`leafsim.appearance.reflectance.mottle_pigments`). None: no mottle.
     mottle_rest : (n, 2) float32 or None
-        Where each vertex samples the mottle field (metres: rest position plus the leaf's offset).
+        Where each vertex samples the mottle field (metres: rest position plus the leaf's
+        offset); required with ``mottle``.
     mottle_size : float
         The field's correlation length in metres; 0 = no mottle.
+    mottle_amount : float
+        ``colour.mottle`` a, 0..1; 0 = no mottle.
     """
 
     positions: np.ndarray
@@ -88,6 +90,7 @@ class RenderMesh:
     mottle: np.ndarray | None = None
     mottle_rest: np.ndarray | None = None
     mottle_size: float = 0.0
+    mottle_amount: float = 0.0
 
     @property
     def vertex_count(self) -> int:
@@ -119,11 +122,16 @@ def validate_mesh(mesh) -> None:
     _check("tint", (3,))
     _check("chroma", (4,))
     _check("vein_colours", (3,))
-    _check("mottle", (7,))
+    _check("mottle", (10,))
     _check("mottle_rest", (2,))
+    if getattr(mesh, "mottle", None) is not None and getattr(mesh, "mottle_rest", None) is None:
+        raise LeafsimError("render mesh: mottle needs mottle_rest (where each vertex samples the mottle field)")
     size = float(getattr(mesh, "mottle_size", 0.0) or 0.0)
     if not (np.isfinite(size) and size >= 0.0):
         raise LeafsimError(f"render mesh: mottle_size must be a finite length >= 0 m, got {size}")
+    amount = float(getattr(mesh, "mottle_amount", 0.0) or 0.0)
+    if not (np.isfinite(amount) and 0.0 <= amount <= 1.0):
+        raise LeafsimError(f"render mesh: mottle_amount must be in [0, 1], got {amount}")
     for name in ("colours", "tint", "chroma", "vein_colours", "mottle", "mottle_rest"):
         a = getattr(mesh, name, None)
         if a is not None and not np.all(np.isfinite(np.asarray(a, dtype=np.float64))):

@@ -100,43 +100,41 @@ def pigments_to_rgb(pig: PigmentState, params: Mapping[str, Any], contents: tupl
     return out
 
 
+#: columns of :func:`mottle_pigments`: the five pigments' concentrations c_p (as
+#: :func:`pigments_to_rgb` weights them), the four reactions' states in [0, 1] (chlorophyll and
+#: carotenoids left, browning and necrosis made), and the surface reflectance
+MOTTLE_COLUMNS = ("c_chl", "c_car", "c_ant", "c_brn", "C", "K", "B", "N", "c_nec", "surface")
+
+
 @njit(cache=True, fastmath=FASTMATH_FLAGS, nogil=True, error_model="numpy")
-def _mottle_kernel(C, K, B, N, vein, s_chl, s_car, s_ant_A, s_brn, s_nec, pallor, vbrown, absorb, amount, surface, out):  # pragma: no cover
-    """out[i, :3] = the optical depth Σ c_p k_p, out[i, 3] = the surface reflectance, out[i, 4:]
-    = the depth's change per unit of the sub-grid field n (every reaction's progress
-    p → p + a·n·p(1 − p))."""
+def _mottle_kernel(C, K, A, B, N, vein, s_chl, s_car, s_ant, s_brn, s_nec, pallor, vbrown, surface, out):  # pragma: no cover
+    """out[i] = (c_chl, c_car, c_ant, c_brn, C, K, B, N clamped to [0, 1], c_nec, surface)."""
     for i in range(C.shape[0]):
         tissue = ONE32 - pallor * vein[i]
-        c = min(max(C[i], ZERO32), ONE32)
-        k = min(max(K[i], ZERO32), ONE32)
-        b = min(max(B[i], ZERO32), ONE32)
-        m = min(max(N[i], ZERO32), ONE32)
-        c_chl = s_chl * tissue * C[i]
-        c_car = s_car * K[i]
-        c_brn = s_brn * B[i] * (ONE32 - vbrown * vein[i])
-        c_nec = s_nec * tissue * N[i]
-        # chlorophyll and carotenoids fall, browning and necrosis rise, a step further where n > 0
-        d_chl = -amount * (ONE32 - c) * c_chl
-        d_car = -amount * (ONE32 - k) * c_car
-        d_brn = amount * (ONE32 - b) * c_brn
-        d_nec = amount * (ONE32 - m) * c_nec
-        out[i, 3] = surface
-        for j in range(3):
-            out[i, j] = max(c_chl * absorb[0, j] + c_car * absorb[1, j] + s_ant_A[i] * absorb[2, j]
-                            + c_brn * absorb[3, j] + c_nec * absorb[4, j], ZERO32)
-            out[i, 4 + j] = d_chl * absorb[0, j] + d_car * absorb[1, j] + d_brn * absorb[3, j] + d_nec * absorb[4, j]
+        out[i, 0] = s_chl * tissue * C[i]
+        out[i, 1] = s_car * K[i]
+        out[i, 2] = s_ant * A[i]
+        out[i, 3] = s_brn * B[i] * (ONE32 - vbrown * vein[i])
+        out[i, 4] = min(max(C[i], ZERO32), ONE32)
+        out[i, 5] = min(max(K[i], ZERO32), ONE32)
+        out[i, 6] = min(max(B[i], ZERO32), ONE32)
+        out[i, 7] = min(max(N[i], ZERO32), ONE32)
+        out[i, 8] = s_nec * tissue * N[i]
+        out[i, 9] = surface
 
 
-def mottle_depths(pig: PigmentState, params: Mapping[str, Any], contents: tuple | None = None) -> np.ndarray:
-    """(n, 7) float32 for the renderer's sub-grid mottle (``colour.mottle``): the optical depth
-    x = Σ c_p k_p per RGB band (3), the surface reflectance (1) and the depth's change per unit
-    of the sub-grid field n (3), with the concentrations of :func:`pigments_to_rgb` (same
-    ``contents``).  The renderer draws ``surface + base·exp(−(x + n·g))`` over
-    ``surface + base·exp(−x)`` times the albedo: Beer–Lambert is linear in the depths, so they
-    interpolate across a triangle as the pigments do.  Each reaction's progress p (chlorophyll
-    and carotenoids lost, browning, necrosis) is p + a·n·p(1 − p) at a point: with n in [−1, 1],
-    zero mean, and a ≤ 1 it stays in [0, 1], the pigment amounts keep their mean, and fresh
-    (p = 0) or finished (p = 1) tissue is uniform."""
+def mottle_pigments(pig: PigmentState, params: Mapping[str, Any], contents: tuple | None = None) -> np.ndarray:
+    """(n, 10) float32 for the renderer's sub-grid mottle (``colour.mottle``; columns
+    :data:`MOTTLE_COLUMNS`), with the concentrations of :func:`pigments_to_rgb` (same
+    ``contents``).  The renderer interpolates them across a triangle as the pigments themselves
+    and, per pixel, moves each reaction's progress p (chlorophyll and carotenoids lost, browning,
+    necrosis) to p + a·n·p(1 − p) for the field n at that point: every pigment's amount changes by
+    a·n·(1 − state)·c_p (its state C, K, B or N; lost pigments with the opposite sign), which
+    changes the optical depth x = Σ c_p k_p by n·g; the albedo is multiplied by
+    ``(surface + base·exp(−(x + n·g))) / (surface + base·exp(−x))``
+    (:func:`mottle_ratio` is that formula on the CPU).  With n in [−1, 1], zero mean, and
+    a ≤ 1 every local progress stays in [0, 1] and the pigment amounts keep their mean; fresh
+    (p = 0) and finished (p = 1) tissue is uniform."""
     leaf = pig.leaf
     if contents is None:
         chl = float(params["colour.chlorophyll"]) * leaf[0]
@@ -145,14 +143,29 @@ def mottle_depths(pig: PigmentState, params: Mapping[str, Any], contents: tuple 
     else:
         chl, car = float(contents[0]), float(contents[1])
         surface = float(SURFACE_REFLECTANCE) + float(contents[2])
-    out = np.empty((pig.n, 7), np.float32)
-    ant = (np.float32(float(params["colour.anthocyanin"]) * leaf[2]) * pig.anthocyanin).astype(np.float32)
-    _mottle_kernel(pig.chlorophyll, pig.carotenoid, pig.browning, pig.necrosis, pig.vein,
-                   np.float32(chl), np.float32(car), ant, np.float32(params["colour.brown_level"]),
-                   np.float32(float(params["colour.necrosis"]) * max(chl, 1.0)),
+    out = np.empty((pig.n, len(MOTTLE_COLUMNS)), np.float32)
+    _mottle_kernel(pig.chlorophyll, pig.carotenoid, pig.anthocyanin, pig.browning, pig.necrosis, pig.vein,
+                   np.float32(chl), np.float32(car), np.float32(float(params["colour.anthocyanin"]) * leaf[2]),
+                   np.float32(params["colour.brown_level"]), np.float32(float(params["colour.necrosis"]) * max(chl, 1.0)),
                    np.float32(params["colour.vein_pallor"]), np.float32(params["colour.vein_browning"]),
-                   ABSORPTION, np.float32(params["colour.mottle"]), np.float32(surface), out)
+                   np.float32(surface), out)
     return out
+
+
+def mottle_ratio(m: np.ndarray, n, amount: float) -> np.ndarray:
+    """(k, 3) the factor the renderer multiplies the albedo by at field value(s) ``n`` for
+    :func:`mottle_pigments` rows ``m`` (k, 10) and ``colour.mottle`` ``amount`` (the fragment
+    shader's ``mottle_ratio``, in float64)."""
+    m = np.asarray(m, np.float64)
+    k = ABSORPTION.astype(np.float64)
+    conc = m[:, [0, 1, 2, 3, 8]]
+    x = np.maximum(conc @ k, 0.0)
+    d = amount * np.stack([-(1 - m[:, 4]) * m[:, 0], -(1 - m[:, 5]) * m[:, 1], np.zeros(len(m)),
+                           (1 - m[:, 6]) * m[:, 3], (1 - m[:, 7]) * m[:, 8]], 1)
+    g = d @ k
+    n = np.asarray(n, np.float64).reshape(-1, 1)
+    b = BASE_REFLECTANCE.astype(np.float64)
+    return (m[:, 9:10] + b * np.exp(-np.maximum(x + n * g, 0.0))) / np.maximum(m[:, 9:10] + b * np.exp(-x), 1e-4)
 
 
 def fit_photo_contents(young: np.ndarray, pig0: PigmentState, params: Mapping[str, Any],

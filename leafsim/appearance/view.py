@@ -172,18 +172,17 @@ class LeafView:
         return out
 
     def mottle(self, state: State, params):
-        """(the renderer's sub-grid mottle data (nT, 7) float32, its correlation length in metres,
-        0 when ``colour.mottle`` is 0) or (None, 0.0) without pigments
-        (:func:`~leafsim.appearance.reflectance.mottle_depths`, with the photo's fitted pigment
+        """(the renderer's sub-grid mottle pigments (nT, 10) float32, the field's correlation
+        length in metres, ``colour.mottle``), or (None, 0, 0) without pigments
+        (:func:`~leafsim.appearance.reflectance.mottle_pigments`, with the photo's fitted pigment
         contents where the young colour is the photo's, as :meth:`colours` has them)."""
-        from leafsim.appearance.reflectance import mottle_depths
+        from leafsim.appearance.reflectance import mottle_pigments
 
         pig = state.pigments
         if pig is None:
-            return None, 0.0
+            return None, 0.0, 0.0
         contents = self.photo_contents(params) if (self.photo_colour and self.pigments0 is not None) else None
-        size = float(params["colour.mottle_size"]) if float(params["colour.mottle"]) > 0.0 else 0.0
-        return mottle_depths(pig, params, contents)[self.T], size
+        return mottle_pigments(pig, params, contents)[self.T], float(params["colour.mottle_size"]), float(params["colour.mottle"])
 
     def mottle_rest(self, state: State) -> np.ndarray:
         """(nT, 2) float32: where each vertex samples the mottle field, its rest position in
@@ -217,7 +216,7 @@ class LeafView:
         kind_map[SPRING_LINK], kind_map[SPRING_VEIN] = R_LINK, R_VEIN
         colours, tint = self.colours(state, params)
         vein_colours = self.vein_colours(state, params, colours)
-        mottle, mottle_size = self.mottle(state, params)
+        mottle, mottle_size, mottle_amount = self.mottle(state, params)
         stalk = ~m.blade_particles
         veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()
                  if not (self.blade_only and stalk[idx].any())]
@@ -238,6 +237,7 @@ class LeafView:
             mottle=mottle,
             mottle_rest=self.mottle_rest(state),
             mottle_size=mottle_size,
+            mottle_amount=mottle_amount,
         )
 
     def update(self, state: State, params) -> dict:
@@ -253,9 +253,9 @@ class LeafView:
         vein = self.vein_colours(state, params, colours)
         if vein is not None:
             out["vein_colours"] = vein
-        mottle, size = self.mottle(state, params)
+        mottle, size, amount = self.mottle(state, params)
         if mottle is not None:
-            out["mottle"], out["mottle_size"] = mottle, size
+            out["mottle"], out["mottle_size"], out["mottle_amount"] = mottle, size, amount
         return out
 
 

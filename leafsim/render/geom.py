@@ -246,6 +246,14 @@ class VeinRibbons:
         d[:, :, 6:9] = n[:, None, :]
         return d.reshape(-1, 9)
 
+    def mottle_rows(self, mottle: np.ndarray, rest: np.ndarray) -> np.ndarray:
+        """(2p, k + 2) float32 per ribbon vertex: the blade's sub-grid mottle pigments (k
+        columns, :func:`leafsim.appearance.reflectance.mottle_pigments`) and where the tissue
+        samples the mottle field, both of the centre line's vertex (the ribbon redraws the blade
+        under it with the photo albedos)."""
+        rows = np.concatenate([np.asarray(mottle, np.float32)[self.idx], np.asarray(rest, np.float32)[self.idx]], 1)
+        return np.repeat(rows, 2, axis=0)
+
     def base_colours(self, colours: np.ndarray, tint: np.ndarray, chroma: np.ndarray,
                      vein: np.ndarray | None = None) -> np.ndarray:
         """(2p, 13) float32 per ribbon vertex: the blade's colour x tint, tint (linear), the

@@ -80,7 +80,9 @@ class OffscreenRenderer:
             self.renderer.update(m.positions, colours=getattr(m, "colours", None),
                                  scalar=getattr(m, "scalars", None) or None, tint=getattr(m, "tint", None),
                                  top_positions=getattr(m, "top_positions", None), chroma=getattr(m, "chroma", None),
-                                 vein_colours=getattr(m, "vein_colours", None))
+                                 vein_colours=getattr(m, "vein_colours", None), mottle=getattr(m, "mottle", None),
+                                 mottle_size=(getattr(m, "mottle_size", 0.0) or 0.0) if getattr(m, "mottle", None) is not None else None,
+                                 mottle_amount=(getattr(m, "mottle_amount", 0.0) or 0.0) if getattr(m, "mottle", None) is not None else None)
         else:
             self.renderer.populate(mesh_or_update)
             self._mesh = mesh_or_update

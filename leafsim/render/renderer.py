@@ -14,7 +14,7 @@ import numpy as np
 
 from leafsim.appearance.mesh import NO_CHROMA, validate_mesh
 from leafsim.appearance.mottle import mottle_field, mottle_scale
-from leafsim.appearance.reflectance import BASE_REFLECTANCE
+from leafsim.appearance.reflectance import ABSORPTION, BASE_REFLECTANCE, MOTTLE_COLUMNS
 from leafsim.appearance.texture import clean_texture
 from leafsim.base.errors import LeafsimError
 from leafsim.base.resources import shader_dir as default_shader_dir
@@ -187,10 +187,14 @@ class Renderer:
         self.scalars = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in (getattr(mesh, "scalars", None) or {}).items()}
         self._scalar_name = None
         mottle = getattr(mesh, "mottle", None)
-        self.mottle = np.zeros((n, 7), np.float32) if mottle is None else np.ascontiguousarray(mottle, dtype=np.float32).copy()
+        self.mottle = (np.zeros((n, len(MOTTLE_COLUMNS)), np.float32) if mottle is None
+                       else np.ascontiguousarray(mottle, dtype=np.float32).copy())
         rest = getattr(mesh, "mottle_rest", None)
+        self.has_rest = rest is not None  # without where the tissue samples the field, no mottle
         rest = np.zeros((n, 2), np.float32) if rest is None else np.ascontiguousarray(rest, dtype=np.float32)
+        self.rest = rest
         self.mottle_size = float(getattr(mesh, "mottle_size", 0.0) or 0.0) if mottle is not None else 0.0
+        self.mottle_amount = float(getattr(mesh, "mottle_amount", 0.0) or 0.0)
         top = getattr(mesh, "top_positions", None)
         self.top = None if top is None else np.ascontiguousarray(top, dtype=np.float32).copy()
         self.k = 0 if self.top is None else self.top.shape[0]
@@ -203,14 +207,13 @@ class Renderer:
         self.vbo_chroma = self._buf(self.chroma, dynamic=True)
         self.vbo_uv = self._buf(uv)
         self.vbo_scalar = self._buf(np.zeros(n, np.float32), dynamic=True)
-        self.vbo_depth = self._buf(np.ascontiguousarray(self.mottle[:, :4]), dynamic=True)
-        self.vbo_mottle = self._buf(np.ascontiguousarray(self.mottle[:, 4:]), dynamic=True)
+        self.vbo_mottle = self._buf(self.mottle, dynamic=True)
         self.vbo_rest = self._buf(rest)
         self.ibo_tri = self._buf(self.tri)
         self._specs["blade"] = ([
             (self.vbo_pos, "3f", "in_pos"), (self.vbo_nrm, "3f", "in_nrm"), (self.vbo_col, "3f", "in_col"),
             (self.vbo_tint, "3f", "in_tint"), (self.vbo_chroma, "4f", "in_chroma"), (self.vbo_uv, "2f", "in_uv"),
-            (self.vbo_scalar, "1f", "in_scalar"), (self.vbo_depth, "4f", "in_depth"), (self.vbo_mottle, "3f", "in_mottle"),
+            (self.vbo_scalar, "1f", "in_scalar"), (self.vbo_mottle, "4f 4f 2f", "in_conc", "in_state", "in_extra"),
             (self.vbo_rest, "2f", "in_rest")],
             self.ibo_tri)
         self.vao_shadow = self._vao("shadow", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_uv, "2f", "in_uv")],
@@ -244,7 +247,9 @@ class Renderer:
             self.vbo_vein_base = self._buf(self.veins.base_colours(self.colours, self.tint, self.chroma, self.vein_col), dynamic=True)
             self.vbo_vein_static = self._buf(self.veins.static)
             self.ibo_vein = self._buf(self.veins.indices)
+            self.vbo_vein_mottle = self._buf(self.veins.mottle_rows(self.mottle, self.rest), dynamic=True)
             self._specs["vein"] = ([
+                (self.vbo_vein_mottle, "4f 4f 2f 2f", "in_conc", "in_state", "in_extra", "in_rest"),
                 (self.vbo_vein_dyn, "3f 3f 3f", "in_center", "in_side", "in_nrm"),
                 (self.vbo_vein_static, "1f 1f 2f 1f", "in_hw", "in_v", "in_uv", "in_order"),
                 (self.vbo_vein_base, "3f 3f 4f 3f", "in_base", "in_tint", "in_chroma", "in_vein")], self.ibo_vein)
@@ -287,7 +292,7 @@ class Renderer:
 
     # --- per frame ------------------------------------------------------------------------
     def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None, chroma=None,
-               vein_colours=None, mottle=None, mottle_size=None) -> None:
+               vein_colours=None, mottle=None, mottle_size=None, mottle_amount=None) -> None:
         """Write new per-frame data into the GL buffers.
 
         Parameters
@@ -308,10 +313,12 @@ class Renderer:
         vein_colours : (n, 3) float, optional
             Linear RGB albedo of the vein tissue per vertex (a mesh populated without them
             keeps drawing its veins in the blade's albedo).
-        mottle : (n, 7) float, optional
-            The sub-grid mottle's optical depths (:class:`~leafsim.appearance.mesh.RenderMesh`).
+        mottle : (n, 10) float, optional
+            The sub-grid mottle's pigments (:class:`~leafsim.appearance.mesh.RenderMesh`).
         mottle_size : float, optional
             The mottle field's correlation length in metres; 0 turns the mottle off.
+        mottle_amount : float, optional
+            ``colour.mottle`` a, 0..1.
         """
         if self.mesh is None:
             raise LeafsimError("renderer: update() before populate()")
@@ -325,10 +332,16 @@ class Renderer:
         if c is not None and (c.shape != (self.n, 4) or not np.all(np.isfinite(c))):
             raise LeafsimError(f"renderer: chroma must be finite, ({self.n}, 4), got {c.shape}")
         mt = None if mottle is None else np.asarray(mottle, dtype=np.float32)
-        if mt is not None and (mt.shape != (self.n, 7) or not np.all(np.isfinite(mt))):
-            raise LeafsimError(f"renderer: mottle must be finite, ({self.n}, 7), got {mt.shape}")
+        k = len(MOTTLE_COLUMNS)
+        if mt is not None and (mt.shape != (self.n, k) or not np.all(np.isfinite(mt))):
+            raise LeafsimError(f"renderer: mottle must be finite, ({self.n}, {k}), got {mt.shape}")
         if mottle_size is not None and not (np.isfinite(mottle_size) and mottle_size >= 0.0):
             raise LeafsimError(f"renderer: mottle_size must be a finite length >= 0 m, got {mottle_size}")
+        if mottle_size and not self.has_rest:
+            raise LeafsimError("renderer: mottle_size > 0 needs the mesh populated with mottle_rest "
+                               "(where the tissue samples the mottle field)")
+        if mottle_amount is not None and not (np.isfinite(mottle_amount) and 0.0 <= mottle_amount <= 1.0):
+            raise LeafsimError(f"renderer: mottle_amount must be in [0, 1], got {mottle_amount}")
         self.pos[:] = pos
         vertex_normals(self.pos, self.tri, self.nrm)
         self.vbo_pos.write(self.pos)
@@ -349,10 +362,13 @@ class Renderer:
             recolour = True
         if mt is not None:
             self.mottle[:] = mt
-            self.vbo_depth.write(np.ascontiguousarray(self.mottle[:, :4]))
-            self.vbo_mottle.write(np.ascontiguousarray(self.mottle[:, 4:]))
+            self.vbo_mottle.write(self.mottle)
+            if self.veins.count:
+                self.vbo_vein_mottle.write(self.veins.mottle_rows(self.mottle, self.rest))
         if mottle_size is not None:
             self.mottle_size = float(mottle_size)
+        if mottle_amount is not None:
+            self.mottle_amount = float(mottle_amount)
         if vein_colours is not None and self.vein_col is not None:
             self.vein_col[:] = vein_colours
             recolour = True
@@ -600,15 +616,12 @@ class Renderer:
             mode, cmap = 3, 0 if opts.colormap == "turbo" else 1
         else:
             mode, cmap = self._albedo_mode(opts), 0
-        mottle = not heat and self.mottle_size > 0.0
+        mottle = not heat and self._mottle_on()
         defs = dict(LS_MODE=mode, LS_CMAP=cmap, LS_SHADOW=int(self_shadow and not heat),
                     LS_CUTOUT=int(bool(opts.texture_cutout) and mode == 1), LS_MOTTLE=int(mottle))
         b = self._variant("blade", **defs)
         if mottle:
-            self._mottle_texture().use(location=3)
-            _set(b, "u_noise", 3)
-            _set(b, "u_mottle_scale", mottle_scale(self.mottle_size))
-            _set(b, "u_base", tuple(float(v) for v in BASE_REFLECTANCE))
+            self._mottle_uniforms(b)
         if heat:
             if self._scalar_name != opts.view:
                 self.vbo_scalar.write(self.scalars[opts.view])
@@ -623,6 +636,17 @@ class Renderer:
         _set(b, "u_light_mat", light_mat)
         _set(b, "u_shadow_offset", 12.0 * 2.3 * self.radius / opts.shadow_size)
         self._variant_vao("blade", **defs).render(moderngl.TRIANGLES)
+
+    def _mottle_on(self) -> bool:
+        return self.mottle_size > 0.0 and self.mottle_amount > 0.0 and self.has_rest
+
+    def _mottle_uniforms(self, prog) -> None:
+        self._mottle_texture().use(location=3)
+        _set(prog, "u_noise", 3)
+        _set(prog, "u_mottle_scale", mottle_scale(self.mottle_size))
+        _set(prog, "u_mottle", self.mottle_amount)
+        _set(prog, "u_absorb", [tuple(float(v) for v in row) for row in ABSORPTION])
+        _set(prog, "u_base", tuple(float(v) for v in BASE_REFLECTANCE))
 
     def _mottle_texture(self):
         """The periodic mottle field (:func:`leafsim.appearance.mottle.mottle_field`) as a
@@ -672,9 +696,12 @@ class Renderer:
 
     def _draw_veins(self, opts, vp, light, width, height, light_mat, self_shadow):
         mode = self._albedo_mode(opts)
+        mottle = mode > 0 and self._mottle_on()  # the ribbon redraws the blade's photo under it
         defs = dict(LS_TEX=mode, LS_CUTOUT=int(mode == 1 and bool(opts.texture_cutout)),
-                    LS_SHADOW=int(self_shadow))
+                    LS_SHADOW=int(self_shadow), LS_MOTTLE=int(mottle))
         v = self._variant("vein", **defs)
+        if mottle:
+            self._mottle_uniforms(v)
         _set(v, "u_shadow", 1)
         _set(v, "u_light_mat", light_mat)
         _set(v, "u_shadow_offset", 12.0 * 2.3 * self.radius / opts.shadow_size)

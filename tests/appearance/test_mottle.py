@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from leafsim.appearance.mottle import TEXELS_PER_LENGTH, leaf_offset, mottle_field, mottle_scale
-from leafsim.appearance.reflectance import BASE_REFLECTANCE, mottle_depths, pigments_to_rgb
+from leafsim.appearance.reflectance import (ABSORPTION, BASE_REFLECTANCE, MOTTLE_COLUMNS, mottle_pigments, mottle_ratio,
+                                            pigments_to_rgb)
 from leafsim.config.params import ParamSet
 from leafsim.sim.pigments import init_pigments
 
@@ -38,7 +39,7 @@ def test_scale_and_leaf_offsets():
 
 
 def _pigments(n=64, seed=0):
-    p = ParamSet()
+    p = ParamSet().with_overrides({"colour.anthocyanin": 1.0})
     pig = init_pigments(n, p, seed=seed, rest_relative_mass=np.linspace(0.0, 1.0, n))
     rng = np.random.default_rng(seed)
     pig.chlorophyll[:] = rng.uniform(0, 1, n)
@@ -49,54 +50,80 @@ def _pigments(n=64, seed=0):
     return p, pig
 
 
-def test_depths_reproduce_the_reflectance_and_their_gradient():
+def _moved(pig, a, n):
+    """The pigments with every reaction's progress moved by a·n·p(1 − p)."""
+    q = pig.copy()
+    c, k, b, m = (getattr(pig, x).astype(np.float64) for x in ("chlorophyll", "carotenoid", "browning", "necrosis"))
+    q.chlorophyll = (c - a * n * c * (1 - c)).astype(np.float32)
+    q.carotenoid = (k - a * n * k * (1 - k)).astype(np.float32)
+    q.browning = (b + a * n * b * (1 - b)).astype(np.float32)
+    q.necrosis = (m + a * n * m * (1 - m)).astype(np.float32)
+    return q
+
+
+@pytest.mark.parametrize("contents", [None, (1.7, 0.9, 0.02)])
+def test_the_rows_reproduce_the_reflectance_and_the_moved_pigments(contents):
+    """The renderer's formula (mottle_ratio, the shader's in float64) at field value n is the
+    reflectance of the pigments moved by a·n·p(1 − p) over the unmoved one, for the palette's
+    contents and a photo's fitted ones."""
     p, pig = _pigments()
-    p = p.with_overrides({"colour.anthocyanin": 1.0})
-    d = mottle_depths(pig, p)
-    assert d.shape == (pig.n, 7) and np.all(np.isfinite(d))
-    # surface + base·exp(−x) is the particle's colour
-    np.testing.assert_allclose(d[:, 3:4] + BASE_REFLECTANCE * np.exp(-d[:, :3]), pigments_to_rgb(pig, p), rtol=2e-4, atol=1e-6)
-    # the gradient: every reaction's progress moved by a·n·p(1 − p), here n = ±ε (central difference)
-    a, eps = float(p["colour.mottle"]), 1e-3
-
-    def moved(n):
-        q = pig.copy()
-        c, k, b, m = (np.clip(getattr(pig, x), 0, 1) for x in ("chlorophyll", "carotenoid", "browning", "necrosis"))
-        q.chlorophyll = (pig.chlorophyll - a * n * c * (1 - c)).astype(np.float32)
-        q.carotenoid = (pig.carotenoid - a * n * k * (1 - k)).astype(np.float32)
-        q.browning = (pig.browning + a * n * b * (1 - b)).astype(np.float32)
-        q.necrosis = (pig.necrosis + a * n * m * (1 - m)).astype(np.float32)
-        return mottle_depths(q, p)[:, :3].astype(np.float64)
-
-    np.testing.assert_allclose((moved(eps) - moved(-eps)) / (2 * eps), d[:, 4:], rtol=2e-2, atol=2e-3)
+    m = mottle_pigments(pig, p, contents)
+    assert m.shape == (pig.n, len(MOTTLE_COLUMNS)) and np.all(np.isfinite(m))
+    rgb = pigments_to_rgb(pig, p, contents).astype(np.float64)
+    x = m[:, [0, 1, 2, 3, 8]].astype(np.float64) @ ABSORPTION.astype(np.float64)
+    np.testing.assert_allclose(m[:, 9:10] + BASE_REFLECTANCE * np.exp(-np.maximum(x, 0)), rgb, rtol=1e-4, atol=1e-6)
+    a = float(p["colour.mottle"])
+    assert 0 < a <= 1
+    for n in (-1.0, -0.3, 0.5, 1.0):
+        want = pigments_to_rgb(_moved(pig, a, n), p, contents).astype(np.float64) / rgb
+        np.testing.assert_allclose(mottle_ratio(m, np.full(pig.n, n), a), want, rtol=1e-4)
+    assert np.all(mottle_ratio(m, np.zeros(pig.n), a) == 1.0)
 
 
-def test_fresh_and_finished_tissue_and_zero_amount_are_uniform():
+def test_fresh_and_finished_tissue_stay_uniform():
     p, pig = _pigments()
+    a = float(p["colour.mottle"])
     fresh = init_pigments(pig.n, p, seed=0)
-    assert np.all(mottle_depths(fresh, p)[:, 4:] == 0.0)
+    assert np.all(mottle_ratio(mottle_pigments(fresh, p), np.ones(pig.n), a) == 1.0)
     done = pig.copy()
     done.chlorophyll[:] = 0.0
     done.carotenoid[:] = 0.0
     done.browning[:] = 1.0
     done.necrosis[:] = 1.0
-    assert np.all(mottle_depths(done, p)[:, 4:] == 0.0)
-    off = mottle_depths(pig, p.with_overrides({"colour.mottle": 0.0}))
-    assert np.all(off[:, 4:] == 0.0)
-    np.testing.assert_array_equal(off[:, :4], mottle_depths(pig, p)[:, :4])
-    # half-turned tissue is mottled: where n > 0 it holds less chlorophyll, which absorbs red
-    # and blue most, so those bands' depths fall (the fleck is yellower)
-    mid = pig.copy()
-    mid.chlorophyll[:], mid.carotenoid[:], mid.browning[:], mid.necrosis[:] = 0.5, 1.0, 0.0, 0.0
-    g = mottle_depths(mid, p)[:, 4:]
-    assert np.all(g[:, 0] < 0) and np.all(g[:, 2] < 0)
+    assert np.all(mottle_ratio(mottle_pigments(done, p), -np.ones(pig.n), a) == 1.0)
+    # half-turned tissue: where n > 0 it holds less chlorophyll, which absorbs red and blue
+    # most, so the fleck is lighter in red and blue, and it is darker where n < 0
+    mid = init_pigments(pig.n, p, seed=0)
+    mid.chlorophyll[:] = 0.5
+    r = mottle_ratio(mottle_pigments(mid, p), np.ones(pig.n), a)
+    assert np.all(r[:, 0] > 1.05) and np.all(r[:, 2] > 1.0)
+    assert np.all(mottle_ratio(mottle_pigments(mid, p), -np.ones(pig.n), a)[:, 0] < 0.97)
 
 
-def test_the_pigment_amounts_keep_their_mean():
-    """Over the field, p + a·n·p(1 − p) has the mean p (n has mean 0 and stays in [−1, 1], so
-    every local progress stays in [0, 1])."""
-    f = mottle_field(256, seed=5).astype(np.float64)
-    for prog in (0.1, 0.5, 0.9):
-        local = prog + 1.0 * f * prog * (1 - prog)
-        assert local.min() >= 0.0 and local.max() <= 1.0
-        assert abs(local.mean() - prog) < 1e-9
+@pytest.mark.parametrize("species", ["oak", "maple"])
+def test_the_view_gives_the_renderer_its_pigments(species):
+    """LeafView's rows are the blade's (layer T) pigments with the contents its colours use: a
+    photo species' fitted ones (oak), the palette's (maple); the mesh and the per-frame update
+    carry them with the field's size, amount and the tissue's sample positions."""
+    from leafsim.interactive.session import Session
+
+    s = Session(species, overrides={"mesh.spacing": 0.04, "effects.pbd": False, "effects.shrink": False,
+                                    "colour.age_rate": 0.3}, build=True)
+    s.step(200)
+    view, params, state = s.view, s.sim_params, s.state
+    rows, size, amount = view.mottle(state, params)
+    contents = view.photo_contents(params) if species == "oak" else None
+    assert (species == "oak") == view.photo_colour
+    rgb = pigments_to_rgb(state.pigments, params, contents)[view.T].astype(np.float64)
+    x = rows[:, [0, 1, 2, 3, 8]].astype(np.float64) @ ABSORPTION.astype(np.float64)
+    np.testing.assert_allclose(rows[:, 9:10] + BASE_REFLECTANCE * np.exp(-np.maximum(x, 0)), rgb, rtol=1e-4, atol=1e-6)
+    assert size == params["colour.mottle_size"] and amount == params["colour.mottle"]
+    mesh = view.mesh(state, params)
+    np.testing.assert_array_equal(mesh.mottle, rows)
+    assert mesh.mottle_rest.shape == (len(view.T), 2) and (mesh.mottle_size, mesh.mottle_amount) == (size, amount)
+    # the rest positions (plus the leaf's offset), not the current ones: the flecks ride on the tissue
+    np.testing.assert_allclose(mesh.mottle_rest - s.model.particle_rest[view.T][:, :2],
+                               np.broadcast_to(leaf_offset(state.pigments.seed), (len(view.T), 2)), atol=1e-6)
+    up = view.update(state, params)
+    np.testing.assert_array_equal(up["mottle"], rows)
+    assert up["mottle_size"] == size and up["mottle_amount"] == amount
