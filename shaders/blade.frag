@@ -45,7 +45,7 @@ uniform float u_translucency;
 uniform float u_specular;
 uniform float u_shininess;
 
-uniform sampler2D u_noise;      // the mottle field: uniform on [-1, 1], mean 0, periodic
+uniform sampler2D u_noise;      // the mottle field's 8-bit levels (mottle_n), periodic
 uniform float u_mottle_scale;   // its texture coordinates per metre
 uniform float u_mottle;         // colour.mottle a
 uniform vec3 u_absorb[5];       // absorption per pigment and band
@@ -85,7 +85,7 @@ void main() {
 #endif
 #if LS_MOTTLE
     // the pigments interpolate linearly over the triangle; the field moves them on per pixel
-    float n = texture(u_noise, v_rest * u_mottle_scale).r;
+    float n = mottle_n(texture(u_noise, v_rest * u_mottle_scale).r);
     albedo *= mottle_ratio(v_conc, v_state, v_extra, n, u_mottle, u_absorb, u_base);
 #endif
 #if LS_SHADOW

@@ -31,6 +31,9 @@ vec3 photo_detail(vec3 base, vec3 t, vec3 tex_mean, vec4 chroma) {
 // extra = (c_nec, surface reflectance), all interpolated over the triangle as the pigments
 // are; k = the absorption per pigment and band, base = pigment-free tissue. Returns the
 // Beer-Lambert reflectance there over the one of the interpolated pigments (1 where n g = 0).
+// The mottle field's value from its 8-bit texel t = k/255: n = (2k + 1)/256 - 1.
+float mottle_n(float t) { return t * (255.0 / 128.0) - (255.0 / 256.0); }
+
 vec3 mottle_ratio(vec4 conc, vec4 state, vec2 extra, float n, float a, vec3 k[5], vec3 base) {
     vec3 x = max(conc.x * k[0] + conc.y * k[1] + conc.z * k[2] + conc.w * k[3] + extra.x * k[4], vec3(0.0));
     vec3 g = a * (-(1.0 - state.x) * conc.x * k[0] - (1.0 - state.y) * conc.y * k[1]

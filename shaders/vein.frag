@@ -97,7 +97,7 @@ void main() {
 #endif
 #if LS_TEX && LS_MOTTLE
     // sampled along the centre line, as the photo is
-    base *= mottle_ratio(v_conc, v_state, v_extra, texture(u_noise, v_rest * u_mottle_scale).r, u_mottle, u_absorb, u_base);
+    base *= mottle_ratio(v_conc, v_state, v_extra, mottle_n(texture(u_noise, v_rest * u_mottle_scale).r), u_mottle, u_absorb, u_base);
 #endif
 #if !LS_TEX
     vec3 base = v_vein;   // vertex colours: the vein tissue's own

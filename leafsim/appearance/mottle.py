@@ -6,7 +6,8 @@ pigment state at a point of the blade is the mesh's (interpolated) state pushed 
 ahead or behind: each reaction's progress p goes to p + a·n·p(1 − p), with n a seeded field.
 This module makes n: a periodic square of band-limited noise (white noise under a Gaussian
 filter, so its correlation length is :data:`TEXELS_PER_LENGTH` texels), mapped by rank to an
-exactly uniform distribution on [−1, 1] with mean zero.  The renderer samples it at the
+exactly uniform distribution over 256 levels in (−1, 1), symmetric, with mean exactly zero (the
+renderer samples it as an 8-bit texture, a quarter of a float one's memory; it draws as fast).  The renderer samples it at the
 particles' rest positions over ``colour.mottle_size``, so the flecks move with the tissue and
 keep their size at any mesh spacing.  Imports no OpenGL.
 """
@@ -25,9 +26,11 @@ FIELD_SEED = 20261206
 _CACHE: dict = {}
 
 
-def mottle_field(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> np.ndarray:
-    """(size, size) float32 periodic field, uniform on [−1, 1] (rank-mapped), mean 0, with a
-    Gaussian correlation of 1/e length :data:`TEXELS_PER_LENGTH` texels (before the rank map)."""
+def mottle_levels(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> np.ndarray:
+    """(size, size) uint8 periodic field of levels k, each level on the same number of texels
+    (size² a multiple of 256), with a Gaussian correlation of 1/e length
+    :data:`TEXELS_PER_LENGTH` texels (before the rank map); the field's value is
+    n = (2k + 1)/256 − 1 (:func:`mottle_field`)."""
     key = (int(size), int(seed))
     hit = _CACHE.get(key)
     if hit is not None:
@@ -39,12 +42,19 @@ def mottle_field(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> np.ndarray:
     f = np.fft.fftfreq(size)
     gain = np.exp(-2.0 * (np.pi * sigma) ** 2 * (f[:, None] ** 2 + f[None, :] ** 2))
     smooth = np.fft.ifft2(np.fft.fft2(white) * gain).real
-    rank = np.empty(size * size, np.float64)
+    if (size * size) % 256:
+        raise ValueError(f"mottle_levels: size² = {size * size} is not a multiple of 256")
+    rank = np.empty(size * size, np.int64)
     rank[np.argsort(smooth, axis=None, kind="stable")] = np.arange(size * size)
-    field = ((rank + 0.5) / (size * size) * 2.0 - 1.0).reshape(size, size).astype(np.float32)
-    field -= np.float32(field.mean(dtype=np.float64))  # exactly zero mean in float32 too
-    _CACHE[key] = field
-    return field
+    levels = (rank * 256 // (size * size)).astype(np.uint8).reshape(size, size)
+    _CACHE[key] = levels
+    return levels
+
+
+def mottle_field(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> np.ndarray:
+    """(size, size) float32: the field's values n = (2k + 1)/256 − 1 of :func:`mottle_levels`,
+    uniform over 256 levels in [−255/256, 255/256], mean exactly 0."""
+    return ((2.0 * mottle_levels(size, seed).astype(np.float32) + 1.0) / 256.0 - 1.0).astype(np.float32)
 
 
 def mottle_scale(size_m: float, size: int = FIELD_SIZE) -> float:

@@ -103,10 +103,10 @@ PASSES = ("_shadow_pass", "_ground_shadow_pass", "_draw_ground", "_draw_blade", 
 CONFIGS = ((False, False), (True, False), (True, True), (False, True))
 
 
-def _measure(ctx, species: str, reps: int, fbo=None) -> dict:
+def _measure(ctx, species: str, reps: int, fbo=None, sets=()) -> dict:
     W, H = VIEW_SIZE
     r = Renderer(ctx)
-    r.populate(Session(species).render_mesh())
+    r.populate(Session(species, overrides=parse_set_args(list(sets))).render_mesh())
     cam = OrbitCamera(yaw=-90, pitch=55)
     cam.frame_bounds(np.stack([r.lo, r.hi]), margin=1.05)
     if fbo is None:
@@ -142,10 +142,10 @@ def _measure(ctx, species: str, reps: int, fbo=None) -> dict:
     return {c: {k: round(float(np.median(v)), 2) for k, v in row.items()} for c, row in res.items()}
 
 
-def passes_child(where: str, species: str, reps: int) -> None:
-    """Measure in ``where`` = "egl" or "window" and print one JSON line."""
+def passes_child(where: str, species: str, reps: int, sets=()) -> None:
+    """Measure in ``where`` = "egl" or "window" (parameters ``sets``, KEY=VALUE) and print one JSON line."""
     if where == "egl":
-        out = _measure(moderngl.create_standalone_context(backend="egl", require=330), species, reps)
+        out = _measure(moderngl.create_standalone_context(backend="egl", require=330), species, reps, sets=sets)
         print("PASSES " + json.dumps(out), flush=True)
         return
     done = {}
@@ -154,7 +154,7 @@ def passes_child(where: str, species: str, reps: int) -> None:
         if not done:
             ctx = moderngl.create_context()
             fb = ctx.detect_framebuffer()
-            done["out"] = _measure(ctx, species, reps)
+            done["out"] = _measure(ctx, species, reps, sets=sets)
             fb.use()
             hello_imgui.get_runner_params().app_shall_exit = True
 
@@ -182,7 +182,7 @@ def main(argv=None) -> int:
     if args.what == "window":
         window_child(args)
     else:
-        passes_child(args.what.split("-")[1], args.species, args.reps)
+        passes_child(args.what.split("-")[1], args.species, args.reps, args.set)
     return 0
 
 

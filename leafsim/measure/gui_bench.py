@@ -110,7 +110,7 @@ def _table(rows) -> str:
 
 # ------------------------------------------------------------------ per-pass render profile (--passes)
 
-def run_passes(env: dict, species: str, reps: int) -> str:
+def run_passes(env: dict, species: str, reps: int, sets=()) -> str:
     """Both contexts, as a text table (CPU ms per pass, medians)."""
     env = dict(env)
     from leafsim.gui.threads import render_threads
@@ -119,7 +119,7 @@ def run_passes(env: dict, species: str, reps: int) -> str:
     lines = []
     for where in ("egl", "window"):
         cmd = [sys.executable, "-m", "leafsim.gui.bench_child", f"passes-{where}", "--species", species,
-               "--reps", str(max(reps, 5))]
+               "--reps", str(max(reps, 5))] + [a for kv in sets for a in ("--set", kv)]
         r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
         got = [ln for ln in r.stdout.splitlines() if ln.startswith("PASSES ")]
         if not got:
@@ -154,7 +154,7 @@ def main(argv=None) -> int:
         xvfb, env["DISPLAY"] = _start_xvfb()
     try:
         if args.passes:
-            print(run_passes(env, args.species, args.reps))
+            print(run_passes(env, args.species, args.reps, args.set))
             return 0
         configs = [(float(s), int(g)) for s in args.scales.split(",") for g in args.ground.split(",")]
         _run_one(env, args, *configs[0])  # warms numba's and Mesa's caches; discarded

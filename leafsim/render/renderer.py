@@ -13,7 +13,7 @@ import moderngl
 import numpy as np
 
 from leafsim.appearance.mesh import NO_CHROMA, validate_mesh
-from leafsim.appearance.mottle import mottle_field, mottle_scale
+from leafsim.appearance.mottle import mottle_levels, mottle_scale
 from leafsim.appearance.reflectance import ABSORPTION, BASE_REFLECTANCE, MOTTLE_COLUMNS
 from leafsim.appearance.texture import clean_texture
 from leafsim.base.errors import LeafsimError
@@ -650,11 +650,12 @@ class Renderer:
 
     def _mottle_texture(self):
         """The periodic mottle field (:func:`leafsim.appearance.mottle.mottle_field`) as a
-        single-channel float texture, repeated and mipmapped (made once per renderer): a
-        minified leaf averages the flecks out instead of shimmering."""
+        single-channel 8-bit texture of its levels (the shaders decode n = (2k + 1)/256 − 1),
+        repeated and mipmapped (made once per renderer): a minified leaf averages the flecks out
+        instead of shimmering."""
         if self._noise is None:
-            f = mottle_field()
-            t = self.ctx.texture((f.shape[1], f.shape[0]), 1, np.ascontiguousarray(f).tobytes(), dtype="f4")
+            f = mottle_levels()
+            t = self.ctx.texture((f.shape[1], f.shape[0]), 1, np.ascontiguousarray(f).tobytes(), dtype="f1")
             t.build_mipmaps()
             t.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
             t.repeat_x = t.repeat_y = True

@@ -4,7 +4,7 @@ from.  The pixels are tested in tests/render/test_renderer.py."""
 import numpy as np
 import pytest
 
-from leafsim.appearance.mottle import TEXELS_PER_LENGTH, leaf_offset, mottle_field, mottle_scale
+from leafsim.appearance.mottle import TEXELS_PER_LENGTH, leaf_offset, mottle_field, mottle_levels, mottle_scale
 from leafsim.appearance.reflectance import (ABSORPTION, BASE_REFLECTANCE, MOTTLE_COLUMNS, mottle_pigments, mottle_ratio,
                                             pigments_to_rgb)
 from leafsim.config.params import ParamSet
@@ -14,11 +14,12 @@ from leafsim.sim.pigments import init_pigments
 def test_field_is_uniform_zero_mean_periodic_and_seeded():
     f = mottle_field(256, seed=3)
     assert f.dtype == np.float32 and f.shape == (256, 256)
-    assert f.min() >= -1.0 and f.max() <= 1.0
-    assert abs(float(f.mean(dtype=np.float64))) < 1e-6
-    # rank-mapped: uniform on [-1, 1] (each tenth of the range holds a tenth of the texels)
-    counts = np.histogram(f, bins=10, range=(-1, 1))[0] / f.size
-    assert np.abs(counts - 0.1).max() < 1e-3
+    assert f.min() == -255 / 256 and f.max() == 255 / 256
+    assert float(f.mean(dtype=np.float64)) == 0.0
+    # rank-mapped: every one of the 256 levels on the same number of texels
+    k = mottle_levels(256, seed=3)
+    assert k.dtype == np.uint8 and np.all(np.bincount(k.ravel(), minlength=256) == 256)
+    np.testing.assert_array_equal(f, (2.0 * k + 1) / 256 - 1)
     # correlation 1/e at the correlation length (Gaussian filter), gone by three lengths
     lag = int(TEXELS_PER_LENGTH)
     rho = [float(np.mean(f * np.roll(f, k, axis)) / np.mean(f * f)) for k in (lag, 3 * lag) for axis in (0, 1)]
