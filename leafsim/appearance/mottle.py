@@ -7,7 +7,8 @@ ahead or behind: each reaction's progress p goes to p + a·n·p(1 − p), with n
 This module makes n: a periodic square of band-limited noise (white noise under a Gaussian
 filter, so its correlation length is :data:`TEXELS_PER_LENGTH` texels), mapped by rank to an
 exactly uniform distribution over 256 levels in (−1, 1), symmetric, with mean exactly zero (the
-renderer samples it as an 8-bit texture, a quarter of a float one's memory; it draws as fast).  The renderer samples it at the
+renderer samples it as an 8-bit texture, a quarter of a float one's memory, drawn within a few
+per cent of a float one's time).  The renderer samples it at the
 particles' rest positions over ``colour.mottle_size``, so the flecks move with the tissue and
 keep their size at any mesh spacing.  Imports no OpenGL.
 """
