@@ -220,6 +220,7 @@ class VeinRibbons:
         self.next = np.concatenate(nxt)
         self.indices = np.concatenate(quads).astype(np.int32).ravel()
         hw = 0.5 * np.concatenate(width)
+        self.hw = hw  # half widths, metres (the mottle's sample positions across the ribbon)
         order = np.concatenate(order).astype(np.float32)
         uv = (np.zeros((start, 2)) if texcoords is None
               else np.asarray(texcoords, dtype=np.float64)[self.idx])
@@ -247,12 +248,24 @@ class VeinRibbons:
         return d.reshape(-1, 9)
 
     def mottle_rows(self, mottle: np.ndarray, rest: np.ndarray) -> np.ndarray:
-        """(2p, k + 2) float32 per ribbon vertex: the blade's sub-grid mottle pigments (k
-        columns, :func:`leafsim.appearance.reflectance.mottle_pigments`) and where the tissue
-        samples the mottle field, both of the centre line's vertex (the ribbon redraws the blade
-        under it with the photo albedos)."""
-        rows = np.concatenate([np.asarray(mottle, np.float32)[self.idx], np.asarray(rest, np.float32)[self.idx]], 1)
-        return np.repeat(rows, 2, axis=0)
+        """(2p, k + 2) float32 per ribbon vertex: the blade's sub-grid mottle pigments at the
+        centre line's vertex (k columns, :func:`leafsim.appearance.reflectance.mottle_pigments`)
+        and where the tissue samples the mottle field: the vertex's rest position moved half the
+        vein's width across the vein in the rest plane, to the side the vertex spreads to, so a
+        ribbon (which redraws the blade under it with the photo albedos) shows the field across
+        its width as the blade does, not one sample stretched across it in bars."""
+        rest = np.asarray(rest, np.float64)
+        c = rest[self.idx]
+        t = rest[self.idx[self.next]] - rest[self.idx[self.prev]]
+        ln = np.linalg.norm(t, axis=1, keepdims=True)
+        perp = np.where(ln > 1e-12, np.stack([-t[:, 1], t[:, 0]], 1) / np.maximum(ln, 1e-12), np.array([1.0, 0.0]))
+        off = perp * self.hw[:, None]
+        m = np.asarray(mottle, np.float32)[self.idx]
+        out = np.empty((self.count, 2, m.shape[1] + 2), np.float32)
+        out[:, :, :-2] = m[:, None, :]
+        out[:, 0, -2:] = c - off   # v = -1
+        out[:, 1, -2:] = c + off   # v = +1
+        return out.reshape(-1, m.shape[1] + 2)
 
     def base_colours(self, colours: np.ndarray, tint: np.ndarray, chroma: np.ndarray,
                      vein: np.ndarray | None = None) -> np.ndarray:

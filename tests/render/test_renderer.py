@@ -779,3 +779,22 @@ def test_mottle_switched_on_and_off_by_update(off, leaf):
     off.render_array(bare, cam, opts)
     with pytest.raises(LeafsimError, match="mottle_rest"):
         off.render_array({"positions": half.positions, "mottle": half.mottle, "mottle_size": 0.003}, cam, opts)
+
+
+def test_vein_ribbon_samples_the_mottle_across_its_width():
+    """A ribbon's two sides sample the mottle field half the vein's width either side of its
+    centre line, across the line in the rest plane (one sample stretched across a stalk drew
+    bars along it)."""
+    from leafsim.render.geom import VeinRibbons
+
+    rest = np.array([[0.0, 0.0], [0.001, 0.002], [0.002, 0.004], [0.003, 0.006]], np.float32)
+    width = np.array([0.002, 0.0016, 0.0012, 0.0008])
+    rib = VeinRibbons([(np.arange(4), width, 0)], 4)
+    mottle = np.arange(40, dtype=np.float32).reshape(4, 10)
+    rows = rib.mottle_rows(mottle, rest).reshape(4, 2, 12)
+    np.testing.assert_array_equal(rows[:, 0, :10], mottle)
+    np.testing.assert_array_equal(rows[:, 1, :10], mottle)
+    np.testing.assert_allclose(0.5 * (rows[:, 0, 10:] + rows[:, 1, 10:]), rest, atol=1e-7)
+    half = 0.5 * (rows[:, 1, 10:] - rows[:, 0, 10:])
+    np.testing.assert_allclose(np.linalg.norm(half, axis=1), width / 2, rtol=1e-5)
+    np.testing.assert_allclose(half @ np.array([1.0, 2.0]) / np.sqrt(5), 0.0, atol=1e-7)  # across the line
