@@ -10,7 +10,7 @@ from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output, not_an_input, output_target
 from leafsim.commands.common import Progress, emit, ready_kernels, species_inputs, species_params, stop_of
-from leafsim.export.mesh import export_mesh, format_of
+from leafsim.export.mesh import export_mesh, format_of, texture_file
 from leafsim.pipeline import build_leaf
 from leafsim.sim.run import Run, Stop
 
@@ -24,6 +24,12 @@ def _check(args) -> str:
         raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
     if args.every and fmt in ("obj", "ply"):
         raise LeafsimError(f"--every needs --format glb or gltf ({fmt} holds one static shape)")
+    if args.texture == "baked" and args.every:
+        raise LeafsimError(f"--texture baked holds one state's colour (a texture cannot change with the key frames): "
+                           f"leave out --every {args.every}, or use --texture colours for the drying animation")
+    if fmt == "ply" and args.texture != "colours":
+        raise LeafsimError(f"--texture {args.texture}: PLY carries vertex colours, not a texture (use --texture colours, "
+                           "or --format glb / obj)")
     if args.frames is None and args.until is None:
         if args.every:  # key frames of a run that does not run: an animation without a key
             raise LeafsimError(f"--every {args.every} needs --frames N or --until dry (how long the animated drying runs)")
@@ -33,21 +39,22 @@ def _check(args) -> str:
     if not folder.is_dir():
         raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")
     # the files written beside the mesh, checked now too (a folder named x.bin failed after the drying)
-    for path, what in _side_files(args.out, fmt):
+    for path, what in _side_files(args.out, fmt, args.texture):
         output_target(path, what)
     return fmt
 
 
-def _side_files(out, fmt: str) -> list:
+def _side_files(out, fmt: str, texture: str = "colours") -> list:
     """(path, what) of the files written beside the mesh ``out``."""
     out = Path(out)
+    png = [(texture_file(out, texture), "texture")] if texture != "colours" else []
     return {"gltf": [(out.with_suffix(".bin"), "glTF buffer")],
-            "obj": [(out.with_suffix(".mtl"), "material"), (out.with_name(out.stem + "_photo.png"), "texture")]}.get(fmt, [])
+            "obj": [(out.with_suffix(".mtl"), "material"), *png]}.get(fmt, [])
 
 
-def _written(out, fmt: str) -> list:
+def _written(out, fmt: str, texture: str = "colours") -> list:
     """Every file an export to ``out`` writes."""
-    return [Path(out), *(p for p, _ in _side_files(out, fmt))]
+    return [Path(out), *(p for p, _ in _side_files(out, fmt, texture))]
 
 
 def key_frames(run: Run, stop: Stop | int, every: int, progress: Progress | None = None) -> list:
@@ -73,7 +80,7 @@ def key_frames(run: Run, stop: Stop | int, every: int, progress: Progress | None
 def cmd_export(args):
     fmt = _check(args)
     sp, params = species_params(args, effects=True)
-    for path in _written(args.out, fmt):
+    for path in _written(args.out, fmt, args.texture):
         not_an_input(path, species_inputs(sp), "--out")
     if args.texture == "photo" and sp.image is None:
         raise LeafsimError(f"--texture photo: species '{sp.key}' has no photo (drawn outline)")

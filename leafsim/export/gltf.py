@@ -68,9 +68,9 @@ class GltfBuilder:
         self.doc["materials"].append({"name": name, "pbrMetallicRoughness": pbr, "doubleSided": True})
         return len(self.doc["materials"]) - 1
 
-    def texture(self, png: bytes) -> int:
+    def texture(self, png: bytes, name: str = "photo") -> int:
         d = self.doc
-        d["images"] = [{"bufferView": self.view(png), "mimeType": "image/png", "name": "photo"}]
+        d["images"] = [{"bufferView": self.view(png), "mimeType": "image/png", "name": name}]
         d["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}]
         d["textures"] = [{"sampler": 0, "source": 0}]
         return 0
@@ -144,22 +144,25 @@ class GltfBuilder:
         return self._json(bin_name), bytes(self.bin)
 
 
-def build_gltf(frames: list[dict], times: list[float], photo_png: bytes | None = None) -> GltfBuilder:
+def build_gltf(frames: list[dict], times: list[float], photo_png: bytes | None = None,
+               image_name: str = "photo") -> GltfBuilder:
     """A :class:`GltfBuilder` holding every surface of ``frames`` (one dict name → Surface per
-    key frame), animated over ``times`` when there is more than one frame."""
+    key frame), animated over ``times`` when there is more than one frame; the texture
+    ``photo_png`` goes on every surface with texture coordinates."""
     g = GltfBuilder()
-    tex = g.texture(photo_png) if photo_png is not None else None
+    tex = g.texture(photo_png, image_name) if photo_png is not None else None
     names = [f"t = {t - times[0]:.4g} s" for t in times[:-1]]  # the morph targets: every key frame but the last
-    nodes = [g.mesh(name, [f[name] for f in frames], g.material(name, tex), names) for name in frames[0]]
+    nodes = [g.mesh(name, [f[name] for f in frames], g.material(name, tex if frames[0][name].uv is not None else None),
+                    names) for name in frames[0]]
     if len(frames) > 1:
         g.animation(nodes, times)
     return g
 
 
 def write_gltf(path: Path, frames: list[dict], times: list[float], photo_png: bytes | None = None,
-               binary: bool = True) -> list[Path]:
+               binary: bool = True, image_name: str = "photo") -> list[Path]:
     """Write ``frames`` as ``path`` (.glb, or .gltf + a .bin beside it); returns the files."""
-    g = build_gltf(frames, times, photo_png)
+    g = build_gltf(frames, times, photo_png, image_name)
     if binary:
         return [atomic_write_bytes(path, g.glb(), "glTF binary")]
     bin_path = path.with_suffix(".bin")

@@ -5,7 +5,10 @@ a top surface at the current layer separation measured from the V particles, and
 along the margin — watertight) or as the **mid-surface** (``layers="mid"``: one sheet halfway
 between the layers, with the local thickness as a vertex attribute).  Colours are the baked
 pigment colours (linear RGB per vertex) or the species photo as a texture.  Veins are an
-optional second mesh (flat ribbons of the vein width on the upper surface).  Several states
+optional second mesh (flat ribbons of the vein width on the upper surface).  ``texture="baked"``
+writes one state's blade colour as a texture instead (:mod:`leafsim.export.bake`: the window's
+albedo per texel, the sub-grid mottle and a photo's detail included, which per-vertex colours
+cannot carry), the veins keeping their vertex colours.  Several states
 become a glTF animation: one morph target per key frame and an animation channel driving
 their weights (static formats take one state).  Every file is written atomically.
 
@@ -33,7 +36,7 @@ from leafsim.sim.model import Model, State
 
 FORMATS = ("glb", "gltf", "obj", "ply")
 LAYERS = ("shell", "mid")
-TEXTURES = ("colours", "photo")
+TEXTURES = ("colours", "photo", "baked")
 #: the ageing factor on a photo texture is clipped to this (a green pixel needs × 10 and more
 #: to turn red; the app's photo albedo clips at 64)
 MAX_AGEING = 64.0
@@ -140,13 +143,19 @@ class MeshSource:
     of one state (same topology for every state of the model)."""
 
     def __init__(self, model: Model, params, view=None, layers: str = "shell", veins: bool = False,
-                 texture: str = "colours"):
+                 texture: str = "colours", albedo: str = "detail"):
         from leafsim.appearance.view import LeafView
 
         if layers not in LAYERS:
             raise LeafsimError(f"export: layers {layers!r}: expected one of {', '.join(LAYERS)}")
         if texture not in TEXTURES:
             raise LeafsimError(f"export: texture {texture!r}: expected one of {', '.join(TEXTURES)}")
+        from leafsim.export.bake import ALBEDOS
+
+        if albedo not in ALBEDOS:
+            raise LeafsimError(f"export: albedo {albedo!r}: expected one of {', '.join(ALBEDOS)} (what a baked texture draws "
+                               "on a photo species)")
+        self.albedo = albedo
         if view is not None:  # another build's view indexed this model's particles with its own
             if not isinstance(view, LeafView):
                 raise LeafsimError(f"export: view is a {type(view).__name__}, expected a LeafView(model, photo_rgba) "
@@ -170,13 +179,16 @@ class MeshSource:
     def surfaces(self, state: State) -> dict[str, Surface]:
         """``{"blade": Surface, "veins": Surface}`` (veins only when asked for and present)."""
         col = None
-        if self.texture == "colours":
+        if self.texture in ("colours", "baked"):
             col = np.asarray(self.view.colours(state, self.params)[0], np.float64)
-        blade, top, n = blade_surface(self.model, state, self.view.T, self.view.remap, self.layers, self.uv, col)
+        baked = self.texture == "baked"  # the blade's colour is the texture; the veins keep theirs per vertex
+        blade, top, n = blade_surface(self.model, state, self.view.T, self.view.remap, self.layers, self.uv,
+                                      None if baked else col)
         out = {"blade": blade}
         if self.veins:
             vcol = None if col is None else self.view.vein_colours(state, self.params, col)
-            v = vein_surface(self.model, self.view.remap, top, n, self.uv, col if vcol is None else np.asarray(vcol, np.float64))
+            v = vein_surface(self.model, self.view.remap, top, n, None if baked else self.uv,
+                             col if vcol is None else np.asarray(vcol, np.float64))
             if v is not None:
                 out["veins"] = v
         if self.texture == "photo":  # the ageing as a factor on the photo, per vertex of each surface
@@ -187,6 +199,16 @@ class MeshSource:
                 out["veins"].ageing = np.concatenate([np.concatenate([f[self.view.remap[i]], f[self.view.remap[i]]])
                                                       for i, _, _ in self.model.vein_polylines() if len(i) >= 2]).astype(np.float32)
         return out
+
+    def texture_png(self, state: State) -> bytes | None:
+        """The texture of an export of ``state`` as PNG bytes: the photo (:meth:`photo_png`), the
+        blade's colour baked at ``state`` (:func:`~leafsim.export.bake.bake_png`), or None for
+        vertex colours."""
+        if self.texture == "baked":
+            from leafsim.export.bake import bake_png
+
+            return bake_png(self, state)
+        return self.photo_png()
 
     def photo_png(self) -> bytes | None:
         """The photo (RGB, at most TEXTURE_MAX px a side; the blade's colour carried past its margin,
@@ -222,7 +244,8 @@ def format_of(path, fmt: str | None) -> str:
 
 
 def export_mesh(model: Model, states, path, format: str | None = None, params=None, view=None,
-                layers: str = "shell", veins: bool = False, texture: str = "colours", times=None) -> dict:
+                layers: str = "shell", veins: bool = False, texture: str = "colours", times=None,
+                albedo: str = "detail") -> dict:
     """Write the leaf ``model`` in ``states`` (a State or a list; several = a glTF animation with
     one morph target per state after the first) to ``path``.
 
@@ -233,8 +256,12 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     view : a :class:`~leafsim.appearance.view.LeafView` (carries the photo); default a photo-less one.
     layers : "shell" (closed thin shell from both layers) or "mid" (mid-surface + thickness).
     veins : add the veins as a second mesh.
-    texture : "colours" (baked pigment colours) or "photo" (the species photo, glTF/OBJ).
+    texture : "colours" (baked pigment colours), "photo" (the species photo, glTF/OBJ) or
+        "baked" (one state's blade colour as a texture, mottle and photo detail included, glTF/OBJ).
     times : key times [s] of the states (default: their simulated times).
+    albedo : with ``texture="baked"`` on a photo species, the window's albedo the texture holds:
+        "detail" (the pigment colour with the photo's detail, the window's default), "texture"
+        (the photo tinted by the pigment change) or "colours" (the pigment colour alone).
 
     Returns a summary: format, path, files written, vertex and triangle counts per mesh, targets.
     """
@@ -270,17 +297,21 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     fmt = format_of(path, format)
     if fmt in ("obj", "ply") and len(states) > 1:
         raise LeafsimError(f"{path}: {fmt.upper()} holds one static shape; use glb or gltf for the drying animation")
-    if fmt == "ply" and texture == "photo":
-        raise LeafsimError(f"{path}: PLY carries vertex colours, not a photo texture (use --texture colours)")
-    src = MeshSource(model, params, view, layers, veins, texture)
+    if fmt == "ply" and texture in ("photo", "baked"):
+        raise LeafsimError(f"{path}: PLY carries vertex colours, not a {texture} texture (use --texture colours)")
+    if texture == "baked" and len(states) > 1:
+        raise LeafsimError(f"{path}: texture 'baked' holds one state's colour, and a glTF texture cannot change with "
+                           f"the key frames: export one state (no --every), or use --texture colours for the animation")
+    src = MeshSource(model, params, view, layers, veins, texture, albedo)
     frames = [src.surfaces(s) for s in states]
     times = [s.time for s in states] if times is None else times
+    png = src.texture_png(states[-1])
     if fmt in ("glb", "gltf"):
         from leafsim.export.gltf import write_gltf
 
-        files = write_gltf(Path(path), frames, times, src.photo_png(), binary=fmt == "glb")
+        files = write_gltf(Path(path), frames, times, png, binary=fmt == "glb", image_name=texture)
     elif fmt == "obj":
-        files = write_obj(Path(path), frames[0], src.photo_png())
+        files = write_obj(Path(path), frames[0], png, texture_file(path, texture))
     else:
         files = write_ply(Path(path), frames[0])
     return {"format": fmt, "path": str(path), "files": [str(f) for f in files], "targets": len(states) - 1,
@@ -295,11 +326,18 @@ def _srgb8(c: np.ndarray) -> np.ndarray:
     return np.clip(np.round(np.asarray(linear_to_srgb(np.clip(c, 0, 1)), np.float64) * 255.0), 0, 255).astype(np.uint8)
 
 
-def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None = None) -> list[Path]:
-    """OBJ + MTL (+ the photo PNG): one object per mesh, ``v x y z r g b`` vertex colours (sRGB,
-    the common extension trimesh, Blender and MeshLab read), ``vt``, ``vn``."""
-    stem = path.stem
-    mtl, png = path.with_suffix(".mtl"), path.with_name(stem + "_photo.png")
+def texture_file(path, texture: str) -> Path:
+    """The PNG an OBJ export of ``path`` writes beside it with ``texture`` "photo" or "baked"."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}_{texture}.png")
+
+
+def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None = None, png: Path | None = None) -> list[Path]:
+    """OBJ + MTL (+ the texture PNG, ``png``, default ``<stem>_photo.png``): one object per mesh,
+    ``v x y z r g b`` vertex colours (sRGB, the common extension trimesh, Blender and MeshLab
+    read), ``vt``, ``vn``; a mesh without texture coordinates is not textured."""
+    mtl = path.with_suffix(".mtl")
+    png = png if png is not None else texture_file(path, "photo")
     lines = ["# leafsim mesh export", f"mtllib {mtl.name}"]
     mat = ["# leafsim materials"]
     base = 0
@@ -307,7 +345,7 @@ def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None 
         lines.append(f"o {name}")
         lines.append(f"usemtl {name}")
         mat += [f"newmtl {name}", "Ka 0 0 0", "Kd 0.8 0.8 0.8", "Ks 0.05 0.05 0.05", "d 1", "illum 2"]
-        if photo_png is not None:
+        if photo_png is not None and s.uv is not None:
             mat.append(f"map_Kd {png.name}")
         rgb = None if s.colours is None else _srgb8(s.colours) / 255.0
         for i, p in enumerate(s.positions):

@@ -586,7 +586,9 @@ class LeafApp:
             raise LeafsimError(f"Export mesh: the simulation diverged (positions NaN/Inf at frame {s.frame}); "
                                "expected a finite leaf: press Reset")
         path = free_path(self._export_folder(), f"{s.species_key}_frame_{s.frame:05d}", ".glb")
-        rep = export_mesh(s.model, s.state.copy(), path, params=s.sim_params, view=s.view, veins=True)
+        # the blade's colour baked as the window draws it (sub-grid mottle, the photo's detail)
+        rep = export_mesh(s.model, s.state.copy(), path, params=s.sim_params, view=s.view, veins=True, texture="baked",
+                          albedo={"detail": "detail", "photo": "texture", "colours": "colours"}[self.albedo])
         tri = sum(m["triangles"] for m in rep["meshes"].values())
         self.status.info("mesh", f"exported mesh {path} ({tri} triangles)", path=path)
         return path

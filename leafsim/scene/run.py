@@ -277,8 +277,11 @@ def _output(w: _Where, o) -> dict:
     out = {"end_state": w.bool(o, "end_state", True, "output."), "every": every, "mesh": mesh,
            "layers": w.choice(o, "layers", "shell", LAYERS, "output."), "veins": w.bool(o, "veins", False, "output."),
            "texture": w.choice(o, "texture", "colours", TEXTURES, "output."), "stats": w.bool(o, "stats", False, "output.")}
-    if out["texture"] == "photo" and mesh == "ply":
-        raise w.err("output.texture", "PLY carries vertex colours, not a photo texture")
+    if out["texture"] != "colours" and mesh == "ply":
+        raise w.err("output.texture", f"PLY carries vertex colours, not a {out['texture']} texture")
+    if out["texture"] == "baked" and every:
+        # a glTF texture cannot change with the key frames: refused here, not after the leaves dried
+        raise w.err("output.texture", "'baked' holds one state's colour; frames every K need 'colours'")
     return out
 
 

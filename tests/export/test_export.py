@@ -264,7 +264,10 @@ def test_cli_export_animation_and_bad_input(tmp_path):
     assert_clean(out)
     for args, msg in [(["--every", "5", "--out", str(tmp_path / "x.obj")], "--every needs"),
                       (["--out", str(tmp_path / "nope" / "x.glb")], "does not exist"),
-                      (["--texture", "photo", "--out", str(tmp_path / "x.glb")], "has no photo")]:
+                      (["--texture", "photo", "--out", str(tmp_path / "x.glb")], "has no photo"),
+                      (["--texture", "baked", "--frames", "4", "--every", "2", "--out", str(tmp_path / "x.glb")],
+                       "--texture baked holds one state"),
+                      (["--texture", "baked", "--out", str(tmp_path / "x.ply")], "PLY carries vertex colours")]:
         r = _cli("export", "--species", "chestnut", *args)
         assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     r = _cli("export", "--species", "nosuch", "--out", str(tmp_path / "x.glb"))

@@ -227,7 +227,12 @@ def test_a_take_holds_every_nth_simulation_frame(tmp_path, dry):
 
 def test_export_mesh_button_writes_a_glb(tmp_path):
     """"Export mesh" writes the leaf on screen as a binary glTF into the export folder (created
-    when missing), a second click a second file; trimesh loads it with the blade's counts."""
+    when missing), a second click a second file; trimesh loads it with the blade's counts, its
+    blade coloured by the baked texture (the window's albedo, sub-grid mottle and photo detail
+    included), the veins by their vertex colours."""
+    import json
+    import struct
+
     import trimesh
 
     out = tmp_path / "meshes"
@@ -251,6 +256,11 @@ def test_export_mesh_button_writes_a_glb(tmp_path):
     scene = trimesh.load(files[0])
     blade = max(scene.geometry.values(), key=lambda g: len(g.faces))
     assert blade.is_watertight and len(blade.vertices) >= 2 * seen["nT"]
+    data = files[0].read_bytes()
+    doc = json.loads(data[20:20 + struct.unpack("<I", data[12:16])[0]])
+    assert [im["name"] for im in doc["images"]] == ["baked"]
+    prims = {m["name"]: m["primitives"][0]["attributes"] for m in doc["meshes"]}
+    assert "COLOR_0" not in prims["blade"] and "COLOR_0" in prims["veins"]
 
 
 def test_layout_does_not_move_when_messages_appear(tmp_path):

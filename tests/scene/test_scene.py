@@ -274,7 +274,29 @@ BAD = [
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "effects": []}]}, "key 'effects': expected a non-empty list"),
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "output": {"mesh": "obj", "every": 5}}]}, "key 'output.mesh'"),
     ({"layout": {"kind": "floor", "size": [0.1]}}, "key 'layout.size'"),
+    # a glTF texture cannot change with the key frames: refused before any leaf dries
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1},
+                  "output": {"mesh": "glb", "every": 5, "texture": "baked"}}]}, "key 'output.texture': 'baked' holds one state"),
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1},
+                  "output": {"mesh": "ply", "texture": "baked"}}]}, "key 'output.texture': PLY carries vertex colours"),
 ]
+
+
+def test_a_scene_leaf_exported_with_a_baked_texture(tmp_path):
+    """``output.texture = baked``: each leaf's mesh carries its colour (with the sub-grid
+    mottle) as a texture the glTF-Validator accepts."""
+    from helpers.gltf import assert_clean
+
+    path = _scene(tmp_path, name="baked", groups=[
+        {"name": "oak", "species": "oak", "count": 1, "seed": 2, "params": {**TINY, "colour.age_rate": 5.0},
+         "stop": {"frames": 30}, "output": {"mesh": "glb", "texture": "baked", "veins": True}}])
+    rep = run_scene(load_scene(path), tmp_path / "out", workers=1, progress=False)
+    assert rep["failed"] == []
+    glb = tmp_path / "out" / "leaves" / "oak-000" / "leaf.glb"
+    assert_clean(glb)
+    data = glb.read_bytes()
+    doc = json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
+    assert [im["name"] for im in doc["images"]] == ["baked"]
 
 
 @pytest.mark.parametrize("over,msg", BAD)

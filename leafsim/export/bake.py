@@ -1,0 +1,259 @@
+"""One state's blade colour baked into a texture (``export --texture baked``; core: no OpenGL).
+
+The window draws the blade's albedo per pixel: the pigment colour interpolated over each
+triangle, the photo's own detail on a photo species ("detail" albedo), and the sub-grid mottle
+(``colour.mottle``, :mod:`leafsim.appearance.mottle`), which moves every reaction's progress
+per pixel and so lives below the vertices.  Per-vertex colours cannot carry it: a glTF or OBJ
+of a turning leaf was smooth where the window is flecked.  This module computes the same
+albedo on the CPU at every texel of the blade's texture space (the particles' texture
+coordinates, the photo's for a photo species) and returns it as an 8-bit sRGB image:
+
+* every texel centre is located in a blade triangle of the texture space (:func:`_raster`:
+  barycentric coordinates, first triangle wins on shared edges);
+* the vertex attributes the fragment shader interpolates (colour, the photo detail's young
+  chromaticity and living weight, the mottle's pigment rows and rest positions) are
+  interpolated with the same barycentric weights;
+* the photo is sampled bilinearly after the exact sRGB decode (what the GL sampler does),
+  the mottle field bilinearly with wrap-around, and ``photo_detail`` and ``mottle_ratio``
+  are the shader's formulas (:mod:`leafsim.appearance.reflectance` holds the mottle's CPU twin);
+* texels outside the blade take the nearest blade colour over a few texels (a viewer that
+  filters or mipmaps across the margin finds no background colour there).
+
+A texel is at most a third of the mottle's correlation length on the blade (sharper flecks
+than the window at any zoom a user would draw the leaf), within :data:`BAKE_MIN` and
+:data:`BAKE_MAX` texels a side.  A state is a still: an animation's texture could not
+change with its key frames, so animations carry vertex colours (:func:`leafsim.export.mesh.export_mesh`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from leafsim.base.cache import configure_numba_cache
+
+configure_numba_cache()
+
+#: texels per correlation length of the mottle on the blade (at least)
+TEXELS_PER_MOTTLE = 3.0
+#: largest and smallest side of a baked texture, texels
+BAKE_MAX = 4096
+BAKE_MIN = 256
+#: texels outside the blade filled with the nearest blade colour
+BLEED = 8
+#: texels computed per chunk (bounds the memory of the interpolated attributes)
+CHUNK = 1 << 18
+#: the fragment shader's "no photo detail" chromaticity and weight
+NO_CHROMA = np.array([1.0, 1.0, 1.0, 0.0])
+_W = np.array([0.2126, 0.7152, 0.0722])
+
+
+@njit(cache=True, nogil=True)
+def _raster(uv_px, tri, tri_id, bary):  # pragma: no cover - compiled
+    """Locate every texel centre (x + ½, y + ½) in the triangles ``tri`` (m, 3) of vertex
+    positions ``uv_px`` (n, 2) in texels: ``tri_id`` (H, W) int32 (−1 outside; filled by the
+    caller) gets the triangle, ``bary`` (H, W, 2) the weights of its second and third vertex."""
+    H, W = tri_id.shape
+    for t in range(tri.shape[0]):
+        a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
+        ax, ay = uv_px[a, 0], uv_px[a, 1]
+        bx, by = uv_px[b, 0] - ax, uv_px[b, 1] - ay
+        cx, cy = uv_px[c, 0] - ax, uv_px[c, 1] - ay
+        det = bx * cy - by * cx
+        if abs(det) < 1e-12:
+            continue
+        x0 = max(int(np.floor(min(ax, ax + bx, ax + cx) - 0.5)), 0)
+        x1 = min(int(np.ceil(max(ax, ax + bx, ax + cx) - 0.5)), W - 1)
+        y0 = max(int(np.floor(min(ay, ay + by, ay + cy) - 0.5)), 0)
+        y1 = min(int(np.ceil(max(ay, ay + by, ay + cy) - 0.5)), H - 1)
+        eps = -1e-9
+        for y in range(y0, y1 + 1):
+            py = y + 0.5 - ay
+            for x in range(x0, x1 + 1):
+                if tri_id[y, x] >= 0:
+                    continue
+                px = x + 0.5 - ax
+                s = (px * cy - py * cx) / det
+                r = (bx * py - by * px) / det
+                if s >= eps and r >= eps and s + r <= 1.0 - eps:
+                    tri_id[y, x] = t
+                    bary[y, x, 0] = s
+                    bary[y, x, 1] = r
+
+
+def srgb_decode(x: np.ndarray) -> np.ndarray:
+    """The exact sRGB transfer curve's inverse (what an sRGB texture sampler applies), float64."""
+    x = np.asarray(x, np.float64)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def bilinear(img: np.ndarray, u: np.ndarray, v: np.ndarray, wrap: bool) -> np.ndarray:
+    """``img`` (H, W[, C]) sampled at texture coordinates ``u``, ``v`` (0..1 across the image,
+    texel centres at (i + ½)/W) as a GL linear sampler does: wrapped (repeat) or clamped to
+    the edge."""
+    H, W = img.shape[:2]
+    x = np.asarray(u, np.float64) * W - 0.5
+    y = np.asarray(v, np.float64) * H - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    if wrap:
+        xa, xb, ya, yb = x0 % W, (x0 + 1) % W, y0 % H, (y0 + 1) % H
+    else:
+        xa, xb = np.clip(x0, 0, W - 1), np.clip(x0 + 1, 0, W - 1)
+        ya, yb = np.clip(y0, 0, H - 1), np.clip(y0 + 1, 0, H - 1)
+    if img.ndim == 3:
+        fx, fy = fx[:, None], fy[:, None]
+    f = lambda a, b: np.asarray(img[a, b], np.float64)  # noqa: E731
+    return (f(ya, xa) * (1 - fx) + f(ya, xb) * fx) * (1 - fy) + (f(yb, xa) * (1 - fx) + f(yb, xb) * fx) * fy
+
+
+def photo_detail(base: np.ndarray, t: np.ndarray, tex_mean, chroma: np.ndarray) -> np.ndarray:
+    """The fragment shader's ``photo_detail`` (shaders/common.glsl): the pigment colour ``base``
+    with the photo texel ``t``'s brightness over the photo's mean and, weighted by the living
+    tissue, its chromaticity over the young one (all linear RGB, (k, 3); ``chroma`` (k, 4))."""
+    lum = t @ _W
+    f = np.clip(lum / max(float(np.asarray(tex_mean, np.float64) @ _W), 1e-4), 0.0, 3.0)
+    ratio = np.clip((t / np.maximum(lum, 1e-4)[:, None]) / np.maximum(chroma[:, :3], 1e-4), 0.25, 4.0)
+    b = np.maximum(base, 0.0)
+    c = b * ratio ** np.clip(chroma[:, 3:4], 0.0, 1.0)
+    return f[:, None] * c * ((b @ _W) / np.maximum(c @ _W, 1e-6))[:, None]
+
+
+def texture_size(uv: np.ndarray, xy: np.ndarray, tri: np.ndarray, mottle_size: float,
+                 photo_size: tuple[int, int] | None = None) -> tuple[int, int]:
+    """(width, height) in texels of the texture space [0, 1]² so that a texel spans at most
+    1/:data:`TEXELS_PER_MOTTLE` of the mottle's correlation length on the blade (rest
+    positions ``xy`` [m] against texture coordinates ``uv`` over the triangles ``tri``) and,
+    with a photo (``photo_size`` (W, H): the texture space is the photo), no more than a photo
+    pixel; clamped to [:data:`BAKE_MIN`, :data:`BAKE_MAX`]."""
+    e1u, e2u = uv[tri[:, 1]] - uv[tri[:, 0]], uv[tri[:, 2]] - uv[tri[:, 0]]
+    e1x, e2x = xy[tri[:, 1]] - xy[tri[:, 0]], xy[tri[:, 2]] - xy[tri[:, 0]]
+    det = e1u[:, 0] * e2u[:, 1] - e1u[:, 1] * e2u[:, 0]
+    ok = np.abs(det) > 1e-14
+    # the Jacobian ∂x/∂(u, v) of each triangle's affine map; its column norms are metres per unit of u and v
+    inv = np.stack([np.stack([e2u[ok, 1], -e1u[ok, 1]], 1), np.stack([-e2u[ok, 0], e1u[ok, 0]], 1)], 1) / det[ok, None, None]
+    X = np.stack([e1x[ok], e2x[ok]], 2)  # (m, 2 coords, 2 edges)
+    J = X @ inv  # (m, 2, 2): d(x, y)/d(u, v)
+    per_u = float(np.median(np.linalg.norm(J[:, :, 0], axis=1))) if ok.any() else 0.1
+    per_v = float(np.median(np.linalg.norm(J[:, :, 1], axis=1))) if ok.any() else 0.1
+    texel = max(float(mottle_size), 1e-5) / TEXELS_PER_MOTTLE
+    pw, ph = photo_size if photo_size is not None else (0, 0)
+    side = lambda metres, floor: int(np.clip(np.ceil(max(metres / texel, floor) / 4.0) * 4, BAKE_MIN, BAKE_MAX))  # noqa: E731
+    return side(per_u, pw), side(per_v, ph)
+
+
+def _bleed(rgb: np.ndarray, inside: np.ndarray, width: int) -> np.ndarray:
+    """``rgb`` with the texels within ``width`` of ``inside`` given the mean of their inside (or
+    already filled) neighbours, ring by ring."""
+    import cv2
+
+    out = rgb.astype(np.float32).copy()
+    have = inside.astype(np.float32)
+    k = np.ones((3, 3), np.float32)
+    for _ in range(int(width)):
+        s = cv2.filter2D(out * have[..., None], -1, k, borderType=cv2.BORDER_CONSTANT)
+        n = cv2.filter2D(have, -1, k, borderType=cv2.BORDER_CONSTANT)
+        new = (have == 0) & (n > 0)
+        if not new.any():
+            break
+        out[new] = s[new] / n[new][:, None]
+        have[new] = 1.0
+    return out
+
+
+#: the window's albedos a bake reproduces (render options' names)
+ALBEDOS = ("detail", "texture", "colours")
+
+
+def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(albedo (H, W, 3) float64 linear RGB, blade (H, W) bool) of ``source``'s blade in
+    ``state`` over the texture space (``source``: a :class:`~leafsim.export.mesh.MeshSource`;
+    ``size`` (W, H) default :func:`texture_size`).  The albedo is ``source.albedo``'s where the
+    species has a photo (and ``render.texture`` is on): "detail" (the pigment colour with the
+    photo's detail, the window's default), "texture" (the photo times the view's tint) or
+    "colours"; the pigment colour otherwise.  Outside the blade the nearest blade colour over
+    :data:`BLEED` texels, black beyond."""
+    from leafsim.appearance.mottle import mottle_levels, mottle_scale
+    from leafsim.appearance.reflectance import mottle_ratio
+
+    view, params, model = source.view, source.params, source.model
+    # the blade's own triangles first: where the stalk's thin strip of texture space overlaps
+    # the blade's (a photo's petiole on the blade), the blade's colour is kept
+    stalk_tri = ~model.blade_particles[model.tri_T].all(axis=1)
+    tri = view.remap[model.tri_T[np.argsort(stalk_tri, kind="stable")]].astype(np.int64)
+    uv = np.asarray(source.uv, np.float64)
+    col, tint = view.colours(state, params)
+    col = np.asarray(col, np.float64)
+    mottle, msize, amount = view.mottle(state, params)
+    rest = np.asarray(view.mottle_rest(state), np.float64)
+    mode = getattr(source, "albedo", "detail")
+    photo = view.photo_rgba if view.use_texture(params) and mode != "colours" else None
+    if photo is not None and mode == "texture":
+        col = np.ones_like(col) if tint is None else np.asarray(tint, np.float64)  # the photo × the tint
+    if size is None:
+        size = texture_size(uv, model.particle_rest[view.T][:, :2], tri, msize if msize > 0 else 6e-4,
+                            None if photo is None else (photo.shape[1], photo.shape[0]))
+    W, H = int(size[0]), int(size[1])
+    chroma = view.chroma(state, params) if photo is not None and mode == "detail" else None
+    tri_id = np.full((H, W), -1, np.int32)
+    bary = np.zeros((H, W, 2), np.float64)
+    _raster(uv * np.array([W, H], np.float64), tri, tri_id, bary)
+    inside = tri_id >= 0
+    # per-vertex attributes the fragment shader interpolates
+    cols = [col]
+    if chroma is not None:
+        cols.append(np.asarray(chroma, np.float64))
+    use_mottle = mottle is not None and msize > 0 and amount > 0
+    if use_mottle:
+        cols += [np.asarray(mottle, np.float64), rest]
+    attr = np.concatenate(cols, 1)
+    if photo is not None:
+        from leafsim.appearance.texture import clean_texture
+
+        tex = srgb_decode(clean_texture(np.asarray(photo))[:, :, :3] / 255.0)
+        mask = np.asarray(photo)[:, :, 3] >= 128
+        lin = (np.asarray(photo)[:, :, :3][mask].astype(np.float64) / 255.0) ** 2.2  # the renderer's mean (u_tex_mean)
+        tex_mean = lin.mean(axis=0) if lin.size else np.array([0.2, 0.3, 0.1])
+    if use_mottle:
+        noise = mottle_levels()
+        scale = mottle_scale(msize)
+    out = np.zeros((H, W, 3), np.float64)
+    ys, xs = np.nonzero(inside)
+    for lo in range(0, len(ys), CHUNK):
+        y, x = ys[lo:lo + CHUNK], xs[lo:lo + CHUNK]
+        t = tri[tri_id[y, x]]
+        s, r = bary[y, x, 0:1], bary[y, x, 1:2]
+        a = attr[t[:, 0]] * (1.0 - s - r) + attr[t[:, 1]] * s + attr[t[:, 2]] * r
+        albedo = a[:, :3]
+        k = 3
+        if photo is not None:
+            texel = bilinear(tex, (x + 0.5) / W, (y + 0.5) / H, wrap=False)
+            if mode == "texture":
+                albedo = texel * albedo
+            else:
+                ch = a[:, k:k + 4] if chroma is not None else np.tile(NO_CHROMA, (len(a), 1))
+                k += 4 if chroma is not None else 0
+                albedo = photo_detail(albedo, texel, tex_mean, ch)
+        if use_mottle:
+            rows, pos = a[:, k:k + 10], a[:, k + 10:k + 12]
+            lev = bilinear(noise, pos[:, 0] * scale, pos[:, 1] * scale, wrap=True) / 255.0
+            n = lev * (255.0 / 128.0) - (255.0 / 256.0)  # the shader's mottle_n
+            albedo = albedo * mottle_ratio(rows, n, amount)
+        out[y, x] = albedo
+    return _bleed(out, inside, BLEED).astype(np.float64), inside
+
+
+def bake_png(source, state) -> bytes:
+    """:func:`bake_albedo` as PNG bytes (8-bit sRGB, what glTF's baseColorTexture holds)."""
+    import cv2
+
+    from leafsim.appearance.reflectance import linear_to_srgb
+    from leafsim.base.errors import LeafsimError
+
+    albedo, _ = bake_albedo(source, state)
+    srgb = np.clip(np.round(linear_to_srgb(np.clip(albedo, 0.0, 1.0)).astype(np.float64) * 255.0), 0, 255).astype(np.uint8)
+    ok, buf = cv2.imencode(".png", cv2.cvtColor(srgb, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise LeafsimError("export: cannot encode the baked texture as PNG")
+    return buf.tobytes()

@@ -1,0 +1,206 @@
+"""The baked texture (``export --texture baked``): the window's albedo, sub-grid mottle and photo
+detail included, computed on the CPU per texel; checked against the renderer itself (the
+top-down scanner picture of the same flat leaf, whose blade facing up is drawn in exactly its
+albedo), against the GL sampling conventions, and in the files a client opens."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from helpers.gltf import assert_clean
+from leafsim.appearance.photo import load_photo_rgba
+from leafsim.appearance.reflectance import linear_to_srgb
+from leafsim.appearance.view import LeafView
+from leafsim.base.errors import LeafsimError
+from leafsim.config.species import get_species
+from leafsim.export.bake import _raster, bake_albedo, bake_png, bilinear
+from leafsim.export.mesh import MeshSource, export_mesh
+from leafsim.pipeline import build_leaf
+from leafsim.sim.simulator import Simulator
+
+
+def _locate(pts, tri, W, H):
+    tri_id = np.full((H, W), -1, np.int32)
+    bary = np.zeros((H, W, 2))
+    _raster(np.asarray(pts, np.float64), np.asarray(tri, np.int64), tri_id, bary)
+    return tri_id, bary
+
+
+def test_every_texel_of_a_triangulated_square_is_located_once_at_its_centre():
+    """A Delaunay triangulation of random points covering [0, W] × [0, H]: every texel centre is
+    found in a triangle (none lost on the shared edges) and its barycentric weights give back
+    the centre."""
+    rng = np.random.default_rng(3)
+    W, H = 37, 23
+    pts = np.concatenate([[[0, 0], [W, 0], [0, H], [W, H]], rng.uniform(0, 1, (40, 2)) * [W, H]])
+    tri = Delaunay(pts).simplices
+    tri_id, bary = _locate(pts, tri, W, H)
+    assert (tri_id >= 0).all()
+    y, x = np.mgrid[0:H, 0:W]
+    t = tri[tri_id]
+    s, r = bary[..., 0:1], bary[..., 1:2]
+    back = pts[t[..., 0]] * (1 - s - r) + pts[t[..., 1]] * s + pts[t[..., 2]] * r
+    assert np.abs(back - np.stack([x + 0.5, y + 0.5], -1)).max() < 1e-9
+    assert (bary >= -1e-9).all() and (bary.sum(-1) <= 1 + 1e-9).all()
+
+
+def test_a_triangle_covers_its_area_and_nothing_outside_it():
+    tri = np.array([[0, 1, 2]])
+    pts = np.array([[3.2, 4.1], [50.7, 10.3], [20.4, 38.9]])
+    tri_id, _ = _locate(pts, tri, 64, 48)
+    (ax, ay), (bx, by) = pts[1] - pts[0], pts[2] - pts[0]
+    area = 0.5 * abs(ax * by - ay * bx)
+    perimeter = sum(np.linalg.norm(pts[(i + 1) % 3] - pts[i]) for i in range(3))
+    assert abs((tri_id == 0).sum() - area) < 0.5 * perimeter
+
+
+def test_bilinear_samples_as_a_gl_linear_sampler():
+    """Texel centres at (i + ½)/W: a linear ramp is reproduced exactly inside, the edge clamps
+    and the wrap-around (repeat) blends the last column with the first."""
+    H, W = 8, 10
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    img = 2.0 * x + 3.0 * y
+    u, v = np.array([0.23, 0.51, 0.77]), np.array([0.31, 0.5, 0.66])
+    assert np.allclose(bilinear(img, u, v, wrap=False), 2.0 * (u * W - 0.5) + 3.0 * (v * H - 0.5))
+    assert np.isclose(bilinear(img, np.array([0.0]), np.array([0.5]), wrap=True)[0], 0.5 * (img[3, 0] + img[3, -1]) * 0.5
+                      + 0.5 * (img[4, 0] + img[4, -1]) * 0.5)
+    assert np.isclose(bilinear(img, np.array([0.0]), np.array([0.5]), wrap=False)[0], 0.5 * (img[3, 0] + img[4, 0]))
+    rgb = np.stack([img, 2 * img, -img], -1)
+    assert np.allclose(bilinear(rgb, u, v, wrap=True), np.stack([bilinear(img, u, v, True) * k for k in (1, 2, -1)], -1))
+
+
+def _turning(key: str, mottle: float = 0.7):
+    """(model, params, view) of species ``key`` on a coarse mesh, and a state lying flat at rest
+    whose every reaction is half-way (the mottle's strongest), as the window would draw it."""
+    sp = get_species(key)
+    params = sp.params.with_overrides({"mesh.spacing": 0.04, "colour.mottle": mottle})
+    _, _, model = build_leaf(sp, params, 0)
+    sim = Simulator(model, params, seed=0)
+    st = sim.state()
+    pig0 = st.pigments.copy()
+    st.particle_q[:] = model.particle_rest
+    p = st.pigments
+    p.chlorophyll[:], p.carotenoid[:], p.browning[:], p.necrosis[:] = 0.45, 0.8, 0.4, 0.15
+    photo = load_photo_rgba(sp.image) if sp.image is not None else None
+    view = LeafView(model, photo, pig0, photo_tint=False, photo_colour=sp.photo_colour)
+    return model, params, view, st
+
+
+def _srgb8(lin):
+    return np.clip(np.round(linear_to_srgb(np.clip(lin, 0, 1)).astype(float) * 255.0), 0, 255)
+
+
+@pytest.mark.parametrize("key", ["maple", "oak"])
+def test_the_bake_is_what_the_window_draws(key):
+    """The texture sampled where each pixel of the renderer's top-down picture of the same flat
+    leaf lies (that pixel's texture coordinates): the same colour within a level on average, a
+    few at worst (a texel is resampled once more than a window pixel), with the mottle's flecks
+    and, on oak, the photo's detail ("detail" albedo).  Fails when the bake leaves out the
+    mottle (its flecks are 7-9 levels of RMS here) or the photo."""
+    from leafsim.compare.metrics import Frame
+    from leafsim.render.topdown import TopDown
+
+    model, params, view, st = _turning(key)
+    src = MeshSource(model, params, view, "shell", False, "baked")
+    alb, inside = bake_albedo(src, st)
+    xy = model.particle_rest[view.T][:, :2]
+    scale = 2500.0 / np.ptp(xy, axis=0).max()
+    lo, hi = xy.min(0) - 0.002, xy.max(0) + 0.002
+    fr = Frame(scale, float(lo[0]), float(hi[1]), int((hi[0] - lo[0]) * scale) + 1, int((hi[1] - lo[1]) * scale) + 1)
+    td = TopDown(fr, supersample=1)
+    try:
+        rgb, mask = td.render(view.mesh(st, params), {"albedo": "detail" if view.photo_rgba is not None else "colours",
+                                                       "veins": False})
+    finally:
+        td.release()
+    tri = view.remap[model.blade_tri_T].astype(np.int64)
+    tri_id, bary = _locate(fr.to_px(xy), tri, fr.width, fr.height)
+    ok = (tri_id >= 0) & cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    y, x = np.nonzero(ok)
+    t = tri[tri_id[y, x]]
+    s, r = bary[y, x, 0:1], bary[y, x, 1:2]
+    uv = src.uv[t[:, 0]] * (1 - s - r) + src.uv[t[:, 1]] * s + src.uv[t[:, 2]] * r
+    baked = _srgb8(bilinear(alb, uv[:, 0], uv[:, 1], wrap=False))
+    window = rgb[y, x].astype(float)
+    d = np.abs(baked - window)
+    assert len(y) > 20000
+    assert d.mean() < 1.0 and np.percentile(d, 99) <= 6, (d.mean(), np.percentile(d, 99))
+    # the flecks are there: the window's picture minus its blur over a few flecks
+    fine = window - cv2.GaussianBlur(rgb.astype(np.float32), (0, 0), 4.0)[y, x]
+    assert fine.std() > 4.0
+
+
+def test_a_fresh_leaf_bakes_its_vertex_colours_and_the_mottle_adds_flecks_only_when_turning():
+    """Fresh tissue is uniform under the mottle (p = 0): the bake is the interpolated pigment
+    colour, the same with colour.mottle 0; a turning leaf's bake with the mottle carries several
+    times the fine structure of one without, and the same mean colour (the mottle moves the
+    pigments about their mean)."""
+    model, params, view, st = _turning("maple")
+    _, params0, view0, _ = _turning("maple", mottle=0.0)
+    fresh = Simulator(model, params, seed=0).state()
+    a, inside = bake_albedo(MeshSource(model, params, view, "shell", False, "baked"), fresh)
+    b, _ = bake_albedo(MeshSource(model, params0, view0, "shell", False, "baked"), fresh)
+    assert np.abs(a - b)[inside].max() < 1e-6
+    m, _ = bake_albedo(MeshSource(model, params, view, "shell", False, "baked"), st)
+    s, _ = bake_albedo(MeshSource(model, params0, view0, "shell", False, "baked"), st)
+    inner = cv2.erode(inside.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
+
+    def fine(img):
+        img = _srgb8(img).astype(np.float32)
+        return (img - cv2.GaussianBlur(img, (0, 0), 3.0))[inner].std()
+
+    assert fine(m) > 10.0 * fine(s) and fine(m) > 1.5, (fine(m), fine(s))
+    assert np.abs(_srgb8(m)[inner].mean(0) - _srgb8(s)[inner].mean(0)).max() < 2.0
+
+
+def _glb_json(path) -> tuple[dict, bytes]:
+    data = path.read_bytes()
+    n, kind = struct.unpack("<I4s", data[12:20])
+    assert kind == b"JSON"
+    doc = json.loads(data[20:20 + n])
+    m = struct.unpack("<I", data[20 + n:24 + n])[0]
+    return doc, data[28 + n:28 + n + m]
+
+
+def test_a_baked_export_opens_as_a_textured_glb_and_obj(tmp_path):
+    """glb: valid, the blade textured by the bake (no vertex colours), the veins keeping theirs
+    (no texture), byte for byte reproducible; OBJ: the texture beside it, mapped on the blade
+    only.  An animation or a PLY is refused in one line, and nothing is written."""
+    model, params, view, st = _turning("oak")
+    path = tmp_path / "oak.glb"
+    export_mesh(model, st, path, params=params, view=view, veins=True, texture="baked")
+    assert_clean(path)
+    doc, blob = _glb_json(path)
+    prims = {m["name"]: m["primitives"][0] for m in doc["meshes"]}
+    assert "COLOR_0" not in prims["blade"]["attributes"] and "TEXCOORD_0" in prims["blade"]["attributes"]
+    assert "COLOR_0" in prims["veins"]["attributes"] and "TEXCOORD_0" not in prims["veins"]["attributes"]
+    mats = doc["materials"]
+    assert mats[prims["blade"]["material"]]["pbrMetallicRoughness"]["baseColorTexture"] == {"index": 0}
+    assert "baseColorTexture" not in mats[prims["veins"]["material"]]["pbrMetallicRoughness"]
+    assert doc["images"][0]["name"] == "baked"
+    bv = doc["bufferViews"][doc["images"][0]["bufferView"]]
+    png = blob[bv["byteOffset"]:bv["byteOffset"] + bv["byteLength"]]
+    assert png == bake_png(MeshSource(model, params, view, "shell", True, "baked"), st)
+    again = tmp_path / "again.glb"
+    export_mesh(model, st, again, params=params, view=view, veins=True, texture="baked")
+    assert again.read_bytes() == path.read_bytes()
+
+    files = export_mesh(model, st, tmp_path / "oak.obj", params=params, view=view, veins=True, texture="baked")["files"]
+    assert sorted(p.rsplit("/", 1)[-1] for p in files) == ["oak.mtl", "oak.obj", "oak_baked.png"]
+    mtl = (tmp_path / "oak.mtl").read_text().split("newmtl ")
+    assert [m.split()[0] for m in mtl if "map_Kd oak_baked.png" in m] == ["blade"]
+
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(LeafsimError, match="one state"):
+        export_mesh(model, [st, st], tmp_path / "anim.glb", params=params, view=view, texture="baked", times=[0.0, 1.0])
+    with pytest.raises(LeafsimError, match="PLY carries vertex colours"):
+        export_mesh(model, st, tmp_path / "x.ply", params=params, view=view, texture="baked")
+    with pytest.raises(LeafsimError, match="albedo 'shiny'"):
+        export_mesh(model, st, tmp_path / "y.glb", params=params, view=view, texture="baked", albedo="shiny")
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
