@@ -16,12 +16,16 @@ coordinates, the photo's for a photo species) and returns it as an 8-bit sRGB im
 * the photo is sampled bilinearly after the exact sRGB decode (what the GL sampler does),
   the mottle field bilinearly with wrap-around, and ``photo_detail`` and ``mottle_ratio``
   are the shader's formulas (:mod:`leafsim.appearance.reflectance` holds the mottle's CPU twin);
-* texels outside the blade take the nearest blade colour over a few texels (a viewer that
-  filters or mipmaps across the margin finds no background colour there).
+* every texel outside the blade takes the nearest blade texel's colour (a viewer that filters
+  or mipmaps across the margin finds no background colour there, at any mip level).
 
 A texel is at most a third of the mottle's correlation length on the blade (sharper flecks
 than the window at any zoom a user would draw the leaf), within :data:`BAKE_MIN` and
-:data:`BAKE_MAX` texels a side.  A state is a still: an animation's texture could not
+:data:`BAKE_MAX` texels a side; over a photo the texture is the photo's size, or an integer
+multiple of it where the mottle asks for more (texel centres on the photo's pixels' grid, so
+its detail is not resampled at fractional offsets).  Where the stalk's texture coordinates
+overlap the blade's (the petiole drawn on a photo, or a drawn leaf's stalk at its base), the
+blade's triangles are baked and the stalk shows the blade's colour there.  A state is a still: an animation's texture could not
 change with its key frames, so animations carry vertex colours (:func:`leafsim.export.mesh.export_mesh`).
 """
 
@@ -39,8 +43,6 @@ TEXELS_PER_MOTTLE = 3.0
 #: largest and smallest side of a baked texture, texels
 BAKE_MAX = 4096
 BAKE_MIN = 256
-#: texels outside the blade filled with the nearest blade colour
-BLEED = 8
 #: texels computed per chunk (bounds the memory of the interpolated attributes)
 CHUNK = 1 << 18
 #: the fragment shader's "no photo detail" chromaticity and weight
@@ -138,28 +140,24 @@ def texture_size(uv: np.ndarray, xy: np.ndarray, tri: np.ndarray, mottle_size: f
     per_u = float(np.median(np.linalg.norm(J[:, :, 0], axis=1))) if ok.any() else 0.1
     per_v = float(np.median(np.linalg.norm(J[:, :, 1], axis=1))) if ok.any() else 0.1
     texel = max(float(mottle_size), 1e-5) / TEXELS_PER_MOTTLE
-    pw, ph = photo_size if photo_size is not None else (0, 0)
-    side = lambda metres, floor: int(np.clip(np.ceil(max(metres / texel, floor) / 4.0) * 4, BAKE_MIN, BAKE_MAX))  # noqa: E731
-    return side(per_u, pw), side(per_v, ph)
+    if photo_size is not None:  # the photo's grid, times the integer the mottle asks for (if the cap allows)
+        pw, ph = (int(x) for x in photo_size)
+        k = max(1, int(np.ceil(max(per_u / texel / pw, per_v / texel / ph))))
+        while k > 1 and max(pw, ph) * k > BAKE_MAX:
+            k -= 1
+        return pw * k, ph * k
+    side = lambda metres: int(np.clip(np.ceil(metres / texel), BAKE_MIN, BAKE_MAX))  # noqa: E731
+    return side(per_u), side(per_v)
 
 
-def _bleed(rgb: np.ndarray, inside: np.ndarray, width: int) -> np.ndarray:
-    """``rgb`` with the texels within ``width`` of ``inside`` given the mean of their inside (or
-    already filled) neighbours, ring by ring."""
-    import cv2
+def _fill_outside(rgb: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """``rgb`` with every texel outside ``inside`` given its nearest inside texel's colour."""
+    from scipy.ndimage import distance_transform_edt
 
-    out = rgb.astype(np.float32).copy()
-    have = inside.astype(np.float32)
-    k = np.ones((3, 3), np.float32)
-    for _ in range(int(width)):
-        s = cv2.filter2D(out * have[..., None], -1, k, borderType=cv2.BORDER_CONSTANT)
-        n = cv2.filter2D(have, -1, k, borderType=cv2.BORDER_CONSTANT)
-        new = (have == 0) & (n > 0)
-        if not new.any():
-            break
-        out[new] = s[new] / n[new][:, None]
-        have[new] = 1.0
-    return out
+    if inside.all() or not inside.any():
+        return rgb
+    _, (iy, ix) = distance_transform_edt(~inside, return_distances=True, return_indices=True)
+    return rgb[iy, ix]
 
 
 #: the window's albedos a bake reproduces (render options' names)
@@ -167,13 +165,12 @@ ALBEDOS = ("detail", "texture", "colours")
 
 
 def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(albedo (H, W, 3) float64 linear RGB, blade (H, W) bool) of ``source``'s blade in
+    """(albedo (H, W, 3) float32 linear RGB, blade (H, W) bool) of ``source``'s blade in
     ``state`` over the texture space (``source``: a :class:`~leafsim.export.mesh.MeshSource`;
     ``size`` (W, H) default :func:`texture_size`).  The albedo is ``source.albedo``'s where the
     species has a photo (and ``render.texture`` is on): "detail" (the pigment colour with the
     photo's detail, the window's default), "texture" (the photo times the view's tint) or
-    "colours"; the pigment colour otherwise.  Outside the blade the nearest blade colour over
-    :data:`BLEED` texels, black beyond."""
+    "colours"; the pigment colour otherwise.  Outside the blade the nearest blade texel's colour."""
     from leafsim.appearance.mottle import mottle_levels, mottle_scale
     from leafsim.appearance.reflectance import mottle_ratio
 
@@ -197,7 +194,7 @@ def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.
     W, H = int(size[0]), int(size[1])
     chroma = view.chroma(state, params) if photo is not None and mode == "detail" else None
     tri_id = np.full((H, W), -1, np.int32)
-    bary = np.zeros((H, W, 2), np.float64)
+    bary = np.zeros((H, W, 2), np.float32)
     _raster(uv * np.array([W, H], np.float64), tri, tri_id, bary)
     inside = tri_id >= 0
     # per-vertex attributes the fragment shader interpolates
@@ -218,12 +215,12 @@ def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.
     if use_mottle:
         noise = mottle_levels()
         scale = mottle_scale(msize)
-    out = np.zeros((H, W, 3), np.float64)
+    out = np.zeros((H, W, 3), np.float32)
     ys, xs = np.nonzero(inside)
     for lo in range(0, len(ys), CHUNK):
         y, x = ys[lo:lo + CHUNK], xs[lo:lo + CHUNK]
         t = tri[tri_id[y, x]]
-        s, r = bary[y, x, 0:1], bary[y, x, 1:2]
+        s, r = bary[y, x, 0:1].astype(np.float64), bary[y, x, 1:2].astype(np.float64)
         a = attr[t[:, 0]] * (1.0 - s - r) + attr[t[:, 1]] * s + attr[t[:, 2]] * r
         albedo = a[:, :3]
         k = 3
@@ -241,7 +238,7 @@ def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.
             n = lev * (255.0 / 128.0) - (255.0 / 256.0)  # the shader's mottle_n
             albedo = albedo * mottle_ratio(rows, n, amount)
         out[y, x] = albedo
-    return _bleed(out, inside, BLEED).astype(np.float64), inside
+    return _fill_outside(out, inside), inside
 
 
 def bake_png(source, state) -> bytes:

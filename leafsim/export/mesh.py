@@ -181,14 +181,17 @@ class MeshSource:
         col = None
         if self.texture in ("colours", "baked"):
             col = np.asarray(self.view.colours(state, self.params)[0], np.float64)
-        baked = self.texture == "baked"  # the blade's colour is the texture; the veins keep theirs per vertex
+        baked = self.texture == "baked"  # the blade's colour is the texture
+        # over a photo the window draws the veins as the photo under them (the photo shows its
+        # own veins): their ribbons take the baked texture too; otherwise their own colour per vertex
+        veins_textured = baked and self.view.use_texture(self.params) and self.albedo != "colours"
         blade, top, n = blade_surface(self.model, state, self.view.T, self.view.remap, self.layers, self.uv,
                                       None if baked else col)
         out = {"blade": blade}
         if self.veins:
-            vcol = None if col is None else self.view.vein_colours(state, self.params, col)
-            v = vein_surface(self.model, self.view.remap, top, n, None if baked else self.uv,
-                             col if vcol is None else np.asarray(vcol, np.float64))
+            vcol = None if col is None or veins_textured else self.view.vein_colours(state, self.params, col)
+            v = vein_surface(self.model, self.view.remap, top, n, None if baked and not veins_textured else self.uv,
+                             None if veins_textured else (col if vcol is None else np.asarray(vcol, np.float64)))
             if v is not None:
                 out["veins"] = v
         if self.texture == "photo":  # the ageing as a factor on the photo, per vertex of each surface

@@ -75,9 +75,10 @@ def test_bilinear_samples_as_a_gl_linear_sampler():
     assert np.allclose(bilinear(rgb, u, v, wrap=True), np.stack([bilinear(img, u, v, True) * k for k in (1, 2, -1)], -1))
 
 
-def _turning(key: str, mottle: float = 0.7):
+def _turning(key: str, mottle: float = 0.7, photo_tint: bool = False):
     """(model, params, view) of species ``key`` on a coarse mesh, and a state lying flat at rest
-    whose every reaction is half-way (the mottle's strongest), as the window would draw it."""
+    whose every reaction is half-way (the mottle's strongest), as the window would draw it
+    (``photo_tint``: the view of the window's "photo" albedo, the photo tinted)."""
     sp = get_species(key)
     params = sp.params.with_overrides({"mesh.spacing": 0.04, "colour.mottle": mottle})
     _, _, model = build_leaf(sp, params, 0)
@@ -88,7 +89,7 @@ def _turning(key: str, mottle: float = 0.7):
     p = st.pigments
     p.chlorophyll[:], p.carotenoid[:], p.browning[:], p.necrosis[:] = 0.45, 0.8, 0.4, 0.15
     photo = load_photo_rgba(sp.image) if sp.image is not None else None
-    view = LeafView(model, photo, pig0, photo_tint=False, photo_colour=sp.photo_colour)
+    view = LeafView(model, photo, pig0, photo_tint=photo_tint, photo_colour=sp.photo_colour)
     return model, params, view, st
 
 
@@ -96,18 +97,19 @@ def _srgb8(lin):
     return np.clip(np.round(linear_to_srgb(np.clip(lin, 0, 1)).astype(float) * 255.0), 0, 255)
 
 
-@pytest.mark.parametrize("key", ["maple", "oak"])
-def test_the_bake_is_what_the_window_draws(key):
+@pytest.mark.parametrize("key, albedo", [("maple", "colours"), ("oak", "detail"), ("oak", "texture")])
+def test_the_bake_is_what_the_window_draws(key, albedo):
     """The texture sampled where each pixel of the renderer's top-down picture of the same flat
     leaf lies (that pixel's texture coordinates): the same colour within a level on average, a
     few at worst (a texel is resampled once more than a window pixel), with the mottle's flecks
-    and, on oak, the photo's detail ("detail" albedo).  Fails when the bake leaves out the
-    mottle (its flecks are 7-9 levels of RMS here) or the photo."""
+    and, on oak, the photo: with its detail under the pigment colour (the window's default
+    albedo) or tinted by the pigment change (its "photo" albedo).  Fails when the bake leaves out
+    the mottle (its flecks are 7-9 levels of RMS here) or the photo."""
     from leafsim.compare.metrics import Frame
     from leafsim.render.topdown import TopDown
 
-    model, params, view, st = _turning(key)
-    src = MeshSource(model, params, view, "shell", False, "baked")
+    model, params, view, st = _turning(key, photo_tint=albedo == "texture")
+    src = MeshSource(model, params, view, "shell", False, "baked", albedo)
     alb, inside = bake_albedo(src, st)
     xy = model.particle_rest[view.T][:, :2]
     scale = 2500.0 / np.ptp(xy, axis=0).max()
@@ -115,8 +117,7 @@ def test_the_bake_is_what_the_window_draws(key):
     fr = Frame(scale, float(lo[0]), float(hi[1]), int((hi[0] - lo[0]) * scale) + 1, int((hi[1] - lo[1]) * scale) + 1)
     td = TopDown(fr, supersample=1)
     try:
-        rgb, mask = td.render(view.mesh(st, params), {"albedo": "detail" if view.photo_rgba is not None else "colours",
-                                                       "veins": False})
+        rgb, mask = td.render(view.mesh(st, params), {"albedo": albedo, "veins": False})
     finally:
         td.release()
     tri = view.remap[model.blade_tri_T].astype(np.int64)
@@ -168,33 +169,76 @@ def _glb_json(path) -> tuple[dict, bytes]:
     return doc, data[28 + n:28 + n + m]
 
 
-def test_a_baked_export_opens_as_a_textured_glb_and_obj(tmp_path):
-    """glb: valid, the blade textured by the bake (no vertex colours), the veins keeping theirs
-    (no texture), byte for byte reproducible; OBJ: the texture beside it, mapped on the blade
-    only.  An animation or a PLY is refused in one line, and nothing is written."""
-    model, params, view, st = _turning("oak")
-    path = tmp_path / "oak.glb"
+def _png_at(png: bytes, uv: np.ndarray) -> np.ndarray:
+    """The PNG's sRGB levels sampled bilinearly at glTF texture coordinates ``uv`` (v down)."""
+    img = cv2.cvtColor(cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    return bilinear(img.astype(np.float64), uv[:, 0], uv[:, 1], wrap=False)
+
+
+def _accessor(doc, blob, index) -> np.ndarray:
+    acc = doc["accessors"][index]
+    bv = doc["bufferViews"][acc["bufferView"]]
+    width = {"VEC2": 2, "VEC3": 3}[acc["type"]]
+    return np.frombuffer(blob, np.float32, acc["count"] * width, bv["byteOffset"] + acc.get("byteOffset", 0)).reshape(-1, width)
+
+
+def test_a_fresh_leaf_s_baked_texture_in_the_file_is_its_vertex_colours(tmp_path):
+    """The file as a client reads it: the PNG embedded in the glb, sampled at each blade
+    vertex's TEXCOORD_0, is that vertex's COLOR_0 of the same leaf exported with vertex
+    colours (a fresh leaf: the mottle moves nothing).  Catches a flipped v, swapped channels or
+    a shifted texel grid in the file, which the bake's own sampler would not."""
+    model, params, view, _ = _turning("maple")
+    fresh = Simulator(model, params, seed=0).state()
+    a, b = tmp_path / "baked.glb", tmp_path / "colours.glb"
+    export_mesh(model, fresh, a, params=params, view=view, texture="baked")
+    export_mesh(model, fresh, b, params=params, view=view, texture="colours")
+    doc_a, blob_a = _glb_json(a)
+    doc_b, blob_b = _glb_json(b)
+    attrs_a, attrs_b = doc_a["meshes"][0]["primitives"][0]["attributes"], doc_b["meshes"][0]["primitives"][0]["attributes"]
+    uv = _accessor(doc_a, blob_a, attrs_a["TEXCOORD_0"]).astype(np.float64)
+    bv = doc_a["bufferViews"][doc_a["images"][0]["bufferView"]]
+    got = _png_at(blob_a[bv["byteOffset"]:bv["byteOffset"] + bv["byteLength"]], uv)
+    want = _srgb8(_accessor(doc_b, blob_b, attrs_b["COLOR_0"]))
+    stalk = np.concatenate([~model.blade_particles[view.T]] * 2)  # the shell's two layers
+    d = np.abs(got - want)[~stalk]
+    assert d.mean() < 0.5 and d.max() <= 3.0, (d.mean(), d.max())
+
+
+@pytest.mark.parametrize("key", ["maple", "oak"])
+def test_a_baked_export_opens_as_a_textured_glb_and_obj(tmp_path, key):
+    """glb: valid, the blade textured by the bake (no vertex colours); the veins in their own
+    colour per vertex (maple), or over a photo textured like the blade, as the window draws them
+    there (oak); byte for byte reproducible.  OBJ: the texture beside it, mapped on the textured
+    meshes only.  An animation, a PLY or an unknown albedo is refused in one line, and nothing
+    is written."""
+    model, params, view, st = _turning(key)
+    photo = key == "oak"
+    path = tmp_path / f"{key}.glb"
     export_mesh(model, st, path, params=params, view=view, veins=True, texture="baked")
     assert_clean(path)
     doc, blob = _glb_json(path)
     prims = {m["name"]: m["primitives"][0] for m in doc["meshes"]}
     assert "COLOR_0" not in prims["blade"]["attributes"] and "TEXCOORD_0" in prims["blade"]["attributes"]
-    assert "COLOR_0" in prims["veins"]["attributes"] and "TEXCOORD_0" not in prims["veins"]["attributes"]
+    assert ("COLOR_0" in prims["veins"]["attributes"]) != photo and ("TEXCOORD_0" in prims["veins"]["attributes"]) == photo
     mats = doc["materials"]
     assert mats[prims["blade"]["material"]]["pbrMetallicRoughness"]["baseColorTexture"] == {"index": 0}
-    assert "baseColorTexture" not in mats[prims["veins"]["material"]]["pbrMetallicRoughness"]
+    assert ("baseColorTexture" in mats[prims["veins"]["material"]]["pbrMetallicRoughness"]) == photo
     assert doc["images"][0]["name"] == "baked"
     bv = doc["bufferViews"][doc["images"][0]["bufferView"]]
     png = blob[bv["byteOffset"]:bv["byteOffset"] + bv["byteLength"]]
     assert png == bake_png(MeshSource(model, params, view, "shell", True, "baked"), st)
+    if photo:  # the texture is the photo's grid
+        img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+        h, w = view.photo_rgba.shape[:2]
+        assert img.shape[0] % h == 0 and img.shape[1] % w == 0 and img.shape[0] // h == img.shape[1] // w
     again = tmp_path / "again.glb"
     export_mesh(model, st, again, params=params, view=view, veins=True, texture="baked")
     assert again.read_bytes() == path.read_bytes()
 
-    files = export_mesh(model, st, tmp_path / "oak.obj", params=params, view=view, veins=True, texture="baked")["files"]
-    assert sorted(p.rsplit("/", 1)[-1] for p in files) == ["oak.mtl", "oak.obj", "oak_baked.png"]
-    mtl = (tmp_path / "oak.mtl").read_text().split("newmtl ")
-    assert [m.split()[0] for m in mtl if "map_Kd oak_baked.png" in m] == ["blade"]
+    files = export_mesh(model, st, tmp_path / f"{key}.obj", params=params, view=view, veins=True, texture="baked")["files"]
+    assert sorted(p.rsplit("/", 1)[-1] for p in files) == sorted([f"{key}.mtl", f"{key}.obj", f"{key}_baked.png"])
+    mtl = (tmp_path / f"{key}.mtl").read_text().split("newmtl ")
+    assert [m.split()[0] for m in mtl if f"map_Kd {key}_baked.png" in m] == (["blade", "veins"] if photo else ["blade"])
 
     before = sorted(p.name for p in tmp_path.iterdir())
     with pytest.raises(LeafsimError, match="one state"):
@@ -204,3 +248,15 @@ def test_a_baked_export_opens_as_a_textured_glb_and_obj(tmp_path):
     with pytest.raises(LeafsimError, match="albedo 'shiny'"):
         export_mesh(model, st, tmp_path / "y.glb", params=params, view=view, texture="baked", albedo="shiny")
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_texels_outside_the_blade_take_the_nearest_blade_colour():
+    """No background colour anywhere in the texture (a mipmapping viewer averages the margin
+    with what lies past it, at every level): every outside texel is its nearest blade texel's."""
+    from scipy.ndimage import distance_transform_edt
+
+    model, params, view, st = _turning("maple")
+    alb, inside = bake_albedo(MeshSource(model, params, view, "shell", False, "baked"), st)
+    assert 0.2 < inside.mean() < 0.9
+    _, (iy, ix) = distance_transform_edt(~inside, return_indices=True)
+    assert np.array_equal(alb, alb[iy, ix]) and (alb[~inside].min(axis=1) > 0.01).all()

@@ -229,7 +229,7 @@ def test_export_mesh_button_writes_a_glb(tmp_path):
     """"Export mesh" writes the leaf on screen as a binary glTF into the export folder (created
     when missing), a second click a second file; trimesh loads it with the blade's counts, its
     blade coloured by the baked texture (the window's albedo, sub-grid mottle and photo detail
-    included), the veins by their vertex colours."""
+    included), and so are the veins over oak's photo (the window draws the photo under them)."""
     import json
     import struct
 
@@ -260,7 +260,7 @@ def test_export_mesh_button_writes_a_glb(tmp_path):
     doc = json.loads(data[20:20 + struct.unpack("<I", data[12:16])[0]])
     assert [im["name"] for im in doc["images"]] == ["baked"]
     prims = {m["name"]: m["primitives"][0]["attributes"] for m in doc["meshes"]}
-    assert "COLOR_0" not in prims["blade"] and "COLOR_0" in prims["veins"]
+    assert "COLOR_0" not in prims["blade"] and "TEXCOORD_0" in prims["veins"]
 
 
 def test_layout_does_not_move_when_messages_appear(tmp_path):
