@@ -297,6 +297,17 @@ def test_a_scene_leaf_exported_with_a_baked_texture(tmp_path):
     data = glb.read_bytes()
     doc = json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
     assert [im["name"] for im in doc["images"]] == ["baked"]
+    # an OBJ writes leaf_baked.png beside it: a file of the leaf's own, so a leaf run again (its
+    # last run stopped before done.json) clears it instead of refusing the folder
+    obj = _scene(tmp_path, name="baked_obj", groups=[
+        {"name": "oak", "species": "oak", "count": 1, "seed": 2, "params": dict(TINY), "stop": {"frames": 2},
+         "output": {"mesh": "obj", "texture": "baked"}}])
+    leaf = tmp_path / "out_obj" / "leaves" / "oak-000"
+    for _ in range(2):
+        rep = run_scene(load_scene(obj), tmp_path / "out_obj", workers=1, progress=False)
+        assert rep["failed"] == [] and rep["ran"] == 1, rep
+        assert (leaf / "leaf_baked.png").is_file()
+        (leaf / "done.json").unlink()
 
 
 @pytest.mark.parametrize("over,msg", BAD)
