@@ -224,13 +224,15 @@ class ControlsPanel:
 
     def export_mesh_button(self) -> None:
         """"Export mesh": the leaf on screen as a binary glTF (both layers as a closed shell,
-        veins, pigment colours) into the export folder, never overwriting."""
+        veins, its colour as the window draws it baked into a texture) into the export folder,
+        never overwriting."""
         app = self.app
         imgui.begin_disabled(not app.session.ready)
         if imgui.button("Export mesh"):
             app.guard(app.export_mesh, topic="mesh")
         imgui.end_disabled()
-        tip("Write the leaf on screen as a glTF 2.0 binary (.glb: closed two-layer shell, veins, pigment colours)")
+        tip("Write the leaf on screen as a glTF 2.0 binary (.glb: closed two-layer shell, veins, and its colour as "
+            "drawn here, the fine flecks and the photo's detail included, baked into a texture any glTF viewer shows)")
 
 
 def _disabled_tip(text: str) -> None:
