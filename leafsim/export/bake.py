@@ -122,6 +122,23 @@ def photo_detail(base: np.ndarray, t: np.ndarray, tex_mean, chroma: np.ndarray) 
     return f[:, None] * c * ((b @ _W) / np.maximum(c @ _W, 1e-6))[:, None]
 
 
+def photo_texels(photo: np.ndarray) -> np.ndarray:
+    """(h, w, 3) float32 linear RGB of the photo as the renderer holds it: the clean texture
+    (:func:`~leafsim.appearance.texture.clean_texture`: the blade's colour carried past its
+    mask), shrunk with area averaging to at most :data:`BAKE_MAX` texels a side as the
+    renderer's upload is (its limit), then the exact sRGB decode of its sampler."""
+    import cv2
+
+    from leafsim.appearance.texture import clean_texture
+
+    rgba = clean_texture(np.asarray(photo))
+    h, w = rgba.shape[:2]
+    if max(h, w) > BAKE_MAX:
+        f = BAKE_MAX / max(h, w)
+        rgba = cv2.resize(rgba, (max(1, int(w * f)), max(1, int(h * f))), interpolation=cv2.INTER_AREA)
+    return srgb_decode(rgba[:, :, :3] / 255.0).astype(np.float32)
+
+
 def texture_size(uv: np.ndarray, xy: np.ndarray, tri: np.ndarray, mottle_size: float,
                  photo_size: tuple[int, int] | None = None) -> tuple[int, int]:
     """(width, height) in texels of the texture space [0, 1]² so that a texel spans at most
@@ -142,11 +159,11 @@ def texture_size(uv: np.ndarray, xy: np.ndarray, tri: np.ndarray, mottle_size: f
     texel = max(float(mottle_size), 1e-5) / TEXELS_PER_MOTTLE
     if photo_size is not None:  # the photo's grid, times the integer the mottle asks for (if the cap allows)
         pw, ph = (int(x) for x in photo_size)
-        k = max(1, int(np.ceil(max(per_u / texel / pw, per_v / texel / ph))))
+        k = max(1, int(np.ceil(max(per_u / texel / pw, per_v / texel / ph) - 1e-9)))
         while k > 1 and max(pw, ph) * k > BAKE_MAX:
             k -= 1
         return pw * k, ph * k
-    side = lambda metres: int(np.clip(np.ceil(metres / texel), BAKE_MIN, BAKE_MAX))  # noqa: E731
+    side = lambda metres: int(np.clip(np.ceil(metres / texel - 1e-9), BAKE_MIN, BAKE_MAX))  # noqa: E731
     return side(per_u), side(per_v)
 
 
@@ -186,11 +203,16 @@ def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.
     rest = np.asarray(view.mottle_rest(state), np.float64)
     mode = getattr(source, "albedo", "detail")
     photo = view.photo_rgba if view.use_texture(params) and mode != "colours" else None
-    if photo is not None and mode == "texture":
-        col = np.ones_like(col) if tint is None else np.asarray(tint, np.float64)  # the photo × the tint
+    if photo is not None:
+        if mode == "texture":
+            col = np.ones_like(col) if tint is None else np.asarray(tint, np.float64)  # the photo × the tint
+        tex = photo_texels(photo)
+        mask = np.asarray(photo)[:, :, 3] >= 128
+        lin = (np.asarray(photo)[:, :, :3][mask].astype(np.float64) / 255.0) ** 2.2  # the renderer's mean (u_tex_mean)
+        tex_mean = lin.mean(axis=0) if lin.size else np.array([0.2, 0.3, 0.1])
     if size is None:
         size = texture_size(uv, model.particle_rest[view.T][:, :2], tri, msize if msize > 0 else 6e-4,
-                            None if photo is None else (photo.shape[1], photo.shape[0]))
+                            None if photo is None else (tex.shape[1], tex.shape[0]))
     W, H = int(size[0]), int(size[1])
     chroma = view.chroma(state, params) if photo is not None and mode == "detail" else None
     tri_id = np.full((H, W), -1, np.int32)
@@ -205,13 +227,6 @@ def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.
     if use_mottle:
         cols += [np.asarray(mottle, np.float64), rest]
     attr = np.concatenate(cols, 1)
-    if photo is not None:
-        from leafsim.appearance.texture import clean_texture
-
-        tex = srgb_decode(clean_texture(np.asarray(photo))[:, :, :3] / 255.0)
-        mask = np.asarray(photo)[:, :, 3] >= 128
-        lin = (np.asarray(photo)[:, :, :3][mask].astype(np.float64) / 255.0) ** 2.2  # the renderer's mean (u_tex_mean)
-        tex_mean = lin.mean(axis=0) if lin.size else np.array([0.2, 0.3, 0.1])
     if use_mottle:
         noise = mottle_levels()
         scale = mottle_scale(msize)

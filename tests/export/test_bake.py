@@ -260,3 +260,27 @@ def test_texels_outside_the_blade_take_the_nearest_blade_colour():
     assert 0.2 < inside.mean() < 0.9
     _, (iy, ix) = distance_transform_edt(~inside, return_indices=True)
     assert np.array_equal(alb, alb[iy, ix]) and (alb[~inside].min(axis=1) > 0.01).all()
+
+
+def test_texture_sizes_follow_the_mottle_and_the_photo_within_the_cap():
+    """A texel spans at most a third of the mottle's length on the blade; over a photo the
+    texture is the photo's grid times an integer, never above BAKE_MAX; a photo larger than the
+    cap is shrunk as the renderer's upload shrinks it (area averaging, to 4096 a side)."""
+    from leafsim.export.bake import BAKE_MAX, photo_texels, texture_size
+
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    xy = uv * [0.1, 0.06]  # 10 cm by 6 cm of blade over the texture space
+    tri = np.array([[0, 1, 2]])
+    assert texture_size(uv, xy, tri, 6e-4) == (500, 300)
+    assert texture_size(uv, xy * 0.1, tri, 6e-4) == (256, 256)  # BAKE_MIN
+    assert texture_size(uv, xy, tri, 6e-4, photo_size=(300, 200)) == (600, 400)  # 2 × the photo
+    assert texture_size(uv, xy, tri, 6e-4, photo_size=(800, 500)) == (800, 500)
+    assert texture_size(uv, xy, tri, 1e-5, photo_size=(3000, 1000)) == (3000, 1000)  # × 2 would pass the cap
+    assert max(texture_size(uv, xy, tri, 1e-5)) == BAKE_MAX
+    big = np.zeros((2500, 5000, 4), np.uint8)
+    big[..., :3], big[..., 3] = 200, 255
+    big[:, ::2, 0] = 100  # a stripe pattern the area average halves
+    t = photo_texels(big)
+    assert t.shape == (2048, 4096, 3)
+    want = ((150 / 255 + 0.055) / 1.055) ** 2.4  # the average of 100 and 200, decoded
+    assert abs(float(np.median(t[..., 0])) - want) < 0.01
