@@ -10,7 +10,7 @@ from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output, not_an_input, output_target
 from leafsim.commands.common import Progress, emit, ready_kernels, species_inputs, species_params, stop_of
-from leafsim.export.mesh import export_mesh, format_of, texture_file
+from leafsim.export.mesh import export_mesh, format_of, side_files
 from leafsim.pipeline import build_leaf
 from leafsim.sim.run import Run, Stop
 
@@ -39,22 +39,14 @@ def _check(args) -> str:
     if not folder.is_dir():
         raise LeafsimError(f"--out {args.out}: folder {folder} does not exist")
     # the files written beside the mesh, checked now too (a folder named x.bin failed after the drying)
-    for path, what in _side_files(args.out, fmt, args.texture):
+    for path, what in side_files(args.out, fmt, args.texture):
         output_target(path, what)
     return fmt
 
 
-def _side_files(out, fmt: str, texture: str = "colours") -> list:
-    """(path, what) of the files written beside the mesh ``out``."""
-    out = Path(out)
-    png = [(texture_file(out, texture), "texture")] if texture != "colours" else []
-    return {"gltf": [(out.with_suffix(".bin"), "glTF buffer")],
-            "obj": [(out.with_suffix(".mtl"), "material"), *png]}.get(fmt, [])
-
-
 def _written(out, fmt: str, texture: str = "colours") -> list:
     """Every file an export to ``out`` writes."""
-    return [Path(out), *(p for p, _ in _side_files(out, fmt, texture))]
+    return [Path(out), *(p for p, _ in side_files(out, fmt, texture))]
 
 
 def key_frames(run: Run, stop: Stop | int, every: int, progress: Progress | None = None) -> list:

@@ -89,6 +89,10 @@ def srgb_decode(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
 
 
+#: :func:`srgb_decode` of the 256 8-bit levels (float32): a photo decodes by lookup
+SRGB_LEVELS = srgb_decode(np.arange(256) / 255.0).astype(np.float32)
+
+
 def bilinear(img: np.ndarray, u: np.ndarray, v: np.ndarray, wrap: bool) -> np.ndarray:
     """``img`` (H, W[, C]) sampled at texture coordinates ``u``, ``v`` (0..1 across the image,
     texel centres at (i + ½)/W) as a GL linear sampler does: wrapped (repeat) or clamped to
@@ -136,16 +140,17 @@ def photo_texels(photo: np.ndarray) -> np.ndarray:
     if max(h, w) > BAKE_MAX:
         f = BAKE_MAX / max(h, w)
         rgba = cv2.resize(rgba, (max(1, int(w * f)), max(1, int(h * f))), interpolation=cv2.INTER_AREA)
-    return srgb_decode(rgba[:, :, :3] / 255.0).astype(np.float32)
+    return SRGB_LEVELS[rgba[:, :, :3]]
 
 
 def texture_size(uv: np.ndarray, xy: np.ndarray, tri: np.ndarray, mottle_size: float,
                  photo_size: tuple[int, int] | None = None) -> tuple[int, int]:
     """(width, height) in texels of the texture space [0, 1]² so that a texel spans at most
     1/:data:`TEXELS_PER_MOTTLE` of the mottle's correlation length on the blade (rest
-    positions ``xy`` [m] against texture coordinates ``uv`` over the triangles ``tri``) and,
-    with a photo (``photo_size`` (W, H): the texture space is the photo), no more than a photo
-    pixel; clamped to [:data:`BAKE_MIN`, :data:`BAKE_MAX`]."""
+    positions ``xy`` [m] against texture coordinates ``uv`` over the triangles ``tri``),
+    clamped to [:data:`BAKE_MIN`, :data:`BAKE_MAX`].  With a photo (``photo_size`` (W, H), at
+    most :data:`BAKE_MAX` a side: :func:`photo_texels`; the texture space is the photo) the
+    photo's size times the integer the mottle asks for, as far as the cap allows."""
     e1u, e2u = uv[tri[:, 1]] - uv[tri[:, 0]], uv[tri[:, 2]] - uv[tri[:, 0]]
     e1x, e2x = xy[tri[:, 1]] - xy[tri[:, 0]], xy[tri[:, 2]] - xy[tri[:, 0]]
     det = e1u[:, 0] * e2u[:, 1] - e1u[:, 1] * e2u[:, 0]
@@ -159,9 +164,10 @@ def texture_size(uv: np.ndarray, xy: np.ndarray, tri: np.ndarray, mottle_size: f
     texel = max(float(mottle_size), 1e-5) / TEXELS_PER_MOTTLE
     if photo_size is not None:  # the photo's grid, times the integer the mottle asks for (if the cap allows)
         pw, ph = (int(x) for x in photo_size)
+        if max(pw, ph) > BAKE_MAX:
+            raise ValueError(f"texture_size: a photo grid of {pw} x {ph} is above BAKE_MAX (shrink it: photo_texels)")
         k = max(1, int(np.ceil(max(per_u / texel / pw, per_v / texel / ph) - 1e-9)))
-        while k > 1 and max(pw, ph) * k > BAKE_MAX:
-            k -= 1
+        k = max(1, min(k, BAKE_MAX // max(pw, ph)))
         return pw * k, ph * k
     side = lambda metres: int(np.clip(np.ceil(metres / texel - 1e-9), BAKE_MIN, BAKE_MAX))  # noqa: E731
     return side(per_u), side(per_v)
@@ -173,7 +179,7 @@ def _fill_outside(rgb: np.ndarray, inside: np.ndarray) -> np.ndarray:
 
     if inside.all() or not inside.any():
         return rgb
-    _, (iy, ix) = distance_transform_edt(~inside, return_distances=True, return_indices=True)
+    iy, ix = distance_transform_edt(~inside, return_distances=False, return_indices=True)
     return rgb[iy, ix]
 
 
@@ -263,8 +269,11 @@ def bake_png(source, state) -> bytes:
     from leafsim.appearance.reflectance import linear_to_srgb
     from leafsim.base.errors import LeafsimError
 
-    albedo, _ = bake_albedo(source, state)
-    srgb = np.clip(np.round(linear_to_srgb(np.clip(albedo, 0.0, 1.0)).astype(np.float64) * 255.0), 0, 255).astype(np.uint8)
+    albedo, inside = bake_albedo(source, state)
+    if not inside.any():
+        raise LeafsimError("export: the blade covers no texel of its texture space (texture coordinates all outside "
+                           "[0, 1] or degenerate): nothing to bake")
+    srgb = np.clip(np.rint(linear_to_srgb(albedo) * np.float32(255.0)), 0, 255).astype(np.uint8)  # float32 throughout
     ok, buf = cv2.imencode(".png", cv2.cvtColor(srgb, cv2.COLOR_RGB2BGR))
     if not ok:
         raise LeafsimError("export: cannot encode the baked texture as PNG")

@@ -8,7 +8,8 @@ pigment colours (linear RGB per vertex) or the species photo as a texture.  Vein
 optional second mesh (flat ribbons of the vein width on the upper surface).  ``texture="baked"``
 writes one state's blade colour as a texture instead (:mod:`leafsim.export.bake`: the window's
 albedo per texel, the sub-grid mottle and a photo's detail included, which per-vertex colours
-cannot carry), the veins keeping their vertex colours.  Several states
+cannot carry); the veins keep their vertex colours, or over a photo take the texture (the
+main veins and laterals only, as the window draws them there).  Several states
 become a glTF animation: one morph target per key frame and an animation channel driving
 their weights (static formats take one state).  Every file is written atomically.
 
@@ -102,14 +103,15 @@ def blade_surface(model, state, T, remap, layers, uv, col) -> tuple[Surface, np.
     return _surface(np.concatenate([p, top]), np.concatenate([-n, n]), faces, twice(uv), twice(col)), top, n
 
 
-def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray, uv, col) -> Surface | None:
+def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray, uv, col,
+                 max_order: int | None = None) -> Surface | None:
     """Flat ribbons of the vein widths on the upper surface ``top`` (nT, 3) with normals ``n``;
     2 vertices per vein point, 2 triangles per segment, coloured ``col`` (nT, 3) (the vein
     tissue's own albedo, as the renderer draws it).  None when the model has no veins."""
     pos, nrm, tris, uvs, cols = [], [], [], [], []
     base = 0
     for k, (idx, width, order) in enumerate(model.vein_polylines()):
-        if len(idx) < 2:
+        if len(idx) < 2 or (max_order is not None and order > max_order):
             continue
         # each ribbon a hair above the blade at its own height, the main veins highest: where
         # ribbons met at one height (a branch point), Cycles drew the coplanar faces black
@@ -190,8 +192,11 @@ class MeshSource:
         out = {"blade": blade}
         if self.veins:
             vcol = None if col is None or veins_textured else self.view.vein_colours(state, self.params, col)
+            # (and only the main veins and laterals, as the window draws over a photo: the finer
+            # orders it grew would cross the photo's areoles as a second pattern)
             v = vein_surface(self.model, self.view.remap, top, n, None if baked and not veins_textured else self.uv,
-                             None if veins_textured else (col if vcol is None else np.asarray(vcol, np.float64)))
+                             None if veins_textured else (col if vcol is None else np.asarray(vcol, np.float64)),
+                             max_order=1 if veins_textured else None)
             if v is not None:
                 out["veins"] = v
         if self.texture == "photo":  # the ageing as a factor on the photo, per vertex of each surface
@@ -305,6 +310,10 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     if texture == "baked" and len(states) > 1:
         raise LeafsimError(f"{path}: texture 'baked' holds one state's colour, and a glTF texture cannot change with "
                            f"the key frames: export one state (no --every), or use --texture colours for the animation")
+    from leafsim.base.fileio import output_target
+
+    for side, what in side_files(path, fmt, texture):  # a folder or device in the way: now, not after the bake
+        output_target(side, what)
     src = MeshSource(model, params, view, layers, veins, texture, albedo)
     frames = [src.surfaces(s) for s in states]
     times = [s.time for s in states] if times is None else times
@@ -327,6 +336,15 @@ def _srgb8(c: np.ndarray) -> np.ndarray:
     from leafsim.appearance.reflectance import linear_to_srgb
 
     return np.clip(np.round(np.asarray(linear_to_srgb(np.clip(c, 0, 1)), np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def side_files(path, fmt: str, texture: str = "colours") -> list:
+    """(path, what) of the files an export to ``path`` writes beside it: a glTF's buffer, an
+    OBJ's material and texture."""
+    path = Path(path)
+    png = [(texture_file(path, texture), "texture")] if texture != "colours" else []
+    return {"gltf": [(path.with_suffix(".bin"), "glTF buffer")],
+            "obj": [(path.with_suffix(".mtl"), "material"), *png]}.get(fmt, [])
 
 
 def texture_file(path, texture: str) -> Path:

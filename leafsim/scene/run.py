@@ -279,7 +279,7 @@ def _output(w: _Where, o) -> dict:
            "texture": w.choice(o, "texture", "colours", TEXTURES, "output."), "stats": w.bool(o, "stats", False, "output.")}
     if out["texture"] != "colours" and mesh == "ply":
         raise w.err("output.texture", f"PLY carries vertex colours, not a {out['texture']} texture")
-    if out["texture"] == "baked" and every:
+    if out["texture"] == "baked" and every and mesh:
         # a glTF texture cannot change with the key frames: refused here, not after the leaves dried
         raise w.err("output.texture", "'baked' holds one state's colour; frames every K need 'colours'")
     return out

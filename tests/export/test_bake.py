@@ -25,29 +25,30 @@ from leafsim.pipeline import build_leaf
 from leafsim.sim.simulator import Simulator
 
 
-def _locate(pts, tri, W, H):
+def _locate(pts, tri, W, H, dtype=np.float64):
     tri_id = np.full((H, W), -1, np.int32)
-    bary = np.zeros((H, W, 2))
+    bary = np.zeros((H, W, 2), dtype)
     _raster(np.asarray(pts, np.float64), np.asarray(tri, np.int64), tri_id, bary)
     return tri_id, bary
 
 
-def test_every_texel_of_a_triangulated_square_is_located_once_at_its_centre():
+@pytest.mark.parametrize("dtype, tol", [(np.float64, 1e-9), (np.float32, 1e-4)])
+def test_every_texel_of_a_triangulated_square_is_located_once_at_its_centre(dtype, tol):
     """A Delaunay triangulation of random points covering [0, W] × [0, H]: every texel centre is
     found in a triangle (none lost on the shared edges) and its barycentric weights give back
-    the centre."""
+    the centre (float32 weights, as the bake keeps them, to a ten-thousandth of a texel)."""
     rng = np.random.default_rng(3)
     W, H = 37, 23
     pts = np.concatenate([[[0, 0], [W, 0], [0, H], [W, H]], rng.uniform(0, 1, (40, 2)) * [W, H]])
     tri = Delaunay(pts).simplices
-    tri_id, bary = _locate(pts, tri, W, H)
+    tri_id, bary = _locate(pts, tri, W, H, dtype)
     assert (tri_id >= 0).all()
     y, x = np.mgrid[0:H, 0:W]
     t = tri[tri_id]
-    s, r = bary[..., 0:1], bary[..., 1:2]
+    s, r = bary[..., 0:1].astype(float), bary[..., 1:2].astype(float)
     back = pts[t[..., 0]] * (1 - s - r) + pts[t[..., 1]] * s + pts[t[..., 2]] * r
-    assert np.abs(back - np.stack([x + 0.5, y + 0.5], -1)).max() < 1e-9
-    assert (bary >= -1e-9).all() and (bary.sum(-1) <= 1 + 1e-9).all()
+    assert np.abs(back - np.stack([x + 0.5, y + 0.5], -1)).max() < tol
+    assert (bary >= -tol).all() and (bary.sum(-1) <= 1 + tol).all()
 
 
 def test_a_triangle_covers_its_area_and_nothing_outside_it():
@@ -132,9 +133,13 @@ def test_the_bake_is_what_the_window_draws(key, albedo):
     d = np.abs(baked - window)
     assert len(y) > 20000
     assert d.mean() < 1.0 and np.percentile(d, 99) <= 6, (d.mean(), np.percentile(d, 99))
-    # the flecks are there: the window's picture minus its blur over a few flecks
-    fine = window - cv2.GaussianBlur(rgb.astype(np.float32), (0, 0), 4.0)[y, x]
-    assert fine.std() > 4.0
+    # the flecks are in the bake: its picture minus its blur over a few flecks, at least half
+    # the window's (and on maple, whose palette colour is smooth, nothing else makes them)
+    img = np.full(rgb.shape, 255.0, np.float32)
+    img[y, x] = baked
+    blur = lambda a: cv2.GaussianBlur(a, (0, 0), 4.0)[y, x]  # noqa: E731
+    fine_bake, fine_window = (baked - blur(img)).std(), (window - blur(rgb.astype(np.float32))).std()
+    assert fine_bake > 4.0 and fine_bake > 0.8 * fine_window, (fine_bake, fine_window)
 
 
 def test_a_fresh_leaf_bakes_its_vertex_colours_and_the_mottle_adds_flecks_only_when_turning():

@@ -260,7 +260,9 @@ def test_export_mesh_button_writes_a_glb(tmp_path):
     doc = json.loads(data[20:20 + struct.unpack("<I", data[12:16])[0]])
     assert [im["name"] for im in doc["images"]] == ["baked"]
     prims = {m["name"]: m["primitives"][0]["attributes"] for m in doc["meshes"]}
-    assert "COLOR_0" not in prims["blade"] and "TEXCOORD_0" in prims["veins"]
+    assert "COLOR_0" not in prims["blade"] and "COLOR_0" not in prims["veins"]
+    mats = [doc["materials"][m["primitives"][0]["material"]] for m in doc["meshes"]]
+    assert all(m["pbrMetallicRoughness"].get("baseColorTexture") == {"index": 0} for m in mats)
 
 
 def test_layout_does_not_move_when_messages_appear(tmp_path):

@@ -288,8 +288,8 @@ def test_a_scene_leaf_exported_with_a_baked_texture(tmp_path):
     from helpers.gltf import assert_clean
 
     path = _scene(tmp_path, name="baked", groups=[
-        {"name": "oak", "species": "oak", "count": 1, "seed": 2, "params": {**TINY, "colour.age_rate": 5.0},
-         "stop": {"frames": 30}, "output": {"mesh": "glb", "texture": "baked", "veins": True}}])
+        {"name": "oak", "species": "oak", "count": 1, "seed": 2, "params": {**TINY, "colour.age_rate": 10.0},
+         "stop": {"frames": 60}, "output": {"mesh": "glb", "texture": "baked", "veins": True}}])
     rep = run_scene(load_scene(path), tmp_path / "out", workers=1, progress=False)
     assert rep["failed"] == []
     glb = tmp_path / "out" / "leaves" / "oak-000" / "leaf.glb"
@@ -297,6 +297,13 @@ def test_a_scene_leaf_exported_with_a_baked_texture(tmp_path):
     data = glb.read_bytes()
     doc = json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
     assert [im["name"] for im in doc["images"]] == ["baked"]
+    import cv2
+
+    img = doc["images"][0]
+    bv = doc["bufferViews"][img["bufferView"]]
+    start = 28 + int.from_bytes(data[12:16], "little") + bv["byteOffset"]  # the BIN chunk's data
+    png = cv2.imdecode(np.frombuffer(data[start:start + bv["byteLength"]], np.uint8), cv2.IMREAD_COLOR).astype(np.float32)
+    assert (png - cv2.GaussianBlur(png, (0, 0), 3.0)).std() > 1.0  # the turning leaf's flecks, not a flat colour
     # an OBJ writes leaf_baked.png beside it: a file of the leaf's own, so a leaf run again (its
     # last run stopped before done.json) clears it instead of refusing the folder
     obj = _scene(tmp_path, name="baked_obj", groups=[
