@@ -33,7 +33,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import not_an_input, write_png_atomic
 from leafsim.base.resources import default_config
 from leafsim.export.mesh import export_mesh
-from leafsim.gui.exports import ensure_folder, free_path, new_take, user_path
+from leafsim.gui.exports import BackgroundJobs, ensure_folder, free_path, new_take, user_path
 from leafsim.gui.fonts import load_ui_font
 from leafsim.gui.layout import BACKGROUND, LEFT_W, MIN_WINDOW, PANEL_BG, RIGHT_W, STATUS_H, fixed_flags, window_rects
 from leafsim.gui.panels.controls import ControlsPanel
@@ -131,6 +131,8 @@ class LeafApp:
         self.photo_affine = None
         self.export_fbo = None
         self.requests: list[tuple[str, object]] = []
+        self.jobs = BackgroundJobs()  # mesh exports, each on its own thread
+        self.mesh_paths: set = set()  # the files they are writing (a second press picks another name)
         self.gui_frames = self.leaf_frames = 0
         self.t_start = time.perf_counter()
         self.t_first_frame: float | None = None
@@ -213,6 +215,7 @@ class LeafApp:
             style.set_color_(col, imgui.ImVec4(r, g, b, alpha))
 
     def before_exit(self) -> None:
+        self.jobs.join()  # a mesh still being written is finished, not cut short
         self.session.close()
         for o in (self.photo_tex, self.photo_tex_masked, self.export_fbo, self.view_fbo, self.view_tex, self.view_depth):
             if o is not None:
@@ -309,8 +312,14 @@ class LeafApp:
 
     # ------------------------------------------------------------------ session news
     def _take_session(self) -> None:
-        """Swap in a finished build and the worker's latest snapshot; route their news to the
-        status bar."""
+        """Swap in a finished build and the worker's latest snapshot; route their news (and
+        the finished background exports') to the status bar."""
+        for tag, result, error in self.jobs.finished():
+            if error is not None:
+                self.fail(error, tag)
+            else:
+                path, tri = result
+                self.status.info(tag, f"exported mesh {path} ({tri} triangles)", path=path)
         s = self.session
         if s.poll():
             self.dirty = True
@@ -585,12 +594,29 @@ class LeafApp:
         if s.state is not None and not np.isfinite(s.state.particle_q).all():
             raise LeafsimError(f"Export mesh: the simulation diverged (positions NaN/Inf at frame {s.frame}); "
                                "expected a finite leaf: press Reset")
-        path = free_path(self._export_folder(), f"{s.species_key}_frame_{s.frame:05d}", ".glb")
-        # the blade's colour baked as the window draws it (sub-grid mottle, the photo's detail)
-        rep = export_mesh(s.model, s.state.copy(), path, params=s.sim_params, view=s.view, veins=True, texture="baked",
-                          albedo={"detail": "detail", "photo": "texture", "colours": "colours"}[self.albedo])
-        tri = sum(m["triangles"] for m in rep["meshes"].values())
-        self.status.info("mesh", f"exported mesh {path} ({tri} triangles)", path=path)
+        path = free_path(self._export_folder(), f"{s.species_key}_frame_{s.frame:05d}", ".glb", self.mesh_paths)
+        # the blade's colour baked as the window draws it (sub-grid mottle, the photo's detail):
+        # about a second of work, on a thread of its own with its own view of the leaf (the
+        # window's view keeps drawing), from a copy of the state on screen
+        from leafsim.appearance.view import LeafView
+
+        v = s.view
+        view = LeafView(s.model, v.photo_rgba, v.pigments0, photo_tint=v.photo_tint, photo_colour=v.photo_colour,
+                        blade_only=v.blade_only)
+        model, state, params = s.model, s.state.copy(), s.sim_params
+        albedo = {"detail": "detail", "photo": "texture", "colours": "colours"}[self.albedo]
+        self.mesh_paths.add(path)
+
+        def work():
+            try:
+                rep = export_mesh(model, state, path, params=params, view=view, veins=True, texture="baked", albedo=albedo)
+            finally:
+                self.mesh_paths.discard(path)
+            return path, sum(m["triangles"] for m in rep["meshes"].values())
+
+        self.jobs.start("mesh", work)
+        self.status.info("mesh", f"exporting mesh {path} (baking its colour) …", path=path,
+                         holds=lambda: bool(self.jobs.pending("mesh")))
         return path
 
     def save_preset(self) -> None:

@@ -8,6 +8,7 @@
 * :func:`free_path` picks ``name.png``, else ``name_2.png``, ``name_3.png``, ...
 * :func:`user_path` checks what was typed into a path field (empty, a NUL character) and
   expands ``~``.
+* :class:`BackgroundJobs` runs an export the window should not wait for on its own thread.
 """
 
 from __future__ import annotations
@@ -96,11 +97,53 @@ def new_take(folder: Path) -> Path:
     raise LeafsimError(f"{folder}: no free take number")
 
 
-def free_path(folder: Path, stem: str, suffix: str = ".png") -> Path:
-    """A path in ``folder`` that does not exist yet: ``stem.png``, ``stem_2.png``, ..."""
+def free_path(folder: Path, stem: str, suffix: str = ".png", taken=()) -> Path:
+    """A path in ``folder`` that does not exist yet and is not in ``taken`` (files being
+    written): ``stem.png``, ``stem_2.png``, ..."""
     p = folder / f"{stem}{suffix}"
     k = 2
-    while p.exists():
+    while p.exists() or p in taken:
         p = folder / f"{stem}_{k}{suffix}"
         k += 1
     return p
+
+
+class BackgroundJobs:
+    """Work the window should not wait for (a mesh export bakes its texture for about a
+    second), each on its own thread: :meth:`start` runs ``fn()`` there; :meth:`finished`,
+    called once a frame, returns the jobs that ended as (tag, result, error message or None);
+    :meth:`join` waits for the rest (the window closing must not cut a file short)."""
+
+    def __init__(self):
+        self.jobs: list = []
+
+    def start(self, tag, fn) -> None:
+        import threading
+
+        job = {"tag": tag, "result": None, "error": None, "done": threading.Event()}
+
+        def work():
+            try:
+                job["result"] = fn()
+            except LeafsimError as e:
+                job["error"] = str(e)
+            except Exception as e:  # the window must survive anything a job meets
+                job["error"] = f"internal error: {type(e).__name__}: {e}"
+            finally:
+                job["done"].set()
+
+        job["thread"] = threading.Thread(target=work, name=f"leafsim-{tag}", daemon=True)
+        self.jobs.append(job)
+        job["thread"].start()
+
+    def pending(self, tag=None) -> list:
+        return [j["tag"] for j in self.jobs if not j["done"].is_set() and (tag is None or j["tag"] == tag)]
+
+    def finished(self) -> list:
+        done = [j for j in self.jobs if j["done"].is_set()]
+        self.jobs = [j for j in self.jobs if not j["done"].is_set()]
+        return [(j["tag"], j["result"], j["error"]) for j in done]
+
+    def join(self, timeout: float | None = None) -> None:
+        for j in self.jobs:
+            j["thread"].join(timeout)

@@ -227,7 +227,8 @@ def test_a_take_holds_every_nth_simulation_frame(tmp_path, dry):
 
 def test_export_mesh_button_writes_a_glb(tmp_path):
     """"Export mesh" writes the leaf on screen as a binary glTF into the export folder (created
-    when missing), a second click a second file; trimesh loads it with the blade's counts, its
+    when missing) on a thread of its own, a second click a second file (even while the first is
+    being written); trimesh loads it with the blade's counts, its
     blade coloured by the baked texture (the window's albedo, sub-grid mottle and photo detail
     included), and so are the veins over oak's photo (the window draws the photo under them)."""
     import json
@@ -241,9 +242,13 @@ def test_export_mesh_button_writes_a_glb(tmp_path):
     def body(ctx, app):
         ctx.item_input_value("**/export folder", str(out))
         ctx.yield_(1)
+        # two presses in a row: each bakes on its own thread while the window keeps drawing,
+        # and the second picks another name while the first file is still being written
         ctx.item_click("**/Export mesh")
-        ctx.yield_(2)
+        seen["first"] = app.status.get("mesh").text
+        ctx.yield_(1)
         ctx.item_click("**/Export mesh")
+        app.jobs.join()
         ctx.yield_(2)
         seen["msg"] = app.status.get("mesh")
         seen["nT"] = int((app.session.model.particle_layer == 0).sum())
@@ -252,7 +257,8 @@ def test_export_mesh_button_writes_a_glb(tmp_path):
     assert app.error is None
     files = sorted(out.glob("oak_frame_*.glb"))
     assert len(files) == 2 and files[0].stem + "_2" == files[1].stem
-    assert seen["msg"].path and str(out) in str(seen["msg"].path)
+    assert seen["first"].startswith(("exporting mesh", "exported mesh"))
+    assert seen["msg"].path and str(out) in str(seen["msg"].path) and seen["msg"].text.startswith("exported mesh")
     scene = trimesh.load(files[0])
     blade = max(scene.geometry.values(), key=lambda g: len(g.faces))
     assert blade.is_watertight and len(blade.vertices) >= 2 * seen["nT"]
