@@ -187,9 +187,10 @@ def _scene_export_parsers(sub) -> None:
     ex.add_argument("--out", required=True, help="output file")
     ex.add_argument("--layers", default="shell", choices=["shell", "mid"], help="closed thin shell from both layers, or the mid-surface with thickness")
     ex.add_argument("--veins", action="store_true", help="add the veins as a second mesh")
-    ex.add_argument("--texture", default="colours", choices=["colours", "photo", "baked"],
-                    help="pigment colours per vertex, the species photo, or baked: the blade's colour as the window "
-                         "draws it (sub-grid mottle, photo detail) in a texture, for one state (glb, gltf, obj)")
+    ex.add_argument("--texture", default="auto", choices=["auto", "colours", "photo", "baked"],
+                    help="baked: the blade's colour as the window draws it (sub-grid mottle, photo detail) in a "
+                         "texture, one state (glb, gltf, obj); colours: pigment colours per vertex (animations, PLY); "
+                         "photo: the species photo; auto (default): baked for one state, colours for --every or PLY")
     ex.add_argument("--effects", default=None, help="comma-separated effects to enable (others off)")
     ex.add_argument("--json", action="store_true", help=JSON_HELP)
 

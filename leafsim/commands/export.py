@@ -24,6 +24,8 @@ def _check(args) -> str:
         raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
     if args.every and fmt in ("obj", "ply"):
         raise LeafsimError(f"--every needs --format glb or gltf ({fmt} holds one static shape)")
+    if args.texture == "auto":  # a still as the window draws it; an animation and PLY per vertex
+        args.texture = "colours" if args.every or fmt == "ply" else "baked"
     if args.texture == "baked" and args.every:
         raise LeafsimError(f"--texture baked holds one state's colour (a texture cannot change with the key frames): "
                            f"leave out --every {args.every}, or use --texture colours for the drying animation")
@@ -86,7 +88,7 @@ def cmd_export(args):
     rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view,
                       layers=args.layers, veins=args.veins, texture=args.texture)
     water = model.water_fraction(run.state.particle_water)
-    rep.update(species=sp.key, seed=args.seed, frames=run.state.frame, water_fraction=round(water, 6))
+    rep.update(species=sp.key, seed=args.seed, frames=run.state.frame, water_fraction=round(water, 6), texture=args.texture)
     if fmt in ("glb", "gltf") and len(keys) > 1:
         from leafsim.export import blender_import  # the add-on that brings the colour morphs into Blender
 

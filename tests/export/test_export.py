@@ -261,7 +261,12 @@ def test_cli_export_animation_and_bad_input(tmp_path):
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)
     assert rep["targets"] == 2 and rep["frames"] == 40 and set(rep["meshes"]) == {"blade", "veins"}
+    assert rep["texture"] == "colours"  # the default for an animation: vertex colours with their morphs
     assert_clean(out)
+    still = tmp_path / "still.glb"
+    r = _cli("export", "--species", "chestnut", "--frames", "40", "--out", str(still), "--set", "mesh.spacing=0.08", "--json")
+    assert r.returncode == 0 and json.loads(r.stdout)["texture"] == "baked", r.stderr  # a still: as the window draws it
+    assert_clean(still)
     for args, msg in [(["--every", "5", "--out", str(tmp_path / "x.obj")], "--every needs"),
                       (["--out", str(tmp_path / "nope" / "x.glb")], "does not exist"),
                       (["--texture", "photo", "--out", str(tmp_path / "x.glb")], "has no photo"),
@@ -272,7 +277,7 @@ def test_cli_export_animation_and_bad_input(tmp_path):
         assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     r = _cli("export", "--species", "nosuch", "--out", str(tmp_path / "x.glb"))
     assert r.returncode == 2 and "unknown species" in r.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["chestnut.glb"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["chestnut.glb", "still.glb"]
 
 
 @pytest.mark.parametrize("key, frames", [("oak", 0), ("oak", 80), ("maple", 80)])
