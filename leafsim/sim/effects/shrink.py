@@ -14,6 +14,7 @@ from leafsim.sim.model import (
     Model,
     State,
 )
+from leafsim.sim.pleats import pleat_angles
 from leafsim.sim.senescence import random_field
 from leafsim.sim.veinframe import hinge_alignment
 
@@ -27,6 +28,11 @@ PATCH_SALT = 0x5A71C4
 #: largest rest angle a bending hinge may ask for [rad]: a curvature the mesh cannot resolve
 #: (radius below a few edge lengths) is clamped instead of fighting the stretch constraints
 HINGE_MAX_ANGLE = 0.35
+
+#: largest rest angle of a pleat (shrink.plication) [rad], added after the bilayer's clamp: the
+#: pleats fold along vein lines, which the mesh follows (about 30° at hornbeam's depth, p99), but
+#: where a vein ends inside a panel the field has a point dent whose angle grows as the mesh refines
+PLEAT_MAX_ANGLE = 1.0
 
 
 class Shrink:
@@ -48,7 +54,13 @@ class Shrink:
     With ``shrink.patchiness`` a > 0 the blade's tissue shrinks unevenly: every spring's σ
     and every hinge's bilayer angle × (1 + a z), z a seeded smooth random field of correlation
     length ``shrink.patch_size`` (:meth:`_patches`); both layers and the curl follow the same
-    field, so each patch is a consistent shape of its own, incompatible with its neighbours."""
+    field, so each patch is a consistent shape of its own, incompatible with its neighbours.
+
+    With ``shrink.plication`` δ > 0 every hinge's rest angle gains δ × the dihedral angle of the
+    fresh blade's pleats across it (:mod:`leafsim.sim.pleats`: valleys on the main veins and
+    laterals, the panels between them raised), after the bilayer's clamp (a pleat is a fold
+    along a vein line, which the mesh follows; clamped on its own at ``PLEAT_MAX_ANGLE``); the
+    pleats are a fold of the flat blade, so no rest length changes."""
 
     def __init__(self, model: Model):
         self.model = model
@@ -68,6 +80,7 @@ class Shrink:
         # elsewhere the curl is resolved in the local vein frame (veinframe.py)
         self.hinge_align = hinge_alignment(model)
         self.hinge_curl = np.where(model.hinge_vein, 0.0, 1.0)
+        self.pleat = None  # shrink.plication's rest angles, set by configure
 
     def configure(self, params, seed: int = 0):
         t = self.model.spring_type
@@ -83,6 +96,16 @@ class Shrink:
         self.setw = min(params["dynamics.plasticity"] * params["dynamics.dt"], 1.0)
         beta = params["shrink.curl_anisotropy"]
         self.hinge_curl = np.where(self.model.hinge_vein, 0.0, 1.0 + beta * self.hinge_align) * hinge_f
+        depth = float(params["shrink.plication"])
+        self.pleat = (np.clip(depth * self._pleat_angles(), -PLEAT_MAX_ANGLE, PLEAT_MAX_ANGLE)
+                      if depth > 0.0 and self.model.hinge_count else None)
+
+    def _pleat_angles(self) -> np.ndarray:
+        """The hinges' rest angles per unit ``shrink.plication`` (:mod:`leafsim.sim.pleats`),
+        computed once per model."""
+        if getattr(self, "_pleat_unit", None) is None:
+            self._pleat_unit = pleat_angles(self.model)
+        return self._pleat_unit
 
     def _patches(self, a: float, size: float, seed: int) -> tuple:
         """The shrinkage field of ``shrink.patchiness`` (class doc): per spring and per hinge the
@@ -117,6 +140,8 @@ class Shrink:
                              m.particle_mass0, m.thickness, BILAYER_GAIN, self.setw, state.hinge_plastic, state.hinge_rest)
             np.multiply(state.hinge_rest, self.hinge_curl, out=state.hinge_rest)
             np.clip(state.hinge_rest, -HINGE_MAX_ANGLE, HINGE_MAX_ANGLE, out=state.hinge_rest)
+            if self.pleat is not None:  # the fresh blade's pleats (shrink.plication): folds on vein lines
+                np.add(state.hinge_rest, self.pleat, out=state.hinge_rest)
         # the T springs' shrink, once per triangle, for the springs and volumes above them
         ks.tri_ratios(self.tri_springs, m.spring_rest0, state.spring_rest, self.ratios)
         if m.hinge_count:
