@@ -1,7 +1,7 @@
 """Close-ups of a dried leaf with and without its pleats (``shrink.plication``), side by side,
 under a low sun, so the valleys along the laterals show (docs/drying/README.md, "Pleats").
 
-    .venv/bin/python tools/pleats_picture.py [--species hornbeam] [--depth 0.008] [--out docs/drying/hornbeam_pleats.png]
+    .venv/bin/python tools/pleats_picture.py [--species hornbeam] [--depth D] [--out docs/drying/hornbeam_pleats.png]
 
 Each leaf dries on the ground by the drying report's protocol (tools/drying_report.py: below 2 %
 of its water, then 1.15 × that time); drawn in the model's own colours (not the photo's painted veins) under a
@@ -53,12 +53,13 @@ def dried(key: str, depth: float):
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--species", default="hornbeam")
-    ap.add_argument("--depth", type=float, default=0.008)
+    ap.add_argument("--depth", type=float, default=None, help="shrink.plication (default: the species' own)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "drying" / "hornbeam_pleats.png"))
     a = ap.parse_args()
     r = OffscreenRenderer(640, 420)
     cols = []
-    for depth in (0.0, a.depth):
+    asked = a.depth if a.depth is not None else get_species(a.species).params["shrink.plication"]
+    for depth in (0.0, asked):
         sp, p, model, st = dried(a.species, depth)
         photo = load_photo_rgba(sp.image) if sp.image is not None else None
         view = LeafView(model, photo, photo_tint=False)

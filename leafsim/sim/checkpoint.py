@@ -266,7 +266,8 @@ WATER_SLACK = 2.0
 STRAIN_RANGE = (0.2, 5.0)
 CRUSHED_SHARE = 0.1
 TORN_SHARE = 0.05
-#: |hinge_rest| is clamped at 0.35 rad by the shrink effect; hinge_plastic, the largest bilayer
+#: |hinge_rest| is clamped at 0.35 rad by the shrink effect (1.35 rad with shrink.plication's
+#: pleats, clamped at 1 rad on their own; a loaded state is checked against ±π); hinge_plastic, the largest bilayer
 #: angle a hinge has asked for, is not (6.1 rad measured on oak with shrink.sigma_surface_top 0.8)
 PLASTIC_MAX = 1e3
 

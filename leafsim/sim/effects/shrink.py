@@ -30,7 +30,7 @@ PATCH_SALT = 0x5A71C4
 HINGE_MAX_ANGLE = 0.35
 
 #: largest rest angle of a pleat (shrink.plication) [rad], added after the bilayer's clamp: the
-#: pleats fold along vein lines, which the mesh follows (about 30° at hornbeam's depth, p99), but
+#: pleats fold along vein lines, which the mesh follows (22° at hornbeam's depth, p99), but
 #: where a vein ends inside a panel the field has a point dent whose angle grows as the mesh refines
 PLEAT_MAX_ANGLE = 1.0
 
@@ -81,6 +81,7 @@ class Shrink:
         self.hinge_align = hinge_alignment(model)
         self.hinge_curl = np.where(model.hinge_vein, 0.0, 1.0)
         self.pleat = None  # shrink.plication's rest angles, set by configure
+        self._pleat_unit = None  # the pleats' angles per unit depth, computed on first use
 
     def configure(self, params, seed: int = 0):
         t = self.model.spring_type
@@ -103,7 +104,7 @@ class Shrink:
     def _pleat_angles(self) -> np.ndarray:
         """The hinges' rest angles per unit ``shrink.plication`` (:mod:`leafsim.sim.pleats`),
         computed once per model."""
-        if getattr(self, "_pleat_unit", None) is None:
+        if self._pleat_unit is None:
             self._pleat_unit = pleat_angles(self.model)
         return self._pleat_unit
 
