@@ -12,12 +12,13 @@ in vec4 v_conc;     // sub-grid mottle: pigment concentrations (common.glsl, mot
 in vec4 v_state;    // the reactions' states
 in vec2 v_extra;    // necrosis concentration, surface reflectance
 in vec2 v_rest;     // where the tissue samples the mottle field (rest position, metres)
+in float v_crinkle; // RMS slope of the sub-grid crinkle (render.crinkle; leafsim.sim.crinkle)
 
 // Compile-time switches (the renderer builds one program per combination; a software
 // rasteriser runs both sides of a branch on a uniform, so switches must not be uniforms):
 // LS_MODE 0 colours, 1 texture, 2 detail, 3 heat map; LS_CMAP 0 turbo, 1 viridis;
 // LS_SHADOW 1 = self-shadowing from the shadow map; LS_CUTOUT 1 = discard outside the photo mask;
-// LS_MOTTLE 1 = the sub-grid mottle (colour.mottle).
+// LS_MOTTLE 1 = the sub-grid mottle (colour.mottle); LS_CRINKLE 1 = the sub-grid crinkle (render.crinkle).
 #ifndef LS_MODE
 #define LS_MODE 0
 #endif
@@ -32,6 +33,9 @@ in vec2 v_rest;     // where the tissue samples the mottle field (rest position,
 #endif
 #ifndef LS_MOTTLE
 #define LS_MOTTLE 0
+#endif
+#ifndef LS_CRINKLE
+#define LS_CRINKLE 0
 #endif
 uniform vec2 u_range;
 uniform sampler2D u_tex;       // sRGB photo (decoded by the sampler)
@@ -50,6 +54,10 @@ uniform float u_mottle_scale;   // its texture coordinates per metre
 uniform float u_mottle;         // colour.mottle a
 uniform vec3 u_absorb[5];       // absorption per pigment and band
 uniform vec3 u_base;            // reflectance of pigment-free tissue (linear)
+uniform float u_crinkle_scale;  // the crinkle's texture coordinates per metre (render.crinkle_size)
+uniform vec2 u_crinkle_offset;  // where it samples the field, away from the mottle's samples
+uniform float u_crinkle_norm;   // 1 / RMS of the field's central difference per texel
+uniform float u_noise_texel;    // one texel of the field, in texture coordinates
 
 uniform sampler2DShadow u_shadow;
 uniform mat4 u_light_mat;
@@ -87,6 +95,30 @@ void main() {
     // the pigments interpolate linearly over the triangle; the field moves them on per pixel
     float n = mottle_n(texture(u_noise, v_rest * u_mottle_scale).r);
     albedo *= mottle_ratio(v_conc, v_state, v_extra, n, u_mottle, u_absorb, u_base);
+#endif
+#if LS_CRINKLE
+    // The sub-grid crinkle: a height field h over the rest plane whose slope along each rest
+    // direction has the RMS v_crinkle (its gradient: the field's central difference over one
+    // texel, normalised), carried to the screen by the chain rule and turned into a normal by
+    // Mikkelsen's surface gradient (bump mapping without tangents).  A minified leaf reads a
+    // blurred mip level, so the crinkle fades where the pixels cannot show it.
+    // (no branch: screen derivatives and implicit-LOD fetches need the whole 2×2 quad)
+    {
+        vec2 u = v_rest * u_crinkle_scale + u_crinkle_offset;
+        float e = u_noise_texel;
+        vec2 g = 0.5 * vec2(mottle_n(texture(u_noise, u + vec2(e, 0.0)).r) - mottle_n(texture(u_noise, u - vec2(e, 0.0)).r),
+                            mottle_n(texture(u_noise, u + vec2(0.0, e)).r) - mottle_n(texture(u_noise, u - vec2(0.0, e)).r));
+        vec2 grad_h = max(v_crinkle, 0.0) * u_crinkle_norm * g;  // dh/d(rest), per rest direction
+        float dhdx = dot(grad_h, dFdx(v_rest));
+        float dhdy = dot(grad_h, dFdy(v_rest));
+        vec3 dpdx = dFdx(v_pos);
+        vec3 dpdy = dFdy(v_pos);
+        vec3 r1 = cross(dpdy, N);
+        vec3 r2 = cross(N, dpdx);
+        float det = dot(dpdx, r1);
+        vec3 Nc = abs(det) * N - sign(det) * (dhdx * r1 + dhdy * r2);
+        if (dot(Nc, Nc) > 0.0) N = normalize(Nc);
+    }
 #endif
 #if LS_SHADOW
     float sh = shadow_pcf4(u_shadow, u_light_mat, v_pos + L * u_shadow_offset, 1.5);

@@ -10,6 +10,7 @@ in vec4 in_conc;
 in vec4 in_state;
 in vec2 in_extra;
 in vec2 in_rest;
+in float in_crinkle;
 
 uniform mat4 u_viewproj;
 
@@ -24,6 +25,7 @@ out vec4 v_conc;
 out vec4 v_state;
 out vec2 v_extra;
 out vec2 v_rest;
+out float v_crinkle;
 
 void main() {
     v_pos = in_pos;
@@ -37,5 +39,6 @@ void main() {
     v_state = in_state;
     v_extra = in_extra;
     v_rest = in_rest;
+    v_crinkle = in_crinkle;
     gl_Position = u_viewproj * vec4(in_pos, 1.0);
 }

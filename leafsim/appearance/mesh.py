@@ -72,6 +72,12 @@ class RenderMesh:
         The field's correlation length in metres; 0 = no mottle.
     mottle_amount : float
         ``colour.mottle`` a, 0..1; 0 = no mottle.
+    crinkle : (n,) float32 or None
+        RMS slope [rad] of the sub-grid crinkle at each vertex (``render.crinkle`` times
+        √(2Δ) of :mod:`leafsim.sim.crinkle`), drawn over the same rest positions as the
+        mottle (``mottle_rest``, required with it). None or all 0: a smooth blade.
+    crinkle_size : float
+        The crinkle field's correlation length in metres (``render.crinkle_size``).
     """
 
     positions: np.ndarray
@@ -91,6 +97,8 @@ class RenderMesh:
     mottle_rest: np.ndarray | None = None
     mottle_size: float = 0.0
     mottle_amount: float = 0.0
+    crinkle: np.ndarray | None = None
+    crinkle_size: float = 0.0
 
     @property
     def vertex_count(self) -> int:
@@ -124,6 +132,12 @@ def validate_mesh(mesh) -> None:
     _check("vein_colours", (3,))
     _check("mottle", (10,))
     _check("mottle_rest", (2,))
+    _check("crinkle", ())
+    if getattr(mesh, "crinkle", None) is not None and getattr(mesh, "mottle_rest", None) is None:
+        raise LeafsimError("render mesh: crinkle needs mottle_rest (where each vertex samples the crinkle field)")
+    csize = float(getattr(mesh, "crinkle_size", 0.0) or 0.0)
+    if not (np.isfinite(csize) and csize >= 0.0):
+        raise LeafsimError(f"render mesh: crinkle_size must be a finite length >= 0 m, got {csize}")
     if getattr(mesh, "mottle", None) is not None and getattr(mesh, "mottle_rest", None) is None:
         raise LeafsimError("render mesh: mottle needs mottle_rest (where each vertex samples the mottle field)")
     size = float(getattr(mesh, "mottle_size", 0.0) or 0.0)
@@ -132,10 +146,13 @@ def validate_mesh(mesh) -> None:
     amount = float(getattr(mesh, "mottle_amount", 0.0) or 0.0)
     if not (np.isfinite(amount) and 0.0 <= amount <= 1.0):
         raise LeafsimError(f"render mesh: mottle_amount must be in [0, 1], got {amount}")
-    for name in ("colours", "tint", "chroma", "vein_colours", "mottle", "mottle_rest"):
+    for name in ("colours", "tint", "chroma", "vein_colours", "mottle", "mottle_rest", "crinkle"):
         a = getattr(mesh, name, None)
         if a is not None and not np.all(np.isfinite(np.asarray(a, dtype=np.float64))):
             raise LeafsimError(f"render mesh: {name} must be finite")
+    crinkle = getattr(mesh, "crinkle", None)
+    if crinkle is not None and (np.asarray(crinkle) < 0).any():
+        raise LeafsimError("render mesh: crinkle slopes must be >= 0")
     for name, arr in (getattr(mesh, "scalars", None) or {}).items():
         if np.asarray(arr).shape != (n,):
             raise LeafsimError(f"render mesh: scalar field {name!r} must be ({n},)")

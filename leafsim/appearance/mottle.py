@@ -67,3 +67,24 @@ def leaf_offset(seed: int) -> np.ndarray:
     """(2,) float32 metres added to a leaf's rest positions, drawn from its seed, so leaves of
     a scene (and seeds of one species) are not flecked alike."""
     return np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x6D6F74]).uniform(0.0, 0.5, 2).astype(np.float32)
+
+
+#: where the crinkle samples the field, in texture coordinates added to the mottle's: far from
+#: the mottle's own samples (the field's period is 256 correlation lengths), so the two are
+#: not alike where their scales meet
+CRINKLE_OFFSET = (0.3719, 0.6113)
+
+
+def crinkle_gradient_rms(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> float:
+    """RMS of the field's central difference ½ (n(u + 1 texel) − n(u − 1 texel)) along one
+    axis (the mean of both axes' mean squares), as the fragment shader takes it at texel
+    centres: the crinkle divides its gradient by this, so each direction's slope has the RMS
+    the vertex asks for (``render.crinkle``, :mod:`leafsim.sim.crinkle`)."""
+    key = ("grad", int(size), int(seed))
+    hit = _CACHE.get(key)
+    if hit is None:
+        f = mottle_field(size, seed).astype(np.float64)
+        gx = 0.5 * (np.roll(f, -1, 1) - np.roll(f, 1, 1))
+        gy = 0.5 * (np.roll(f, -1, 0) - np.roll(f, 1, 0))
+        hit = _CACHE[key] = float(np.sqrt(0.5 * (np.mean(gx * gx) + np.mean(gy * gy))))
+    return hit

@@ -55,6 +55,7 @@ class LeafView:
         self._young = None   # (photo colour per particle (n, 3) linear, luminance normaliser (nT,))
         self._fit = None     # (vein_pallor, fitted contents)
         self._pure_vein = None  # ones (n,): m̂ of pure vein tissue (vein_colours)
+        self._crinkle = {}  # the lamina excess's per-mesh data and prolongations (leafsim.sim.crinkle)
 
     def use_texture(self, params) -> bool:
         return bool(params["render.texture"]) and self.photo_rgba is not None
@@ -184,6 +185,18 @@ class LeafView:
         contents = self.photo_contents(params) if (self.photo_colour and self.pigments0 is not None) else None
         return mottle_pigments(pig, params, contents)[self.T], float(params["colour.mottle_size"]), float(params["colour.mottle"])
 
+    def crinkle(self, state: State, params):
+        """((nT,) float32 RMS slope of the sub-grid crinkle, ``render.crinkle`` × √(2Δ) with Δ
+        the lamina's excess length (:mod:`leafsim.sim.crinkle`), the field's correlation
+        length in metres), or (None, 0) with ``render.crinkle`` 0."""
+        from leafsim.sim.crinkle import crinkle_slope, lamina_excess
+
+        gain = float(params["render.crinkle"])
+        if gain <= 0.0:
+            return None, 0.0
+        slope = gain * crinkle_slope(lamina_excess(self.model, state, params, self._crinkle))
+        return slope[self.T].astype(np.float32), float(params["render.crinkle_size"])
+
     def mottle_rest(self, state: State) -> np.ndarray:
         """(nT, 2) float32: where each vertex samples the mottle field, its rest position in
         metres shifted by the leaf's own offset (from its pigment seed)."""
@@ -217,6 +230,7 @@ class LeafView:
         colours, tint = self.colours(state, params)
         vein_colours = self.vein_colours(state, params, colours)
         mottle, mottle_size, mottle_amount = self.mottle(state, params)
+        crinkle, crinkle_size = self.crinkle(state, params)
         stalk = ~m.blade_particles
         veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()
                  if not (self.blade_only and stalk[idx].any())]
@@ -238,6 +252,8 @@ class LeafView:
             mottle_rest=self.mottle_rest(state),
             mottle_size=mottle_size,
             mottle_amount=mottle_amount,
+            crinkle=crinkle,
+            crinkle_size=crinkle_size,
         )
 
     def update(self, state: State, params) -> dict:
@@ -256,6 +272,9 @@ class LeafView:
         mottle, size, amount = self.mottle(state, params)
         if mottle is not None:
             out["mottle"], out["mottle_size"], out["mottle_amount"] = mottle, size, amount
+        crinkle, crinkle_size = self.crinkle(state, params)
+        out["crinkle"] = crinkle if crinkle is not None else np.zeros(len(self.T), np.float32)
+        out["crinkle_size"] = crinkle_size
         return out
 
 

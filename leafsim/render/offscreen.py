@@ -82,7 +82,9 @@ class OffscreenRenderer:
                                  top_positions=getattr(m, "top_positions", None), chroma=getattr(m, "chroma", None),
                                  vein_colours=getattr(m, "vein_colours", None), mottle=getattr(m, "mottle", None),
                                  mottle_size=(getattr(m, "mottle_size", 0.0) or 0.0) if getattr(m, "mottle", None) is not None else None,
-                                 mottle_amount=(getattr(m, "mottle_amount", 0.0) or 0.0) if getattr(m, "mottle", None) is not None else None)
+                                 mottle_amount=(getattr(m, "mottle_amount", 0.0) or 0.0) if getattr(m, "mottle", None) is not None else None,
+                                 crinkle=getattr(m, "crinkle", None),
+                                 crinkle_size=(getattr(m, "crinkle_size", 0.0) or 0.0) if getattr(m, "crinkle", None) is not None else None)
         else:
             self.renderer.populate(mesh_or_update)
             self._mesh = mesh_or_update

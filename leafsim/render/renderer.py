@@ -13,7 +13,7 @@ import moderngl
 import numpy as np
 
 from leafsim.appearance.mesh import NO_CHROMA, validate_mesh
-from leafsim.appearance.mottle import mottle_levels, mottle_scale
+from leafsim.appearance.mottle import CRINKLE_OFFSET, FIELD_SIZE, crinkle_gradient_rms, mottle_levels, mottle_scale
 from leafsim.appearance.reflectance import ABSORPTION, BASE_REFLECTANCE, MOTTLE_COLUMNS
 from leafsim.appearance.texture import clean_texture
 from leafsim.base.errors import LeafsimError
@@ -195,6 +195,10 @@ class Renderer:
         self.rest = rest
         self.mottle_size = float(getattr(mesh, "mottle_size", 0.0) or 0.0) if mottle is not None else 0.0
         self.mottle_amount = float(getattr(mesh, "mottle_amount", 0.0) or 0.0)
+        crinkle = getattr(mesh, "crinkle", None)
+        self.crinkle = np.zeros(n, np.float32) if crinkle is None else np.ascontiguousarray(crinkle, dtype=np.float32).copy()
+        self.crinkle_size = float(getattr(mesh, "crinkle_size", 0.0) or 0.0)
+        self.crinkle_max = float(self.crinkle.max()) if n else 0.0
         top = getattr(mesh, "top_positions", None)
         self.top = None if top is None else np.ascontiguousarray(top, dtype=np.float32).copy()
         self.k = 0 if self.top is None else self.top.shape[0]
@@ -209,12 +213,13 @@ class Renderer:
         self.vbo_scalar = self._buf(np.zeros(n, np.float32), dynamic=True)
         self.vbo_mottle = self._buf(self.mottle, dynamic=True)
         self.vbo_rest = self._buf(rest)
+        self.vbo_crinkle = self._buf(self.crinkle, dynamic=True)
         self.ibo_tri = self._buf(self.tri)
         self._specs["blade"] = ([
             (self.vbo_pos, "3f", "in_pos"), (self.vbo_nrm, "3f", "in_nrm"), (self.vbo_col, "3f", "in_col"),
             (self.vbo_tint, "3f", "in_tint"), (self.vbo_chroma, "4f", "in_chroma"), (self.vbo_uv, "2f", "in_uv"),
             (self.vbo_scalar, "1f", "in_scalar"), (self.vbo_mottle, "4f 4f 2f", "in_conc", "in_state", "in_extra"),
-            (self.vbo_rest, "2f", "in_rest")],
+            (self.vbo_rest, "2f", "in_rest"), (self.vbo_crinkle, "1f", "in_crinkle")],
             self.ibo_tri)
         self.vao_shadow = self._vao("shadow", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_uv, "2f", "in_uv")],
                                     self.ibo_tri)
@@ -292,7 +297,8 @@ class Renderer:
 
     # --- per frame ------------------------------------------------------------------------
     def update(self, positions, colours=None, scalar=None, tint=None, top_positions=None, chroma=None,
-               vein_colours=None, mottle=None, mottle_size=None, mottle_amount=None) -> None:
+               vein_colours=None, mottle=None, mottle_size=None, mottle_amount=None, crinkle=None,
+               crinkle_size=None) -> None:
         """Write new per-frame data into the GL buffers.
 
         Parameters
@@ -319,6 +325,10 @@ class Renderer:
             The mottle field's correlation length in metres; 0 turns the mottle off.
         mottle_amount : float, optional
             ``colour.mottle`` a, 0..1.
+        crinkle : (n,) float, optional
+            RMS slope of the sub-grid crinkle per vertex (:class:`~leafsim.appearance.mesh.RenderMesh`).
+        crinkle_size : float, optional
+            The crinkle field's correlation length in metres; 0 turns the crinkle off.
         """
         if self.mesh is None:
             raise LeafsimError("renderer: update() before populate()")
@@ -342,6 +352,14 @@ class Renderer:
                                "(where the tissue samples the mottle field)")
         if mottle_amount is not None and not (np.isfinite(mottle_amount) and 0.0 <= mottle_amount <= 1.0):
             raise LeafsimError(f"renderer: mottle_amount must be in [0, 1], got {mottle_amount}")
+        ck = None if crinkle is None else np.asarray(crinkle, dtype=np.float32)
+        if ck is not None and (ck.shape != (self.n,) or not np.all(np.isfinite(ck)) or (ck < 0).any()):
+            raise LeafsimError(f"renderer: crinkle must be finite slopes >= 0, ({self.n},), got {ck.shape}")
+        if crinkle_size is not None and not (np.isfinite(crinkle_size) and crinkle_size >= 0.0):
+            raise LeafsimError(f"renderer: crinkle_size must be a finite length >= 0 m, got {crinkle_size}")
+        if crinkle_size and not self.has_rest:
+            raise LeafsimError("renderer: crinkle_size > 0 needs the mesh populated with mottle_rest "
+                               "(where the tissue samples the crinkle field)")
         self.pos[:] = pos
         vertex_normals(self.pos, self.tri, self.nrm)
         self.vbo_pos.write(self.pos)
@@ -369,6 +387,12 @@ class Renderer:
             self.mottle_size = float(mottle_size)
         if mottle_amount is not None:
             self.mottle_amount = float(mottle_amount)
+        if ck is not None:
+            self.crinkle[:] = ck
+            self.crinkle_max = float(ck.max()) if self.n else 0.0
+            self.vbo_crinkle.write(self.crinkle)
+        if crinkle_size is not None:
+            self.crinkle_size = float(crinkle_size)
         if vein_colours is not None and self.vein_col is not None:
             self.vein_col[:] = vein_colours
             recolour = True
@@ -617,11 +641,15 @@ class Renderer:
         else:
             mode, cmap = self._albedo_mode(opts), 0
         mottle = not heat and self._mottle_on()
+        crinkle = not heat and self._crinkle_on()
         defs = dict(LS_MODE=mode, LS_CMAP=cmap, LS_SHADOW=int(self_shadow and not heat),
-                    LS_CUTOUT=int(bool(opts.texture_cutout) and mode == 1), LS_MOTTLE=int(mottle))
+                    LS_CUTOUT=int(bool(opts.texture_cutout) and mode == 1), LS_MOTTLE=int(mottle),
+                    LS_CRINKLE=int(crinkle))
         b = self._variant("blade", **defs)
         if mottle:
             self._mottle_uniforms(b)
+        if crinkle:
+            self._crinkle_uniforms(b)
         if heat:
             if self._scalar_name != opts.view:
                 self.vbo_scalar.write(self.scalars[opts.view])
@@ -639,6 +667,17 @@ class Renderer:
 
     def _mottle_on(self) -> bool:
         return self.mottle_size > 0.0 and self.mottle_amount > 0.0 and self.has_rest
+
+    def _crinkle_on(self) -> bool:
+        return self.crinkle_size > 0.0 and self.crinkle_max > 0.0 and self.has_rest
+
+    def _crinkle_uniforms(self, prog) -> None:
+        self._mottle_texture().use(location=3)
+        _set(prog, "u_noise", 3)
+        _set(prog, "u_crinkle_scale", mottle_scale(self.crinkle_size))
+        _set(prog, "u_crinkle_offset", CRINKLE_OFFSET)
+        _set(prog, "u_crinkle_norm", 1.0 / crinkle_gradient_rms())
+        _set(prog, "u_noise_texel", 1.0 / FIELD_SIZE)
 
     def _mottle_uniforms(self, prog) -> None:
         self._mottle_texture().use(location=3)

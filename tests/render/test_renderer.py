@@ -798,3 +798,49 @@ def test_vein_ribbon_samples_the_mottle_across_its_width():
     half = 0.5 * (rows[:, 1, 10:] - rows[:, 0, 10:])
     np.testing.assert_allclose(np.linalg.norm(half, axis=1), width / 2, rtol=1e-5)
     np.testing.assert_allclose(half @ np.array([1.0, 2.0]) / np.sqrt(5), 0.0, atol=1e-7)  # across the line
+
+
+def _srgb_to_linear(c):
+    c = np.asarray(c, np.float64) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def test_crinkle_tilts_the_normals_by_the_slope_asked_for(off, leaf):
+    """The sub-grid crinkle (render.crinkle): a flat blade lit at 45° from the side shades as
+    N·L, so to first order the pixels' linear brightness spreads by albedo × sun × sin 45° × the
+    RMS slope along the light's direction.  The drawn spread must give back the slope each vertex
+    asks for (0.1 rad) within a fifth; the mean brightness stays; without a slope (or with a
+    size of 0) the blade is drawn exactly as a mesh that has no crinkle; the crinkle stays on
+    the tissue (moving the leaf moves the pattern); bad slopes get a one-line error."""
+    s45 = math.sqrt(0.5)
+    opts = RenderOptions(veins=False, shadows=False, ground=False, specular=0.0, translucency=0.0,
+                         light_dir=(s45, 0.0, s45), light_colour=(1.0, 1.0, 1.0), sky_colour=(0.0, 0.0, 0.0))
+    cam = top_camera()
+    box = (slice(H // 2 - 50, H // 2 + 50), slice(W // 2 - 22, W // 2 + 22))  # inside the blade
+    n = leaf.vertex_count
+    rest = leaf.positions[:, :2].astype(np.float32)
+    plain = RenderMesh(**{**leaf.__dict__, "mottle_rest": rest})
+    slope = 0.1
+    crinkled = RenderMesh(**{**plain.__dict__, "crinkle": np.full(n, slope, np.float32), "crinkle_size": 0.003})
+    flat = off.render_array(plain, cam, opts)[box]
+    got = off.render_array(crinkled, cam, opts)[box]
+    g = _srgb_to_linear(got[..., 1])
+    g0 = _srgb_to_linear(flat[..., 1])
+    assert g0.std() < 0.002 * g0.mean()  # evenly lit without it
+    albedo_sun = g0.mean() / s45  # N·L = sin 45° on the flat blade
+    measured = g.std() / (albedo_sun * s45)
+    assert 0.8 * slope < measured < 1.2 * slope, measured
+    assert abs(g.mean() - g0.mean()) < 0.03 * g0.mean()
+    # no slope, or no size: exactly the plain blade (the program without the crinkle)
+    for off_mesh in (RenderMesh(**{**crinkled.__dict__, "crinkle": np.zeros(n, np.float32)}),
+                     RenderMesh(**{**crinkled.__dict__, "crinkle_size": 0.0})):
+        assert np.array_equal(off.render_array(off_mesh, cam, opts)[box], flat)
+    # the pattern rides with the tissue: the leaf moved by 10 px draws it 10 px on
+    px_per_m = H / (2 * cam.distance * math.tan(math.radians(cam.fov) / 2))
+    moved = RenderMesh(**{**crinkled.__dict__, "positions": (crinkled.positions + np.float32([10 / px_per_m, 0, 0])).astype(np.float32)})
+    shifted = off.render_array(moved, cam, opts)[box[0], slice(W // 2 - 12, W // 2 + 32)].astype(float)
+    assert np.abs(shifted - got).mean() < 0.2 * np.abs(got - got.mean()).mean() + 1.0
+    with pytest.raises(LeafsimError, match="crinkle"):
+        off.render_array(RenderMesh(**{**crinkled.__dict__, "crinkle": np.full(n, -0.1, np.float32)}), cam, opts)
+    with pytest.raises(LeafsimError, match="crinkle"):
+        off.render_array(RenderMesh(**{**crinkled.__dict__, "mottle_rest": None}), cam, opts)

@@ -1,0 +1,108 @@
+"""The lamina's excess length: what a drying blade holds in compression, and the sub-grid
+crinkle it would take up.
+
+A dried lamina between stiff, barely shrinking veins is left compressed in places: the blade's
+triangles, measured against the triangles their springs' rest lengths now make (the shrink
+moves those), have a principal stretch below one (docs/drying/README.md, "Where the dried blade
+keeps its strain").  A sheet as thin as a lamina cannot carry compression; it buckles and takes
+the excess length up in crinkles whose wavelength (millimetres, the areoles and veinlets) is
+below any mesh we simulate on.  Whatever their wavelength, a surface z = h(x, y) that takes up
+an excess length Δ along a line has ½ ⟨(∂h/∂s)²⟩ = Δ, so its slopes are fixed by the excess
+alone: an isotropic crinkle carrying the mean of the two principal directions' excess,
+Δ = ½ (max(0, 1 − s₁) + max(0, 1 − s₂)), has an RMS slope √(2Δ) along every direction.  This
+module computes Δ per particle (the renderer tilts its normals by that slope over a seeded
+field, ``render.crinkle``); the mechanics never see it.
+
+While the drying path carries the mechanics (:mod:`leafsim.sim.path`), the leaf's own mesh
+only takes the coarse mesh's positions through a smooth prolongation whose fine-scale error is
+strain of its own (up to 25 % on a spring); the excess is then the coarse mesh's, prolonged
+the same way.  Imports no OpenGL."""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import numpy as np
+
+from leafsim.sim.kernels.crinkle import lamina_excess as _kernel
+from leafsim.sim.model import LAYER_T, Model, State
+
+
+def triangle_springs(model: Model) -> np.ndarray:
+    """(m, 3) int64: the springs along the sides a–b, b–c, c–a of each of ``model.blade_tri_T``
+    (the first spring between the two particles: the triangulation's edge)."""
+    ij = np.sort(np.asarray(model.spring_ij, np.int64), axis=1)
+    n = np.int64(model.particle_count)
+    key = ij[:, 0] * n + ij[:, 1]
+    order = np.argsort(key, kind="stable")
+    skey = key[order]
+    tri = np.asarray(model.blade_tri_T, np.int64)
+    out = np.empty(tri.shape, np.int64)
+    for k, (u, v) in enumerate(((0, 1), (1, 2), (2, 0))):
+        a, b = np.minimum(tri[:, u], tri[:, v]), np.maximum(tri[:, u], tri[:, v])
+        want = a * n + b
+        pos = np.searchsorted(skey, want)
+        pos = np.minimum(pos, len(skey) - 1)
+        if len(skey) == 0 or (skey[pos] != want).any():
+            raise ValueError("crinkle: a blade triangle's side has no spring")
+        out[:, k] = order[pos]
+    return out
+
+
+class _Mesh:
+    """What one mesh needs for its excess, made once: its blade triangles, their springs, the
+    particles that get none (the main and lateral veins, rods that do not crinkle, and every
+    particle off layer T).  Its arrays are only read, so one may serve several threads (the
+    window's worker and its drawing thread)."""
+
+    def __init__(self, model: Model):
+        self.tri = np.ascontiguousarray(model.blade_tri_T, np.int64)
+        self.springs = triangle_springs(model)
+        order = np.asarray(model.particle_vein_order)
+        self.zero = ((order >= 0) & (order <= 1)) | (np.asarray(model.particle_layer) != LAYER_T)
+        self.n = model.particle_count
+        self.s = len(model.spring_ij)
+
+    def excess(self, state: State) -> np.ndarray:
+        out = np.empty(self.n)
+        q = np.ascontiguousarray(state.particle_q, np.float64)
+        rest = np.ascontiguousarray(state.spring_rest, np.float64)
+        if q.shape != (self.n, 3) or rest.shape != (self.s,):  # the compiled loop does not check
+            raise ValueError(f"crinkle: a state of {q.shape} positions and {rest.shape} rest lengths for a model of "
+                             f"{self.n} particles and {self.s} springs")
+        _kernel(self.tri, self.springs, q, rest, self.zero, out, np.empty(self.n))
+        return out
+
+
+def _carried(model: Model, state: State, params: Mapping[str, Any]) -> bool:
+    """The drying path's mesh carries this mesh's mechanics now (as the Simulator decides it:
+    :meth:`leafsim.sim.path.DryingPath.active`)."""
+    from leafsim.sim.path import path_allowed
+
+    if model.path is None or state.path is None or not (params["effects.pbd"] or params["effects.gravity"]):
+        return False
+    return path_allowed(params) and model.water_fraction(state.particle_water) > params["dynamics.handover"]
+
+
+def lamina_excess(model: Model, state: State, params: Mapping[str, Any], cache: dict | None = None) -> np.ndarray:
+    """(n,) float64: each particle's excess length Δ (0 = no compression), on the mesh that
+    carries the mechanics now, prolonged to ``model``'s particles.  ``cache`` (a dict the
+    caller keeps per model) holds each mesh's triangles and the prolongations."""
+    from leafsim.sim.path import path_params, transfer_matrix
+
+    cache = {} if cache is None else cache
+    if _carried(model, state, params):
+        key = ("P", id(model.path))
+        if key not in cache:
+            cache[key] = transfer_matrix(model.path, model)
+        inner = lamina_excess(model.path, state.path, path_params(params, params["dynamics.path"]), cache)
+        return np.maximum(cache[key] @ inner, 0.0)
+    key = ("mesh", id(model))
+    if key not in cache:
+        cache[key] = _Mesh(model)
+    return cache[key].excess(state)
+
+
+def crinkle_slope(excess: np.ndarray) -> np.ndarray:
+    """RMS slope √(2Δ) [rad] of the isotropic crinkle that takes up the excess length Δ."""
+    return np.sqrt(2.0 * np.maximum(np.asarray(excess, np.float64), 0.0))

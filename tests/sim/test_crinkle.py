@@ -1,0 +1,106 @@
+"""The lamina's excess length (leafsim.sim.crinkle): the compression a blade's triangles carry
+against their springs' rest lengths, lumped to particles, which the renderer draws as a
+sub-grid crinkle of RMS slope √(2Δ) (render.crinkle; the pixels are tested in
+tests/render/test_renderer.py)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from leafsim.config.species import get_species
+from leafsim.pipeline import build_leaf
+from leafsim.sim.crinkle import crinkle_slope, lamina_excess, triangle_springs
+from leafsim.sim.kernels.crinkle import lamina_excess as kernel
+from leafsim.sim.path import transfer_matrix
+from leafsim.sim.simulator import Simulator
+
+# 3× the default evaporation, as tests/sim/test_path.py: the hand-over comes within a few hundred frames
+FAST = {"osmosis.evaporation_top": 0.042, "osmosis.evaporation_bottom": 0.0315, "effects.colour": False}
+
+
+def _one(q, rest):
+    """Δ at the three particles of one triangle (0, 1, 2) with rest lengths ``rest`` (ab, bc, ca)."""
+    out, scratch = np.empty(3), np.empty(3)
+    kernel(np.array([[0, 1, 2]]), np.array([[0, 1, 2]]), np.asarray(q, np.float64), np.asarray(rest, np.float64),
+           np.zeros(3, bool), out, scratch)
+    return out
+
+
+def _rot(a, b):
+    ca, sa, cb, sb = math.cos(a), math.sin(a), math.cos(b), math.sin(b)
+    return np.array([[ca, -sa, 0], [sa, ca, 0], [0, 0, 1]]) @ np.array([[1, 0, 0], [0, cb, -sb], [0, sb, cb]])
+
+
+def test_the_excess_of_one_triangle():
+    """Half the sum of the two principal compressions, whatever the triangle's placement."""
+    tri = np.array([[0.0, 0.0, 0.0], [2e-3, 0.0, 0.0], [0.7e-3, 1.6e-3, 0.0]])
+    rest = np.array([np.linalg.norm(tri[1] - tri[0]), np.linalg.norm(tri[2] - tri[1]), np.linalg.norm(tri[0] - tri[2])])
+    R = _rot(0.7, 1.1)
+    assert np.allclose(_one(tri @ R.T + 0.03, rest), 0.0, atol=1e-12)       # moved and turned rigidly: none
+    assert np.allclose(_one(tri * 1.02, rest), 0.0, atol=1e-12)             # stretched: none
+    assert np.allclose(_one(tri * 0.97, rest), 0.03, rtol=1e-9)             # squeezed 3 % both ways: 3 %
+    squeezed_x = tri * np.array([0.98, 1.0, 1.0])                           # 2 % along x only: 1 %
+    assert np.allclose(_one(squeezed_x @ R.T, rest), 0.01, rtol=1e-9)
+    sheared = tri * np.array([0.98, 1.03, 1.0])                             # squeezed one way, stretched the other
+    assert np.allclose(_one(sheared, rest), 0.01, rtol=1e-9)
+    assert np.allclose(_one(tri, np.zeros(3)), 0.0)                         # a degenerate rest triangle carries nothing
+    assert crinkle_slope(np.array([0.01]))[0] == pytest.approx(math.sqrt(0.02))
+
+
+@pytest.fixture(scope="module")
+def maple():
+    sp = get_species("maple")
+    p = sp.params.with_overrides({**FAST, "dynamics.path": "draft"})
+    return p, build_leaf(sp, p, 0).model
+
+
+def test_a_fresh_leaf_has_none_and_a_swollen_rest_shape_is_all_excess(maple):
+    p, m = maple
+    p = p.with_overrides({"dynamics.path": "own"})  # the own mesh carries its mechanics
+    st = m.state()
+    d = lamina_excess(m, st, p)
+    assert d.shape == (m.particle_count,) and d.min() >= 0.0 and d.max() < 1e-12  # the rest shape: nothing compressed
+    order = m.particle_vein_order
+    rods = (order >= 0) & (order <= 1)
+    st.spring_rest[:] = 1.02 * m.spring_rest0  # every side 2 % too long for where it is
+    d = lamina_excess(m, st, p)
+    lamina = m.blade_T & ~rods
+    assert np.allclose(d[lamina], 1.0 - 1.0 / 1.02, rtol=1e-9)  # stretch 1/1.02 both ways
+    assert np.all(d[rods | (m.particle_layer != 0)] == 0.0)     # main and lateral veins are rods; layer V has none
+    assert np.all(d[~m.blade_particles] == 0.0)                  # nor the stalk
+    sides = triangle_springs(m)
+    ij = np.sort(m.spring_ij[sides.ravel()], 1)
+    tri = m.blade_tri_T
+    want = np.sort(np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], 1).reshape(-1, 2), 1)
+    assert np.array_equal(ij, want)
+
+
+def test_on_the_drying_path_the_excess_is_the_carrier_meshs(maple):
+    """While the coarse mesh carries the mechanics the own mesh's positions are its prolongation,
+    whose fine-scale error is strain of its own: the excess is the coarse mesh's, prolonged; after
+    the hand-over it is the own mesh's.  It grows as the leaf dries, never negative or NaN."""
+    p, m = maple
+    sim = Simulator(m, p)
+    st = sim.state()
+    P = transfer_matrix(m.path, m)
+    cache = {}
+    seen, last_path = [], None
+    while m.water_fraction(st.particle_water) > 0.1:
+        sim.step(st)
+        if st.frame % 40:
+            continue
+        d = lamina_excess(m, st, p, cache)
+        assert np.isfinite(d).all() and d.min() >= 0.0
+        if sim.on_path:
+            coarse = lamina_excess(m.path, st.path, sim._path.sim.params)
+            assert np.allclose(d, np.maximum(P @ coarse, 0.0))
+            last_path = d
+        else:
+            own = lamina_excess(m, st, p.with_overrides({"dynamics.path": "own"}))
+            assert np.array_equal(d, own)
+        seen.append((m.water_fraction(st.particle_water), float(np.average(d[m.blade_T], weights=m.particle_area[m.blade_T]))))
+    assert last_path is not None and not sim.on_path  # both phases were seen
+    w, mean = np.array(seen).T
+    assert mean[0] < 0.2 * mean[-1]  # the fresh blade is nearly free of it; the drying makes it
+    assert 0.002 < mean[-1] < 0.05   # tenths of a per cent to a few per cent (maple dried: about 1 %)
