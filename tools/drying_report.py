@@ -27,6 +27,7 @@ from leafsim.config.species import get_species, load_library
 from leafsim.pipeline import build_leaf
 from leafsim.sim.metrics import Probe
 from leafsim.sim.run import Run
+from leafsim.sim.crinkle import crinkle_stats
 from leafsim.sim.curl import dried_shape
 from leafsim.sim.shape import leaf_frame, shape_metrics
 from leafsim.sim.veinframe import vein_frame_curl
@@ -63,6 +64,7 @@ def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides:
            "area_top": round(f["area_top"], 4), "inverted": shape_metrics(model, st)["inverted"],
            "vein_frame_curl": round(vein_frame_curl(model, st.particle_q), 4),
            **dried_shape(model, st),  # margin roll, midrib fold, wrinkles (leafsim.sim.curl)
+           **crinkle_stats(model, st, p),  # the lamina's excess length, the sub-grid crinkle (leafsim.sim.crinkle)
            "particles": model.particle_count, "fresh_mass_g": round(1e3 * float(model.particle_mass0.sum()), 3)}
     if snap_dir is not None:
         _pictures(sp, p, model, st, snap_dir / f"{key}_{scene}{f'_s{seed}' if seed else ''}.png")
@@ -130,14 +132,17 @@ def render(rows: list) -> str:
                    + (f"{_pct(f['area_top'])} | {_pct(f['area_3d'])} | {_pct(f['margin_lift'])} | " if f else "— | — | — | ")
                    + f"{g['inverted']}/{f.get('inverted', '—')} | {g['seconds']:.0f}/{f.get('seconds', float('nan')):.0f} |")
     if any("midrib_fold_deg" in by[(k, "ground")] for k in keys):  # reports made since leafsim.sim.curl
-        out += ["", "| species | margin roll (mean / p90) | midrib fold | wrinkle RMS / L | wrinkle wavelength / L |",
-                "|---|---|---|---|---|"]
+        out += ["", "| species | margin roll (mean / p90) | midrib fold | wrinkle RMS / L | wrinkle wavelength / L | "
+                "lamina excess length: mean (p50 / p90) | crinkle RMS slope |", "|---|---|---|---|---|---|---|"]
         for k in keys:
             g = by[(k, "ground")]
             if "midrib_fold_deg" in g:
                 wl = g["wrinkle_wavelength_L"]
+                ex = g.get("crinkle_excess_p10_p50_p90_p99_pct")
+                crinkle = (f"{g['crinkle_excess_pct']:.2f} % ({ex[1]:.2f} / {ex[2]:.2f} %) | {g['crinkle_slope_rms_deg']:.1f}°"
+                           if ex else "— | —")
                 out.append(f"| {k} | {g['margin_roll_deg']:.0f}° / {g['margin_roll_p90_deg']:.0f}° | {g['midrib_fold_deg']:.0f}° | "
-                           f"{g['wrinkle_rms_L']:.4f} | {'smooth' if wl is None else f'{wl:.3f}'} |")
+                           f"{g['wrinkle_rms_L']:.4f} | {'smooth' if wl is None else f'{wl:.3f}'} | {crinkle} |")
     ground = [by[(k, "ground")] for k in keys]
     for m in ("area_top", "area_3d", "margin_lift"):
         lo, hi = min(ground, key=lambda r: r[m]), max(ground, key=lambda r: r[m])

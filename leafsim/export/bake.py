@@ -45,6 +45,9 @@ BAKE_MAX = 4096
 BAKE_MIN = 256
 #: texels computed per chunk (bounds the memory of the interpolated attributes)
 CHUNK = 1 << 18
+#: the crinkle's largest slope [rad] below which a bake makes no normal map: half a level of
+#: the 8-bit map (a fresh leaf's round-off excess, 1e-8 rad, would otherwise add a flat one)
+MIN_SLOPE = 0.5 / 127.5
 #: the fragment shader's "no photo detail" chromaticity and weight
 NO_CHROMA = np.array([1.0, 1.0, 1.0, 0.0])
 _W = np.array([0.2126, 0.7152, 0.0722])
@@ -156,9 +159,8 @@ def texture_size(uv: np.ndarray, xy: np.ndarray, tri: np.ndarray, mottle_size: f
     det = e1u[:, 0] * e2u[:, 1] - e1u[:, 1] * e2u[:, 0]
     ok = np.abs(det) > 1e-14
     # the Jacobian ∂x/∂(u, v) of each triangle's affine map; its column norms are metres per unit of u and v
-    inv = np.stack([np.stack([e2u[ok, 1], -e1u[ok, 1]], 1), np.stack([-e2u[ok, 0], e1u[ok, 0]], 1)], 1) / det[ok, None, None]
     X = np.stack([e1x[ok], e2x[ok]], 2)  # (m, 2 coords, 2 edges)
-    J = X @ inv  # (m, 2, 2): d(x, y)/d(u, v)
+    J = X @ np.linalg.inv(np.stack([e1u[ok], e2u[ok]], 2))  # (m, 2, 2): d(x, y)/d(u, v)
     per_u = float(np.median(np.linalg.norm(J[:, :, 0], axis=1))) if ok.any() else 0.1
     per_v = float(np.median(np.linalg.norm(J[:, :, 1], axis=1))) if ok.any() else 0.1
     texel = max(float(mottle_size), 1e-5) / TEXELS_PER_MOTTLE
@@ -183,6 +185,85 @@ def _fill_outside(rgb: np.ndarray, inside: np.ndarray) -> np.ndarray:
     return rgb[iy, ix]
 
 
+def _bake_triangles(source) -> np.ndarray:
+    """(m, 3) int64 the T triangles in the view's vertex numbering, the blade's own first:
+    where the stalk's thin strip of texture space overlaps the blade's (a photo's petiole on the
+    blade), the blade's texels are kept."""
+    model = source.model
+    stalk_tri = ~model.blade_particles[model.tri_T].all(axis=1)
+    return source.view.remap[model.tri_T[np.argsort(stalk_tri, kind="stable")]].astype(np.int64)
+
+
+def _tangent_frames(uv: np.ndarray, xy: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(m, 2, 2): per triangle, the unit directions in the rest plane of glTF's tangent-space
+    x (increasing u) and y ("up" in the image: decreasing v, v = 0 the top row), as a client
+    that derives its tangents from the texture coordinates (MikkTSpace) lays them on the
+    surface; rows 0 and 1.  Degenerate triangles get the rest axes."""
+    e1u, e2u = uv[tri[:, 1]] - uv[tri[:, 0]], uv[tri[:, 2]] - uv[tri[:, 0]]
+    e1x, e2x = xy[tri[:, 1]] - xy[tri[:, 0]], xy[tri[:, 2]] - xy[tri[:, 0]]
+    det = e1u[:, 0] * e2u[:, 1] - e1u[:, 1] * e2u[:, 0]
+    ok = np.abs(det) > 1e-14
+    out = np.tile(np.array([[1.0, 0.0], [0.0, 1.0]]), (len(tri), 1, 1))
+    J = np.stack([e1x[ok], e2x[ok]], 2) @ np.linalg.inv(np.stack([e1u[ok], e2u[ok]], 2))  # d(x, y)/d(u, v)
+    t, b = J[:, :, 0], -J[:, :, 1]
+    nt, nb = np.linalg.norm(t, axis=1), np.linalg.norm(b, axis=1)
+    good = (nt > 0) & (nb > 0)
+    idx = np.flatnonzero(ok)[good]
+    out[idx, 0] = t[good] / nt[good, None]
+    out[idx, 1] = b[good] / nb[good, None]
+    return out
+
+
+def bake_normals(source, state, size: tuple[int, int]) -> np.ndarray | None:
+    """(H, W, 3) uint8 tangent-space normal map of the blade's sub-grid crinkle
+    (``render.crinkle``, :mod:`leafsim.sim.crinkle`) over the texture space of ``size`` (W, H)
+    (the albedo's), as glTF's ``normalTexture`` holds it (x right along increasing u, y up,
+    z out; RGB = (n + 1) / 2), or None when the blade has no crinkle.  Each texel takes the
+    fragment shader's height gradient at its rest position (the vertices' slopes and rest
+    positions interpolated as the shader has them, the field sampled bilinearly with
+    wrap-around at ± one texel) and tilts the normal against it along the triangle's
+    tangent-space directions (:func:`_tangent_frames`).  Outside the blade: flat (0, 0, 1)
+    carried from the nearest blade texel.  None too when no slope reaches :data:`MIN_SLOPE`."""
+    from leafsim.appearance.mottle import CRINKLE_OFFSET, FIELD_SIZE, crinkle_gradient_rms, mottle_levels, mottle_scale
+
+    view, params, model = source.view, source.params, source.model
+    slope, csize = view.crinkle(state, params)
+    if slope is None or csize <= 0.0 or float(np.max(slope, initial=0.0)) < MIN_SLOPE:
+        return None
+    tri = _bake_triangles(source)
+    uv = np.asarray(source.uv, np.float64)
+    rest = np.asarray(view.mottle_rest(state), np.float64)
+    frames = _tangent_frames(uv, model.particle_rest[view.T][:, :2].astype(np.float64), tri)
+    W, H = int(size[0]), int(size[1])
+    tri_id = np.full((H, W), -1, np.int32)
+    bary = np.zeros((H, W, 2), np.float32)
+    _raster(uv * np.array([W, H], np.float64), tri, tri_id, bary)
+    inside = tri_id >= 0
+    attr = np.concatenate([np.asarray(slope, np.float64)[:, None], rest], 1)
+    noise = mottle_levels()
+    scale, e, norm = mottle_scale(csize), 1.0 / FIELD_SIZE, 1.0 / crinkle_gradient_rms()
+    out = np.zeros((H, W, 3), np.float32)
+    ys, xs = np.nonzero(inside)
+    for lo in range(0, len(ys), CHUNK):
+        y, x = ys[lo:lo + CHUNK], xs[lo:lo + CHUNK]
+        k = tri_id[y, x]
+        t = tri[k]
+        s, r = bary[y, x, 0:1].astype(np.float64), bary[y, x, 1:2].astype(np.float64)
+        a = attr[t[:, 0]] * (1.0 - s - r) + attr[t[:, 1]] * s + attr[t[:, 2]] * r
+        u0 = a[:, 1] * scale + CRINKLE_OFFSET[0]
+        v0 = a[:, 2] * scale + CRINKLE_OFFSET[1]
+        n = lambda du, dv: bilinear(noise, u0 + du, v0 + dv, wrap=True) / 255.0 * (255.0 / 128.0)  # noqa: E731  (mottle_n's slope)
+        g = 0.5 * np.stack([n(e, 0.0) - n(-e, 0.0), n(0.0, e) - n(0.0, -e)], 1)
+        grad = np.maximum(a[:, 0:1], 0.0) * norm * g  # dh/d(rest x, y)
+        ht = np.einsum("ij,ij->i", grad, frames[k, 0])
+        hb = np.einsum("ij,ij->i", grad, frames[k, 1])
+        nrm = np.stack([-ht, -hb, np.ones_like(ht)], 1)
+        out[y, x] = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+    out[~inside] = (0.0, 0.0, 1.0)
+    out = _fill_outside(out, inside)
+    return np.clip(np.rint((out + 1.0) * 127.5), 0, 255).astype(np.uint8)
+
+
 #: the window's albedos a bake reproduces (render options' names)
 ALBEDOS = ("detail", "texture", "colours")
 
@@ -198,10 +279,7 @@ def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.
     from leafsim.appearance.reflectance import mottle_ratio
 
     view, params, model = source.view, source.params, source.model
-    # the blade's own triangles first: where the stalk's thin strip of texture space overlaps
-    # the blade's (a photo's petiole on the blade), the blade's colour is kept
-    stalk_tri = ~model.blade_particles[model.tri_T].all(axis=1)
-    tri = view.remap[model.tri_T[np.argsort(stalk_tri, kind="stable")]].astype(np.int64)
+    tri = _bake_triangles(source)
     uv = np.asarray(source.uv, np.float64)
     col, tint = view.colours(state, params)
     col = np.asarray(col, np.float64)
@@ -264,6 +342,13 @@ def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.
 
 def bake_png(source, state) -> bytes:
     """:func:`bake_albedo` as PNG bytes (8-bit sRGB, what glTF's baseColorTexture holds)."""
+    return bake_pngs(source, state, normals=False)[0]
+
+
+def bake_pngs(source, state, normals: bool = True) -> tuple[bytes, bytes | None]:
+    """(:func:`bake_png`, the crinkle's normal map of the same size as PNG bytes
+    (:func:`bake_normals`; glTF's normalTexture, linear RGB) or None without a crinkle or with
+    ``normals`` False)."""
     import cv2
 
     from leafsim.appearance.reflectance import linear_to_srgb
@@ -277,4 +362,10 @@ def bake_png(source, state) -> bytes:
     ok, buf = cv2.imencode(".png", cv2.cvtColor(srgb, cv2.COLOR_RGB2BGR))
     if not ok:
         raise LeafsimError("export: cannot encode the baked texture as PNG")
-    return buf.tobytes()
+    nmap = bake_normals(source, state, (albedo.shape[1], albedo.shape[0])) if normals else None
+    if nmap is None:
+        return buf.tobytes(), None
+    ok, nbuf = cv2.imencode(".png", cv2.cvtColor(nmap, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise LeafsimError("export: cannot encode the crinkle's normal map as PNG")
+    return buf.tobytes(), nbuf.tobytes()

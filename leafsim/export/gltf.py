@@ -61,27 +61,36 @@ class GltfBuilder:
         self.doc["accessors"].append(acc)
         return len(self.doc["accessors"]) - 1
 
-    def material(self, name: str, texture: int | None) -> int:
+    def material(self, name: str, texture: int | None, normal: int | None = None) -> int:
         pbr = {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.75}
         if texture is not None:
             pbr["baseColorTexture"] = {"index": texture}
-        self.doc["materials"].append({"name": name, "pbrMetallicRoughness": pbr, "doubleSided": True})
+        mat = {"name": name, "pbrMetallicRoughness": pbr, "doubleSided": True}
+        if normal is not None:
+            mat["normalTexture"] = {"index": normal}
+        self.doc["materials"].append(mat)
         return len(self.doc["materials"]) - 1
 
     def texture(self, png: bytes, name: str = "photo") -> int:
+        """A texture of the PNG ``png`` (clamped at the edges, mipmapped); returns its index."""
         d = self.doc
-        d["images"] = [{"bufferView": self.view(png), "mimeType": "image/png", "name": name}]
+        d.setdefault("images", []).append({"bufferView": self.view(png), "mimeType": "image/png", "name": name})
         d["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}]
-        d["textures"] = [{"sampler": 0, "source": 0}]
-        return 0
+        d.setdefault("textures", []).append({"sampler": 0, "source": len(d["images"]) - 1})
+        return len(d["textures"]) - 1
 
     def mesh(self, name: str, frames: list, material: int, target_names: list[str] | None = None) -> int:
         """A node + mesh from one :class:`~leafsim.export.mesh.Surface` per frame (the last is the
-        base, the earlier ones morph targets against it: module docstring)."""
+        base, the earlier ones morph targets against it: module docstring).  A material with a
+        normal map gets the surface's tangents (:func:`tangents`) with it."""
         s0 = frames[-1]
         attrs = {"POSITION": self.accessor(s0.positions, bounds=True), "NORMAL": self.accessor(s0.normals)}
         if s0.uv is not None:
             attrs["TEXCOORD_0"] = self.accessor(s0.uv)
+            if "normalTexture" in self.doc["materials"][material]:
+                if len(frames) > 1:
+                    raise ValueError("glTF: a normal map on an animated mesh would need its tangents morphed too")
+                attrs["TANGENT"] = self.accessor(tangents(s0.positions, s0.normals, s0.uv, s0.triangles))
         if s0.colours is not None:
             attrs["COLOR_0"] = self.accessor(s0.colours)
         if s0.thickness is not None:
@@ -144,25 +153,64 @@ class GltfBuilder:
         return self._json(bin_name), bytes(self.bin)
 
 
+def tangents(positions: np.ndarray, normals: np.ndarray, uv: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(n, 4) float32 glTF TANGENT of a surface: xyz the direction of increasing u (the sum over
+    each vertex's triangles of ∂P/∂u, made orthogonal to the vertex normal, unit), w the sign
+    that makes cross(normal, tangent) · w point up the image (decreasing v, v = 0 the top row),
+    the normal map's +y (the bake's frame, :func:`leafsim.export.bake.bake_normals`).  A vertex
+    of no usable triangle gets any unit vector across its normal and w = 1."""
+    P = np.asarray(positions, np.float64)
+    N = np.asarray(normals, np.float64)
+    U = np.asarray(uv, np.float64)
+    tri = np.asarray(triangles, np.int64)
+    dP = np.stack([P[tri[:, 1]] - P[tri[:, 0]], P[tri[:, 2]] - P[tri[:, 0]]], 2)  # (m, 3, 2)
+    dU = np.stack([U[tri[:, 1]] - U[tri[:, 0]], U[tri[:, 2]] - U[tri[:, 0]]], 2)  # (m, 2, 2)
+    det = dU[:, 0, 0] * dU[:, 1, 1] - dU[:, 0, 1] * dU[:, 1, 0]
+    ok = np.abs(det) > 1e-14
+    D = np.zeros((len(tri), 3, 2))
+    D[ok] = dP[ok] @ np.linalg.inv(dU[ok])  # [∂P/∂u, ∂P/∂v]
+    t = np.zeros_like(P)
+    b = np.zeros_like(P)
+    for k in range(3):
+        np.add.at(t, tri[:, k], D[:, :, 0])
+        np.add.at(b, tri[:, k], D[:, :, 1])
+    t -= N * np.sum(N * t, axis=1, keepdims=True)
+    norm = np.linalg.norm(t, axis=1)
+    bad = norm < 1e-12
+    if bad.any():  # any direction across the normal
+        alt = np.where(np.abs(N[bad, 0:1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+        t[bad] = alt - N[bad] * np.sum(N[bad] * alt, axis=1, keepdims=True)
+        norm[bad] = np.linalg.norm(t[bad], axis=1)
+    t /= norm[:, None]
+    w = np.where(np.sum(np.cross(N, t) * -b, axis=1) < 0.0, -1.0, 1.0)
+    return np.concatenate([t, w[:, None]], 1).astype(np.float32)
+
+
 def build_gltf(frames: list[dict], times: list[float], photo_png: bytes | None = None,
-               image_name: str = "photo") -> GltfBuilder:
+               image_name: str = "photo", normal_png: bytes | None = None) -> GltfBuilder:
     """A :class:`GltfBuilder` holding every surface of ``frames`` (one dict name → Surface per
     key frame), animated over ``times`` when there is more than one frame; the texture
-    ``photo_png`` goes on every surface with texture coordinates."""
+    ``photo_png`` goes on every surface with texture coordinates, the normal map ``normal_png``
+    (the blade's crinkle, in the same texture space) on the blade's."""
     g = GltfBuilder()
     tex = g.texture(photo_png, image_name) if photo_png is not None else None
+    nrm = g.texture(normal_png, "crinkle") if normal_png is not None else None
     names = [f"t = {t - times[0]:.4g} s" for t in times[:-1]]  # the morph targets: every key frame but the last
-    nodes = [g.mesh(name, [f[name] for f in frames], g.material(name, tex if frames[0][name].uv is not None else None),
-                    names) for name in frames[0]]
+
+    def material(name):
+        uv = frames[0][name].uv is not None
+        return g.material(name, tex if uv else None, nrm if uv and name == "blade" else None)
+
+    nodes = [g.mesh(name, [f[name] for f in frames], material(name), names) for name in frames[0]]
     if len(frames) > 1:
         g.animation(nodes, times)
     return g
 
 
 def write_gltf(path: Path, frames: list[dict], times: list[float], photo_png: bytes | None = None,
-               binary: bool = True, image_name: str = "photo") -> list[Path]:
+               binary: bool = True, image_name: str = "photo", normal_png: bytes | None = None) -> list[Path]:
     """Write ``frames`` as ``path`` (.glb, or .gltf + a .bin beside it); returns the files."""
-    g = build_gltf(frames, times, photo_png, image_name)
+    g = build_gltf(frames, times, photo_png, image_name, normal_png)
     if binary:
         return [atomic_write_bytes(path, g.glb(), "glTF binary")]
     bin_path = path.with_suffix(".bin")

@@ -212,11 +212,17 @@ class MeshSource:
         """The texture of an export of ``state`` as PNG bytes: the photo (:meth:`photo_png`), the
         blade's colour baked at ``state`` (:func:`~leafsim.export.bake.bake_png`), or None for
         vertex colours."""
-        if self.texture == "baked":
-            from leafsim.export.bake import bake_png
+        return self.texture_pngs(state, normals=False)[0]
 
-            return bake_png(self, state)
-        return self.photo_png()
+    def texture_pngs(self, state: State, normals: bool = True) -> tuple[bytes | None, bytes | None]:
+        """(:meth:`texture_png`, the blade's crinkle as a normal map of the same texture space, or
+        None): a baked texture carries the crinkle (``render.crinkle``,
+        :func:`~leafsim.export.bake.bake_normals`) where the blade has one."""
+        if self.texture == "baked":
+            from leafsim.export.bake import bake_pngs
+
+            return bake_pngs(self, state, normals)
+        return self.photo_png(), None
 
     def photo_png(self) -> bytes | None:
         """The photo (RGB, at most TEXTURE_MAX px a side; the blade's colour carried past its margin,
@@ -317,11 +323,11 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     src = MeshSource(model, params, view, layers, veins, texture, albedo)
     frames = [src.surfaces(s) for s in states]
     times = [s.time for s in states] if times is None else times
-    png = src.texture_png(states[-1])
+    png, normal_png = src.texture_pngs(states[-1], normals=fmt in ("glb", "gltf"))
     if fmt in ("glb", "gltf"):
         from leafsim.export.gltf import write_gltf
 
-        files = write_gltf(Path(path), frames, times, png, binary=fmt == "glb", image_name=texture)
+        files = write_gltf(Path(path), frames, times, png, binary=fmt == "glb", image_name=texture, normal_png=normal_png)
     elif fmt == "obj":
         files = write_obj(Path(path), frames[0], png, texture_file(path, texture))
     else:

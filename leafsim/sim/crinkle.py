@@ -106,3 +106,24 @@ def lamina_excess(model: Model, state: State, params: Mapping[str, Any], cache: 
 def crinkle_slope(excess: np.ndarray) -> np.ndarray:
     """RMS slope √(2Δ) [rad] of the isotropic crinkle that takes up the excess length Δ."""
     return np.sqrt(2.0 * np.maximum(np.asarray(excess, np.float64), 0.0))
+
+
+def crinkle_stats(model: Model, state: State, params: Mapping[str, Any]) -> dict:
+    """The lamina's excess length over the blade's layer-T particles off the main and lateral
+    veins, weighted by their area: mean and p10 / p50 / p90 / p99 in per cent, the share over
+    0.5 %, and the RMS slope √(2Δ) of the crinkle it draws, in degrees (what
+    docs/drying/README.md tabulates per species)."""
+    d = lamina_excess(model, state, params)
+    order = np.asarray(model.particle_vein_order)
+    lamina = model.blade_T & ~((order >= 0) & (order <= 1))
+    w = np.asarray(model.particle_area, np.float64)[lamina]
+    x = d[lamina]
+    if not len(x) or w.sum() <= 0.0:
+        raise ValueError("crinkle: the blade has no lamina off its veins to measure")
+    srt = np.argsort(x, kind="stable")
+    cw = np.cumsum(w[srt]) / w.sum()
+    pct = [float(x[srt][min(int(np.searchsorted(cw, q / 100.0)), len(x) - 1)]) for q in (10, 50, 90, 99)]
+    return {"crinkle_excess_pct": round(100.0 * float(np.average(x, weights=w)), 3),
+            "crinkle_excess_p10_p50_p90_p99_pct": [round(100.0 * v, 3) for v in pct],
+            "crinkle_share_over_half_pct": round(float(w[x > 0.005].sum() / w.sum()), 3),
+            "crinkle_slope_rms_deg": round(float(np.degrees(np.sqrt(2.0 * np.average(x, weights=w)))), 2)}

@@ -183,8 +183,9 @@ def _png_at(png: bytes, uv: np.ndarray) -> np.ndarray:
 def _accessor(doc, blob, index) -> np.ndarray:
     acc = doc["accessors"][index]
     bv = doc["bufferViews"][acc["bufferView"]]
-    width = {"VEC2": 2, "VEC3": 3}[acc["type"]]
-    return np.frombuffer(blob, np.float32, acc["count"] * width, bv["byteOffset"] + acc.get("byteOffset", 0)).reshape(-1, width)
+    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
+    dtype = np.uint32 if acc["componentType"] == 5125 else np.float32
+    return np.frombuffer(blob, dtype, acc["count"] * width, bv["byteOffset"] + acc.get("byteOffset", 0)).reshape(-1, width)
 
 
 def test_a_fresh_leaf_s_baked_texture_in_the_file_is_its_vertex_colours(tmp_path):
@@ -289,3 +290,111 @@ def test_texture_sizes_follow_the_mottle_and_the_photo_within_the_cap():
     assert t.shape == (2048, 4096, 3)
     want = ((150 / 255 + 0.055) / 1.055) ** 2.4  # the average of 100 and 200, decoded
     assert abs(float(np.median(t[..., 0])) - want) < 0.01
+
+
+def _client_frames(P: np.ndarray, uv: np.ndarray, tri: np.ndarray, flip_v: bool = False) -> tuple:
+    """Per triangle, the tangent frame a glTF client lays over texture coordinates: x along
+    ∂P/∂u, y "up" in the image (−∂P/∂v, v = 0 the top row), both unit; (``flip_v``: the wrong
+    convention, y along +∂P/∂v, which the test must tell apart)."""
+    dP = np.stack([P[tri[:, 1]] - P[tri[:, 0]], P[tri[:, 2]] - P[tri[:, 0]]], 2)       # (m, 3, 2)
+    dU = np.stack([uv[tri[:, 1]] - uv[tri[:, 0]], uv[tri[:, 2]] - uv[tri[:, 0]]], 2)   # (m, 2, 2)
+    D = dP @ np.linalg.pinv(dU)                                                          # [∂P/∂u, ∂P/∂v]
+    with np.errstate(invalid="ignore", divide="ignore"):  # (a rim triangle of the shell has no texture area: NaN)
+        t = D[:, :, 0] / np.linalg.norm(D[:, :, 0], axis=1, keepdims=True)
+        b = (1.0 if flip_v else -1.0) * D[:, :, 1] / np.linalg.norm(D[:, :, 1], axis=1, keepdims=True)
+    return t, b
+
+
+@pytest.mark.parametrize("key", ["maple", "oak"])
+def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key):
+    """A flat leaf whose lamina is held 2 % short of its rest lengths (a crinkle of about 0.2
+    rad RMS slope) lit at 45° from the side (and 45° to both texture axes), drawn by the renderer top-down: every pixel's
+    brightness is what a glTF client computes from the baked albedo and the baked normal map
+    decoded in its tangent frame (x along increasing u, y up the image), within a couple of
+    levels on average; decoded with v's direction the other way it is not.  The glb carries the
+    map as the blade's normalTexture (not the veins'), passes the validator, and a leaf without
+    a crinkle (fresh, or render.crinkle 0) carries none."""
+    from leafsim.compare.metrics import Frame
+    from leafsim.export.bake import bake_normals
+    from leafsim.render.topdown import TopDown
+
+    model, params, view, st = _turning(key, mottle=0.0)
+    params = params.with_overrides({"dynamics.path": "own", "render.crinkle_size": 0.002})
+    st.spring_rest[:] = 1.02 * model.spring_rest0
+    src = MeshSource(model, params, view, "shell", False, "baked", "colours")
+    alb, inside = bake_albedo(src, st)
+    nmap = bake_normals(src, st, (alb.shape[1], alb.shape[0]))
+    assert nmap is not None and nmap.shape == alb.shape and nmap.dtype == np.uint8
+    xy = model.particle_rest[view.T][:, :2]
+    scale = 2500.0 / np.ptp(xy, axis=0).max()
+    lo, hi = xy.min(0) - 0.002, xy.max(0) + 0.002
+    fr = Frame(scale, float(lo[0]), float(hi[1]), int((hi[0] - lo[0]) * scale) + 1, int((hi[1] - lo[1]) * scale) + 1)
+    s45 = np.sqrt(0.5)
+    L = np.array([0.5, 0.5, s45])  # from the side, at 45° to both texture axes: a flip of either shows
+    light = dict(light_dir=tuple(L), light_colour=(1.0, 1.0, 1.0), sky_colour=(0.0, 0.0, 0.0))
+    td = TopDown(fr, supersample=1)
+    try:
+        rgb, mask = td.render(view.mesh(st, params), {"albedo": "colours", "veins": False, **light})
+    finally:
+        td.release()
+    tri = view.remap[model.blade_tri_T].astype(np.int64)
+    tri_id, bary = _locate(fr.to_px(xy), tri, fr.width, fr.height)
+    ok = (tri_id >= 0) & cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    y, x = np.nonzero(ok)
+    k = tri_id[y, x]
+    t = tri[k]
+    s, r = bary[y, x, 0:1], bary[y, x, 1:2]
+    uv = src.uv[t[:, 0]] * (1 - s - r) + src.uv[t[:, 1]] * s + src.uv[t[:, 2]] * r
+    albedo = bilinear(alb, uv[:, 0], uv[:, 1], wrap=False)
+    n_ts = bilinear(nmap.astype(np.float64), uv[:, 0], uv[:, 1], wrap=False) / 127.5 - 1.0
+    P = np.concatenate([xy, np.zeros((len(xy), 1))], 1)
+    window = rgb[y, x].astype(float)
+    errors = {}
+    for flip in (False, True):
+        tx, by = _client_frames(P, src.uv, tri, flip)
+        N = tx[k] * n_ts[:, 0:1] + by[k] * n_ts[:, 1:2] + np.array([0.0, 0.0, 1.0]) * n_ts[:, 2:3]
+        N /= np.linalg.norm(N, axis=1, keepdims=True)
+        ndl = np.maximum(N @ L, 0.0)
+        errors[flip] = np.abs(_srgb8(albedo * ndl[:, None]) - window)
+    flat = _srgb8(albedo * s45)
+    assert (window - flat).std() > 3.0  # the crinkle is drawn: several levels of shading (0 without it)
+    assert errors[False].mean() < 2.0 and np.percentile(errors[False], 90) <= 5, (errors[False].mean(), np.percentile(errors[False], 90))
+    assert errors[True].mean() > 2.0 * errors[False].mean() + 2.0, (errors[True].mean(), errors[False].mean())
+
+    path = tmp_path / f"{key}.glb"
+    export_mesh(model, st, path, params=params, view=view, veins=True, texture="baked", albedo="colours")
+    assert_clean(path)
+    doc, blob = _glb_json(path)
+    prims = {m["name"]: m["primitives"][0] for m in doc["meshes"]}
+    mats = doc["materials"]
+    blade = mats[prims["blade"]["material"]]
+    assert "normalTexture" not in mats[prims["veins"]["material"]]
+    img = doc["images"][doc["textures"][blade["normalTexture"]["index"]]["source"]]
+    assert img["name"] == "crinkle"
+    bv = doc["bufferViews"][img["bufferView"]]
+    got = cv2.cvtColor(cv2.imdecode(np.frombuffer(blob[bv["byteOffset"]:bv["byteOffset"] + bv["byteLength"]], np.uint8),
+                                    cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    assert np.array_equal(got, nmap)
+    # the tangents in the file: x along increasing u, cross(normal, tangent) × w up the image, as
+    # the client frames of the file's own positions and texture coordinates (the blade's top and
+    # bottom surfaces alike)
+    attrs = prims["blade"]["attributes"]
+    Pf, Nf, Uf, Tf = (_accessor(doc, blob, attrs[a]).astype(np.float64) for a in ("POSITION", "NORMAL", "TEXCOORD_0", "TANGENT"))
+    trif = _accessor(doc, blob, prims["blade"]["indices"]).reshape(-1, 3).astype(np.int64)
+    tx, by = _client_frames(Pf, Uf, trif)
+    fn = np.cross(Pf[trif[:, 1]] - Pf[trif[:, 0]], Pf[trif[:, 2]] - Pf[trif[:, 0]])
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30)
+    face = np.abs(np.sum(fn * Nf[trif[:, 0]], axis=1)) > 0.99  # the leaf's faces, not the shell's rim
+    first = np.full(len(Pf), -1)
+    first[trif[face, 0]] = np.flatnonzero(face)  # one face triangle of each vertex
+    v = np.flatnonzero(first >= 0)
+    assert np.all(np.abs(np.linalg.norm(Tf[:, :3], axis=1) - 1) < 1e-5) and set(np.unique(Tf[:, 3])) <= {-1.0, 1.0}
+    up = np.cross(Nf[v], Tf[v, :3]) * Tf[v, 3:4]
+    assert np.median(np.sum(Tf[v, :3] * tx[first[v]], axis=1)) > 0.99
+    assert np.median(np.sum(up * by[first[v]], axis=1)) > 0.99
+    for quiet in (Simulator(model, params, seed=0).state(), None):
+        p = params if quiet is not None else params.with_overrides({"render.crinkle": 0.0})
+        plain = tmp_path / "plain.glb"
+        export_mesh(model, quiet if quiet is not None else st, plain, params=p, view=view, texture="baked")
+        doc, _ = _glb_json(plain)
+        assert all("normalTexture" not in m for m in doc["materials"]) and len(doc["images"]) == 1

@@ -10,7 +10,7 @@ import pytest
 
 from leafsim.config.species import get_species
 from leafsim.pipeline import build_leaf
-from leafsim.sim.crinkle import crinkle_slope, lamina_excess, triangle_springs
+from leafsim.sim.crinkle import crinkle_slope, crinkle_stats, lamina_excess, triangle_springs
 from leafsim.sim.kernels.crinkle import lamina_excess as kernel
 from leafsim.sim.path import transfer_matrix
 from leafsim.sim.simulator import Simulator
@@ -69,6 +69,10 @@ def test_a_fresh_leaf_has_none_and_a_swollen_rest_shape_is_all_excess(maple):
     assert np.allclose(d[lamina], 1.0 - 1.0 / 1.02, rtol=1e-9)  # stretch 1/1.02 both ways
     assert np.all(d[rods | (m.particle_layer != 0)] == 0.0)     # main and lateral veins are rods; layer V has none
     assert np.all(d[~m.blade_particles] == 0.0)                  # nor the stalk
+    stats = crinkle_stats(m, st, p)  # over the lamina, by area
+    assert stats["crinkle_excess_pct"] == pytest.approx(100 * (1 - 1 / 1.02), abs=1e-3)  # (rounded)
+    assert stats["crinkle_share_over_half_pct"] == 1.0
+    assert stats["crinkle_slope_rms_deg"] == pytest.approx(math.degrees(math.sqrt(2 * (1 - 1 / 1.02))), abs=0.01)
     sides = triangle_springs(m)
     ij = np.sort(m.spring_ij[sides.ravel()], 1)
     tri = m.blade_tri_T
