@@ -8,8 +8,9 @@ Dries the leaf on the ground by the drying report's protocol (to 2 % of its wate
 1.15 × that time), then prints one JSON line: the blade's excess length Δ (area-weighted
 mean and percentiles over the lamina, the share of the lamina with Δ > 0.5 %) and the RMS slope
 √(2Δ) the renderer draws, in degrees (:func:`leafsim.sim.crinkle.crinkle_stats`).  With
-``--png``: top-down and two close-ups under a low sun, the crinkle off (top row) and on
-(bottom row).  ``--cache DIR`` keeps the dried state (pickle) so a second run only renders.
+``--png``: top-down, a close-up of the flank and an oblique view under a low sun, the crinkle
+off (top row) and on (bottom row).  ``--cache DIR`` keeps the dried state (pickle) so a second
+run only renders.
 """
 
 from __future__ import annotations
@@ -77,7 +78,7 @@ def picture(sp, p, model, st, png: Path) -> None:
         pts = DR._close_up_points(model, st.particle_q)
         cams = [default_camera(mesh.positions, pitch=89.0, yaw=-90.0),
                 default_camera(pts, pitch=35.0, yaw=-30.0, aspect=560 / 460),
-                default_camera(pts[: max(len(pts) // 3, 3)], pitch=45.0, yaw=-60.0, aspect=560 / 460)]
+                default_camera(mesh.positions, pitch=25.0, yaw=-60.0, aspect=560 / 460)]
         rows.append(np.hstack([r.render_array(mesh, camera=c, options=opts) for c in cams]))
     r.release()
     write_png_atomic(png, np.vstack(rows), rgb=True)
