@@ -67,6 +67,32 @@ out vec4 f_colour;
 
 void main() {
     vec3 N = normalize(v_nrm);
+#if LS_CRINKLE
+    // The sub-grid crinkle: a height field h over the rest plane whose slope along each rest
+    // direction has the RMS v_crinkle (its gradient: the field's central difference over one
+    // texel, normalised), carried to the screen by the chain rule and turned into a normal by
+    // Mikkelsen's surface gradient (bump mapping without tangents).  A minified leaf reads a
+    // blurred mip level, so the crinkle fades where the pixels cannot show it.
+    // (first, and with no branch: screen derivatives and implicit-LOD fetches need the whole
+    // 2×2 quad, before any discard; on the front face's normal, then turned with it, so the
+    // back of the blade shows the same sheet's relief from behind)
+    {
+        vec2 u = v_rest * u_crinkle_scale + u_crinkle_offset;
+        float e = u_noise_texel;
+        vec2 g = 0.5 * vec2(mottle_n(texture(u_noise, u + vec2(e, 0.0)).r) - mottle_n(texture(u_noise, u - vec2(e, 0.0)).r),
+                            mottle_n(texture(u_noise, u + vec2(0.0, e)).r) - mottle_n(texture(u_noise, u - vec2(0.0, e)).r));
+        vec2 grad_h = max(v_crinkle, 0.0) * u_crinkle_norm * g;  // dh/d(rest), per rest direction
+        float dhdx = dot(grad_h, dFdx(v_rest));
+        float dhdy = dot(grad_h, dFdy(v_rest));
+        vec3 dpdx = dFdx(v_pos);
+        vec3 dpdy = dFdy(v_pos);
+        vec3 r1 = cross(dpdy, N);
+        vec3 r2 = cross(N, dpdx);
+        float det = dot(dpdx, r1);
+        vec3 Nc = abs(det) * N - sign(det) * (dhdx * r1 + dhdy * r2);
+        if (dot(Nc, Nc) > 0.0) N = normalize(Nc);
+    }
+#endif
     if (!gl_FrontFacing) N = -N;
     vec3 L = u_light_dir;
 #if LS_MODE == 3
@@ -95,30 +121,6 @@ void main() {
     // the pigments interpolate linearly over the triangle; the field moves them on per pixel
     float n = mottle_n(texture(u_noise, v_rest * u_mottle_scale).r);
     albedo *= mottle_ratio(v_conc, v_state, v_extra, n, u_mottle, u_absorb, u_base);
-#endif
-#if LS_CRINKLE
-    // The sub-grid crinkle: a height field h over the rest plane whose slope along each rest
-    // direction has the RMS v_crinkle (its gradient: the field's central difference over one
-    // texel, normalised), carried to the screen by the chain rule and turned into a normal by
-    // Mikkelsen's surface gradient (bump mapping without tangents).  A minified leaf reads a
-    // blurred mip level, so the crinkle fades where the pixels cannot show it.
-    // (no branch: screen derivatives and implicit-LOD fetches need the whole 2×2 quad)
-    {
-        vec2 u = v_rest * u_crinkle_scale + u_crinkle_offset;
-        float e = u_noise_texel;
-        vec2 g = 0.5 * vec2(mottle_n(texture(u_noise, u + vec2(e, 0.0)).r) - mottle_n(texture(u_noise, u - vec2(e, 0.0)).r),
-                            mottle_n(texture(u_noise, u + vec2(0.0, e)).r) - mottle_n(texture(u_noise, u - vec2(0.0, e)).r));
-        vec2 grad_h = max(v_crinkle, 0.0) * u_crinkle_norm * g;  // dh/d(rest), per rest direction
-        float dhdx = dot(grad_h, dFdx(v_rest));
-        float dhdy = dot(grad_h, dFdy(v_rest));
-        vec3 dpdx = dFdx(v_pos);
-        vec3 dpdy = dFdy(v_pos);
-        vec3 r1 = cross(dpdy, N);
-        vec3 r2 = cross(N, dpdx);
-        float det = dot(dpdx, r1);
-        vec3 Nc = abs(det) * N - sign(det) * (dhdx * r1 + dhdy * r2);
-        if (dot(Nc, Nc) > 0.0) N = normalize(Nc);
-    }
 #endif
 #if LS_SHADOW
     float sh = shadow_pcf4(u_shadow, u_light_mat, v_pos + L * u_shadow_offset, 1.5);

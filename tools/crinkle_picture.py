@@ -93,7 +93,7 @@ def main() -> None:
     a = ap.parse_args()
     overrides = {k: _value(v) for k, v in (s.split("=", 1) for s in a.set)}
     sp, p, model, st = dried(a.species, overrides, Path(a.cache) if a.cache else None)
-    print(json.dumps({"species": a.species, "set": a.set, "particles": int(model.particle_count), **crinkle_stats(model, st, p)}))
+    print(json.dumps({"species": a.species, "set": a.set, "particles": int(model.particle_count), **crinkle_stats(model, st)}))
     if a.png:
         picture(sp, p, model, st, Path(a.png))
 

@@ -64,7 +64,7 @@ def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides:
            "area_top": round(f["area_top"], 4), "inverted": shape_metrics(model, st)["inverted"],
            "vein_frame_curl": round(vein_frame_curl(model, st.particle_q), 4),
            **dried_shape(model, st),  # margin roll, midrib fold, wrinkles (leafsim.sim.curl)
-           **crinkle_stats(model, st, p),  # the lamina's excess length, the sub-grid crinkle (leafsim.sim.crinkle)
+           **crinkle_stats(model, st),  # the lamina's excess length, the sub-grid crinkle (leafsim.sim.crinkle)
            "particles": model.particle_count, "fresh_mass_g": round(1e3 * float(model.particle_mass0.sum()), 3)}
     if snap_dir is not None:
         _pictures(sp, p, model, st, snap_dir / f"{key}_{scene}{f'_s{seed}' if seed else ''}.png")

@@ -194,7 +194,7 @@ class LeafView:
         gain = float(params["render.crinkle"])
         if gain <= 0.0:
             return None, 0.0
-        slope = gain * crinkle_slope(lamina_excess(self.model, state, params, self._crinkle))
+        slope = gain * crinkle_slope(lamina_excess(self.model, state, self._crinkle))
         return slope[self.T].astype(np.float32), float(params["render.crinkle_size"])
 
     def mottle_rest(self, state: State) -> np.ndarray:

@@ -16,11 +16,10 @@ field, ``render.crinkle``); the mechanics never see it.
 While the drying path carries the mechanics (:mod:`leafsim.sim.path`), the leaf's own mesh
 only takes the coarse mesh's positions through a smooth prolongation whose fine-scale error is
 strain of its own (up to 25 % on a spring); the excess is then the coarse mesh's, prolonged
-the same way.  Imports no OpenGL."""
+the same way (and zero on the own mesh's veins).  Imports no OpenGL."""
 
 from __future__ import annotations
 
-from typing import Any, Mapping
 
 import numpy as np
 
@@ -74,33 +73,50 @@ class _Mesh:
         return out
 
 
-def _carried(model: Model, state: State, params: Mapping[str, Any]) -> bool:
-    """The drying path's mesh carries this mesh's mechanics now (as the Simulator decides it:
-    :meth:`leafsim.sim.path.DryingPath.active`)."""
-    from leafsim.sim.path import path_allowed
+def _prolongation(model: Model, cache: dict):
+    """The drying path's fixed transfer coarse → ``model`` (:func:`leafsim.sim.path.transfer_matrix`)."""
+    from leafsim.sim.path import transfer_matrix
 
-    if model.path is None or state.path is None or not (params["effects.pbd"] or params["effects.gravity"]):
+    key = ("P", id(model.path))
+    if key not in cache:
+        cache[key] = transfer_matrix(model.path, model)
+    return cache[key]
+
+
+def _carried(model: Model, state: State, P) -> bool:
+    """The mesh under ``model`` carries its mechanics in ``state``: its positions are exactly
+    the coarse mesh's prolonged (:meth:`leafsim.sim.path.DryingPath.step`; the particles held
+    where they hang excepted).  Read from the state itself, not from the parameters, so it
+    holds whatever effects a Simulator runs, after a live change of the hand-over level, and
+    on every level of nested paths."""
+    if model.path is None or state.path is None:
         return False
-    return path_allowed(params) and model.water_fraction(state.particle_water) > params["dynamics.handover"]
+    q = np.asarray(state.particle_q, np.float64)
+    cq = np.asarray(state.path.particle_q, np.float64)
+    if cq.shape != (P.shape[1], 3) or q.shape != (P.shape[0], 3):
+        raise ValueError(f"crinkle: a state of {q.shape[0]} particles with a path state of {cq.shape[0]} against a "
+                         f"transfer of shape {P.shape}")
+    free = ~np.asarray(model.particle_pinned, bool)
+    return bool(np.allclose((P @ cq)[free], q[free], rtol=0.0, atol=1e-12))
 
 
-def lamina_excess(model: Model, state: State, params: Mapping[str, Any], cache: dict | None = None) -> np.ndarray:
-    """(n,) float64: each particle's excess length Δ (0 = no compression), on the mesh that
-    carries the mechanics now, prolonged to ``model``'s particles.  ``cache`` (a dict the
-    caller keeps per model) holds each mesh's triangles and the prolongations."""
-    from leafsim.sim.path import path_params, transfer_matrix
-
+def lamina_excess(model: Model, state: State, cache: dict | None = None) -> np.ndarray:
+    """(n,) float64: each particle's excess length Δ (0 = no compression; 0 on the main and
+    lateral veins and off layer T), on the mesh that carries the mechanics now, prolonged to
+    ``model``'s particles.  ``cache`` (a dict the caller keeps per model) holds each mesh's
+    triangles and the prolongations."""
     cache = {} if cache is None else cache
-    if _carried(model, state, params):
-        key = ("P", id(model.path))
-        if key not in cache:
-            cache[key] = transfer_matrix(model.path, model)
-        inner = lamina_excess(model.path, state.path, path_params(params, params["dynamics.path"]), cache)
-        return np.maximum(cache[key] @ inner, 0.0)
     key = ("mesh", id(model))
     if key not in cache:
         cache[key] = _Mesh(model)
-    return cache[key].excess(state)
+    mesh = cache[key]
+    if model.path is not None and state.path is not None:
+        P = _prolongation(model, cache)
+        if _carried(model, state, P):
+            out = np.maximum(P @ lamina_excess(model.path, state.path, cache), 0.0)
+            out[mesh.zero] = 0.0  # the own mesh's veins are rods, whatever the coarse mesh had there
+            return out
+    return mesh.excess(state)
 
 
 def crinkle_slope(excess: np.ndarray) -> np.ndarray:
@@ -108,12 +124,12 @@ def crinkle_slope(excess: np.ndarray) -> np.ndarray:
     return np.sqrt(2.0 * np.maximum(np.asarray(excess, np.float64), 0.0))
 
 
-def crinkle_stats(model: Model, state: State, params: Mapping[str, Any]) -> dict:
+def crinkle_stats(model: Model, state: State) -> dict:
     """The lamina's excess length over the blade's layer-T particles off the main and lateral
     veins, weighted by their area: mean and p10 / p50 / p90 / p99 in per cent, the share over
     0.5 %, and the RMS slope √(2Δ) of the crinkle it draws, in degrees (what
     docs/drying/README.md tabulates per species)."""
-    d = lamina_excess(model, state, params)
+    d = lamina_excess(model, state)
     order = np.asarray(model.particle_vein_order)
     lamina = model.blade_T & ~((order >= 0) & (order <= 1))
     w = np.asarray(model.particle_area, np.float64)[lamina]
@@ -125,5 +141,5 @@ def crinkle_stats(model: Model, state: State, params: Mapping[str, Any]) -> dict
     pct = [float(x[srt][min(int(np.searchsorted(cw, q / 100.0)), len(x) - 1)]) for q in (10, 50, 90, 99)]
     return {"crinkle_excess_pct": round(100.0 * float(np.average(x, weights=w)), 3),
             "crinkle_excess_p10_p50_p90_p99_pct": [round(100.0 * v, 3) for v in pct],
-            "crinkle_share_over_half_pct": round(float(w[x > 0.005].sum() / w.sum()), 3),
+            "crinkle_share_above_half_percent": round(float(w[x > 0.005].sum() / w.sum()), 3),
             "crinkle_slope_rms_deg": round(float(np.degrees(np.sqrt(2.0 * np.average(x, weights=w)))), 2)}

@@ -292,15 +292,15 @@ def test_texture_sizes_follow_the_mottle_and_the_photo_within_the_cap():
     assert abs(float(np.median(t[..., 0])) - want) < 0.01
 
 
-def _client_frames(P: np.ndarray, uv: np.ndarray, tri: np.ndarray, flip_v: bool = False) -> tuple:
+def _client_frames(P: np.ndarray, uv: np.ndarray, tri: np.ndarray, flip_v: bool = False, flip_u: bool = False) -> tuple:
     """Per triangle, the tangent frame a glTF client lays over texture coordinates: x along
-    ∂P/∂u, y "up" in the image (−∂P/∂v, v = 0 the top row), both unit; (``flip_v``: the wrong
-    convention, y along +∂P/∂v, which the test must tell apart)."""
+    ∂P/∂u, y "up" in the image (−∂P/∂v, v = 0 the top row), both unit; (``flip_v``, ``flip_u``:
+    wrong conventions, y along +∂P/∂v or x along −∂P/∂u, which the test must tell apart)."""
     dP = np.stack([P[tri[:, 1]] - P[tri[:, 0]], P[tri[:, 2]] - P[tri[:, 0]]], 2)       # (m, 3, 2)
     dU = np.stack([uv[tri[:, 1]] - uv[tri[:, 0]], uv[tri[:, 2]] - uv[tri[:, 0]]], 2)   # (m, 2, 2)
     D = dP @ np.linalg.pinv(dU)                                                          # [∂P/∂u, ∂P/∂v]
     with np.errstate(invalid="ignore", divide="ignore"):  # (a rim triangle of the shell has no texture area: NaN)
-        t = D[:, :, 0] / np.linalg.norm(D[:, :, 0], axis=1, keepdims=True)
+        t = (-1.0 if flip_u else 1.0) * D[:, :, 0] / np.linalg.norm(D[:, :, 0], axis=1, keepdims=True)
         b = (1.0 if flip_v else -1.0) * D[:, :, 1] / np.linalg.norm(D[:, :, 1], axis=1, keepdims=True)
     return t, b
 
@@ -350,16 +350,18 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key):
     P = np.concatenate([xy, np.zeros((len(xy), 1))], 1)
     window = rgb[y, x].astype(float)
     errors = {}
-    for flip in (False, True):
-        tx, by = _client_frames(P, src.uv, tri, flip)
+    for flip in ("none", "v", "u"):
+        tx, by = _client_frames(P, src.uv, tri, flip_v=flip == "v", flip_u=flip == "u")
         N = tx[k] * n_ts[:, 0:1] + by[k] * n_ts[:, 1:2] + np.array([0.0, 0.0, 1.0]) * n_ts[:, 2:3]
         N /= np.linalg.norm(N, axis=1, keepdims=True)
         ndl = np.maximum(N @ L, 0.0)
         errors[flip] = np.abs(_srgb8(albedo * ndl[:, None]) - window)
     flat = _srgb8(albedo * s45)
     assert (window - flat).std() > 3.0  # the crinkle is drawn: several levels of shading (0 without it)
-    assert errors[False].mean() < 2.0 and np.percentile(errors[False], 90) <= 5, (errors[False].mean(), np.percentile(errors[False], 90))
-    assert errors[True].mean() > 2.0 * errors[False].mean() + 2.0, (errors[True].mean(), errors[False].mean())
+    right = errors["none"]
+    assert right.mean() < 2.0 and np.percentile(right, 90) <= 5, (right.mean(), np.percentile(right, 90))
+    for wrong in ("u", "v"):
+        assert errors[wrong].mean() > 2.0 * right.mean() + 2.0, (wrong, errors[wrong].mean(), right.mean())
 
     path = tmp_path / f"{key}.glb"
     export_mesh(model, st, path, params=params, view=view, veins=True, texture="baked", albedo="colours")
