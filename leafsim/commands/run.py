@@ -21,6 +21,7 @@ from leafsim.commands.common import Progress, emit, ready_kernels, species_input
 from leafsim.pipeline import build_leaf
 from leafsim.render.sequence import FrameWriter
 from leafsim.sim.checkpoint import check_meta, load_carry, load_checkpoint, save_checkpoint
+from leafsim.sim.crinkle import crinkle_stats
 from leafsim.sim.curl import dried_shape
 from leafsim.sim.run import Run, Stop
 from leafsim.sim.shape import save_npz, shape_metrics
@@ -201,7 +202,8 @@ def run_text(rep: dict, out: Path | None, ck: Path | None) -> str:
              + (f" (stalk {100 * stalk:.0f} %)" if stalk is not None else "") + "; "
              f"{rep['build_s']:.1f} s building, {rep['sim_s']:.1f} s simulating ({_frame_costs(rep)})",
              f"shape: 3D area kept {100 * rep['shape_area_ratio']:.1f} %, margin lift {rep['shape_margin_lift']:.3f} L, "
-             f"margin roll {rep.get('shape_margin_roll_deg', 0.0):.0f}°, midrib fold {rep.get('shape_midrib_fold_deg', 0.0):.0f}°"
+             f"margin roll {rep.get('shape_margin_roll_deg', 0.0):.0f}°, midrib fold {rep.get('shape_midrib_fold_deg', 0.0):.0f}°, "
+             f"lamina crinkle {rep.get('shape_crinkle_slope_rms_deg', 0.0):.1f}° RMS ({rep.get('shape_crinkle_excess_pct', 0.0):.2f} % excess length)"
              + (f", {rep['shape_inverted']} inverted triangles" if rep.get("shape_inverted") else "")]
     wrote = [str(out / "final.npz")] if out is not None else []
     if ck is not None:
@@ -276,6 +278,7 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
         "png_frames": 0 if frames is None else frames.written,
         **{f"shape_{k}": v for k, v in shape_metrics(model, state).items()},
         **({f"shape_{k}": v for k, v in dried_shape(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
+        **({f"shape_{k}": v for k, v in crinkle_stats(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
         **model.to_report(),
         "water_kg": float(state.particle_water.sum()),
         "blade_water_kg": float(state.particle_water[model.blade_particles].sum()),
