@@ -9,6 +9,7 @@ from helpers.synthetic import ellipse_shape, lobed_shape, synthetic_veins
 from leafsim.blade.build import build_blade
 from leafsim.config.params import ParamSet
 from leafsim.config.presets import THESIS_PRESET
+from leafsim.sim.crinkle import lamina_excess
 from leafsim.sim.model import LAYER_T
 from leafsim.sim.run import run_headless
 from leafsim.sim.shape import leaf_frame, shape_metrics
@@ -91,6 +92,8 @@ def test_hard_case_stable(case):
     assert disp <= 2 * L, f"particle moved {disp / L:.2f} leaf lengths"
     met = shape_metrics(m, st, own_frame=free)
     assert met["inverted"] == 0, met
+    excess = lamina_excess(m, st)  # the crinkle the renderer draws: finite, in [0, 1] (half the sum of two compressions)
+    assert np.isfinite(excess).all() and excess.min() >= 0.0 and excess.max() <= 1.0, excess.max()
     if p["dynamics.scene"] == "ground":
         assert st.particle_q[:, 2].min() >= -1e-9
     if case == "hanging":
