@@ -57,7 +57,7 @@ uniform vec3 u_base;            // reflectance of pigment-free tissue (linear)
 uniform float u_crinkle_scale;  // the crinkle's texture coordinates per metre (render.crinkle_size)
 uniform vec2 u_crinkle_offset;  // where it samples the field, away from the mottle's samples
 uniform float u_crinkle_norm;   // 1 / RMS of the field's central difference per texel
-uniform float u_noise_texel;    // one texel of the field, in texture coordinates
+uniform sampler2D u_crinkle_grad;  // that central difference along x and y (crinkle_gradient)
 
 uniform sampler2DShadow u_shadow;
 uniform mat4 u_light_mat;
@@ -69,18 +69,15 @@ void main() {
     vec3 N = normalize(v_nrm);
 #if LS_CRINKLE
     // The sub-grid crinkle: a height field h over the rest plane whose slope along each rest
-    // direction has the RMS v_crinkle (its gradient: the field's central difference over one
-    // texel, normalised), carried to the screen by the chain rule and turned into a normal by
+    // direction has the RMS v_crinkle (its gradient: the mottle field's central difference over
+    // one texel, precomputed as a texture, normalised), carried to the screen by the chain rule and turned into a normal by
     // Mikkelsen's surface gradient (bump mapping without tangents).  A minified leaf reads a
     // blurred mip level, so the crinkle fades where the pixels cannot show it.
     // (first, and with no branch: screen derivatives and implicit-LOD fetches need the whole
     // 2×2 quad, before any discard; on the front face's normal, then turned with it, so the
     // back of the blade shows the same sheet's relief from behind)
     {
-        vec2 u = v_rest * u_crinkle_scale + u_crinkle_offset;
-        float e = u_noise_texel;
-        vec2 g = 0.5 * vec2(mottle_n(texture(u_noise, u + vec2(e, 0.0)).r) - mottle_n(texture(u_noise, u - vec2(e, 0.0)).r),
-                            mottle_n(texture(u_noise, u + vec2(0.0, e)).r) - mottle_n(texture(u_noise, u - vec2(0.0, e)).r));
+        vec2 g = texture(u_crinkle_grad, v_rest * u_crinkle_scale + u_crinkle_offset).rg;
         vec2 grad_h = max(v_crinkle, 0.0) * u_crinkle_norm * g;  // dh/d(rest), per rest direction
         float dhdx = dot(grad_h, dFdx(v_rest));
         float dhdy = dot(grad_h, dFdy(v_rest));

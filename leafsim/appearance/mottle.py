@@ -75,26 +75,37 @@ def leaf_offset(seed: int) -> np.ndarray:
 CRINKLE_OFFSET = (0.3719, 0.6113)
 
 
-def crinkle_gradient_rms(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> float:
-    """RMS of the field's central difference ½ (n(u + 1 texel) − n(u − 1 texel)) along one
-    axis (the mean of both axes' mean squares) where the fragment shader and the bake take it:
-    bilinearly interpolated at any point, averaged over sub-texel offsets on a quarter-texel
-    grid (at texel centres alone it reads 4 % high: 0.199 against 0.191).  The crinkle divides
-    its gradient by this, so each direction's slope has the RMS the vertex asks for
-    (``render.crinkle``, :mod:`leafsim.sim.crinkle`).  About 0.25 s, once per process."""
-    key = ("grad", int(size), int(seed))
+def crinkle_gradient(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> np.ndarray:
+    """(size, size, 2) float32: the field's central difference ½ (n(i + 1) − n(i − 1)) along x
+    and y at every texel, periodic (:func:`mottle_field`'s values).  The crinkle reads its
+    gradient from this, one bilinear fetch per pixel, instead of four fetches of the field."""
+    key = ("gradfield", int(size), int(seed))
     hit = _CACHE.get(key)
     if hit is None:
         f = mottle_field(size, seed).astype(np.float64)
-        fx1, fy1 = np.roll(f, -1, 1), np.roll(f, -1, 0)
-        fxy = np.roll(fy1, -1, 1)
+        gx = 0.5 * (np.roll(f, -1, 1) - np.roll(f, 1, 1))
+        gy = 0.5 * (np.roll(f, -1, 0) - np.roll(f, 1, 0))
+        hit = _CACHE[key] = np.ascontiguousarray(np.stack([gx, gy], 2), dtype=np.float32)
+    return hit
+
+
+def crinkle_gradient_rms(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> float:
+    """RMS of one component of :func:`crinkle_gradient` where the fragment shader and the bake
+    read it: bilinearly interpolated at any point, averaged over sub-texel offsets on a
+    quarter-texel grid (at texel centres alone it reads 4 % high: 0.199 against 0.191).  The
+    crinkle divides its gradient by this, so each direction's slope has the RMS the vertex asks
+    for (``render.crinkle``, :mod:`leafsim.sim.crinkle`).  About 0.3 s, once per process."""
+    key = ("grad", int(size), int(seed))
+    hit = _CACHE.get(key)
+    if hit is None:
+        g = crinkle_gradient(size, seed).astype(np.float64)
+        g1, g2 = np.roll(g, -1, 1), np.roll(g, -1, 0)
+        g12 = np.roll(g2, -1, 1)
         total = 0.0
         offsets = (0.0, 0.25, 0.5, 0.75)
         for ox in offsets:
             for oy in offsets:
-                g = (1 - ox) * (1 - oy) * f + ox * (1 - oy) * fx1 + (1 - ox) * oy * fy1 + ox * oy * fxy
-                gx = 0.5 * (np.roll(g, -1, 1) - np.roll(g, 1, 1))
-                gy = 0.5 * (np.roll(g, -1, 0) - np.roll(g, 1, 0))
-                total += 0.5 * (np.mean(gx * gx) + np.mean(gy * gy))
+                b = (1 - ox) * (1 - oy) * g + ox * (1 - oy) * g1 + (1 - ox) * oy * g2 + ox * oy * g12
+                total += 0.5 * (np.mean(b[..., 0] ** 2) + np.mean(b[..., 1] ** 2))
         hit = _CACHE[key] = float(np.sqrt(total / len(offsets) ** 2))
     return hit

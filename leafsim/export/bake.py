@@ -220,11 +220,12 @@ def bake_normals(source, state, size: tuple[int, int]) -> np.ndarray | None:
     (the albedo's), as glTF's ``normalTexture`` holds it (x right along increasing u, y up,
     z out; RGB = (n + 1) / 2), or None when the blade has no crinkle.  Each texel takes the
     fragment shader's height gradient at its rest position (the vertices' slopes and rest
-    positions interpolated as the shader has them, the field sampled bilinearly with
-    wrap-around at ± one texel) and tilts the normal against it along the triangle's
+    positions interpolated as the shader has them, the field's central differences
+    (:func:`~leafsim.appearance.mottle.crinkle_gradient`, in half floats as the renderer's
+    texture) sampled bilinearly with wrap-around) and tilts the normal against it along the triangle's
     tangent-space directions (:func:`_tangent_frames`).  Outside the blade: flat (0, 0, 1)
     carried from the nearest blade texel.  None too when no slope reaches :data:`MIN_SLOPE`."""
-    from leafsim.appearance.mottle import CRINKLE_OFFSET, FIELD_SIZE, crinkle_gradient_rms, mottle_levels, mottle_scale
+    from leafsim.appearance.mottle import CRINKLE_OFFSET, crinkle_gradient, crinkle_gradient_rms, mottle_scale
 
     view, params, model = source.view, source.params, source.model
     slope, csize = view.crinkle(state, params)
@@ -240,8 +241,8 @@ def bake_normals(source, state, size: tuple[int, int]) -> np.ndarray | None:
     _raster(uv * np.array([W, H], np.float64), tri, tri_id, bary)
     inside = tri_id >= 0
     attr = np.concatenate([np.asarray(slope, np.float64)[:, None], rest], 1)
-    noise = mottle_levels()
-    scale, e, norm = mottle_scale(csize), 1.0 / FIELD_SIZE, 1.0 / crinkle_gradient_rms()
+    grad_field = crinkle_gradient().astype(np.float16)  # as the renderer's half-float texture holds it
+    scale, norm = mottle_scale(csize), 1.0 / crinkle_gradient_rms()
     out = np.zeros((H, W, 3), np.float32)
     ys, xs = np.nonzero(inside)
     for lo in range(0, len(ys), CHUNK):
@@ -250,10 +251,7 @@ def bake_normals(source, state, size: tuple[int, int]) -> np.ndarray | None:
         t = tri[k]
         s, r = bary[y, x, 0:1].astype(np.float64), bary[y, x, 1:2].astype(np.float64)
         a = attr[t[:, 0]] * (1.0 - s - r) + attr[t[:, 1]] * s + attr[t[:, 2]] * r
-        u0 = a[:, 1] * scale + CRINKLE_OFFSET[0]
-        v0 = a[:, 2] * scale + CRINKLE_OFFSET[1]
-        n = lambda du, dv: bilinear(noise, u0 + du, v0 + dv, wrap=True) / 255.0 * (255.0 / 128.0)  # noqa: E731  (mottle_n's slope)
-        g = 0.5 * np.stack([n(e, 0.0) - n(-e, 0.0), n(0.0, e) - n(0.0, -e)], 1)
+        g = bilinear(grad_field, a[:, 1] * scale + CRINKLE_OFFSET[0], a[:, 2] * scale + CRINKLE_OFFSET[1], wrap=True)
         grad = np.maximum(a[:, 0:1], 0.0) * norm * g  # dh/d(rest x, y)
         ht = np.einsum("ij,ij->i", grad, frames[k, 0])
         hb = np.einsum("ij,ij->i", grad, frames[k, 1])

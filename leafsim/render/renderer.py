@@ -13,7 +13,7 @@ import moderngl
 import numpy as np
 
 from leafsim.appearance.mesh import NO_CHROMA, validate_mesh
-from leafsim.appearance.mottle import CRINKLE_OFFSET, FIELD_SIZE, crinkle_gradient_rms, mottle_levels, mottle_scale
+from leafsim.appearance.mottle import CRINKLE_OFFSET, crinkle_gradient, crinkle_gradient_rms, mottle_levels, mottle_scale
 from leafsim.appearance.reflectance import ABSORPTION, BASE_REFLECTANCE, MOTTLE_COLUMNS
 from leafsim.appearance.texture import clean_texture
 from leafsim.base.errors import LeafsimError
@@ -94,6 +94,7 @@ class Renderer:
         self._mask = None  # ground shadow coverage: (texture, fbo) twice (blur ping-pong)
         self._white = ctx.texture((1, 1), 4, b"\xff\xff\xff\xff")
         self._noise = None  # the sub-grid mottle field (made on first use)
+        self._crinkle_grad = None  # its central differences, for the crinkle (made on first use)
         self._shadow_tex = None
         self._shadow_fbo = None
         self._objects: list = []
@@ -158,7 +159,7 @@ class Renderer:
             p.release()
         self._variants = {}
         for o in (*self._ground_vaos.values(), self._blur_vao, self._ground_vbo, self._white, self._shadow_fbo,
-                  self._shadow_tex, self._noise, *(self._mask or ())):
+                  self._shadow_tex, self._noise, self._crinkle_grad, *(self._mask or ())):
             if o is not None:
                 o.release()
 
@@ -672,12 +673,24 @@ class Renderer:
         return self.crinkle_size > 0.0 and self.crinkle_max > 0.0 and self.has_rest
 
     def _crinkle_uniforms(self, prog) -> None:
-        self._mottle_texture().use(location=3)
-        _set(prog, "u_noise", 3)
+        self._crinkle_texture().use(location=4)
+        _set(prog, "u_crinkle_grad", 4)
         _set(prog, "u_crinkle_scale", mottle_scale(self.crinkle_size))
         _set(prog, "u_crinkle_offset", CRINKLE_OFFSET)
         _set(prog, "u_crinkle_norm", 1.0 / crinkle_gradient_rms())
-        _set(prog, "u_noise_texel", 1.0 / FIELD_SIZE)
+
+    def _crinkle_texture(self):
+        """The mottle field's central differences (:func:`leafsim.appearance.mottle.crinkle_gradient`)
+        as a two-channel half-float texture, repeated and mipmapped (made once per renderer): one
+        fetch a pixel for the crinkle's gradient, and a minified leaf averages it away."""
+        if self._crinkle_grad is None:
+            g = crinkle_gradient()
+            t = self.ctx.texture((g.shape[1], g.shape[0]), 2, g.astype(np.float16).tobytes(), dtype="f2")
+            t.build_mipmaps()
+            t.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            t.repeat_x = t.repeat_y = True
+            self._crinkle_grad = t
+        return self._crinkle_grad
 
     def _mottle_uniforms(self, prog) -> None:
         self._mottle_texture().use(location=3)
