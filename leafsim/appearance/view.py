@@ -185,16 +185,22 @@ class LeafView:
         contents = self.photo_contents(params) if (self.photo_colour and self.pigments0 is not None) else None
         return mottle_pigments(pig, params, contents)[self.T], float(params["colour.mottle_size"]), float(params["colour.mottle"])
 
-    def crinkle(self, state: State, params):
+    def excess(self, state: State) -> np.ndarray:
+        """(n,) the lamina's excess length Δ of every particle (:func:`leafsim.sim.crinkle.lamina_excess`)."""
+        from leafsim.sim.crinkle import lamina_excess
+
+        return lamina_excess(self.model, state, self._crinkle)
+
+    def crinkle(self, state: State, params, excess: np.ndarray | None = None):
         """((nT,) float32 RMS slope of the sub-grid crinkle, ``render.crinkle`` × √(2Δ) with Δ
-        the lamina's excess length (:mod:`leafsim.sim.crinkle`), the field's correlation
-        length in metres), or (None, 0) with ``render.crinkle`` 0."""
-        from leafsim.sim.crinkle import crinkle_slope, lamina_excess
+        the lamina's excess length (:meth:`excess`, or ``excess`` when given), the field's
+        correlation length in metres), or (None, 0) with ``render.crinkle`` 0."""
+        from leafsim.sim.crinkle import crinkle_slope
 
         gain = float(params["render.crinkle"])
         if gain <= 0.0:
             return None, 0.0
-        slope = gain * crinkle_slope(lamina_excess(self.model, state, self._crinkle))
+        slope = gain * crinkle_slope(self.excess(state) if excess is None else excess)
         return slope[self.T].astype(np.float32), float(params["render.crinkle_size"])
 
     def mottle_rest(self, state: State) -> np.ndarray:
@@ -205,13 +211,15 @@ class LeafView:
         seed = state.pigments.seed if state.pigments is not None else 0
         return (self.model.particle_rest[self.T][:, :2] + leaf_offset(seed)).astype(np.float32)
 
-    def scalar_fields(self, state: State) -> dict:
-        """Per layer-T vertex heat-map fields: ``mass`` per area [kg/m²] now, ``water`` (now / initial) and
-        the pigment fields (relative to the summer content)."""
+    def scalar_fields(self, state: State, excess: np.ndarray | None = None) -> dict:
+        """Per layer-T vertex heat-map fields: ``mass`` per area [kg/m²] now, ``water`` (now / initial),
+        the pigment fields (relative to the summer content) and ``crinkle``, the lamina's excess
+        length (:meth:`excess`, or ``excess`` when given; 0.01 = 1 %)."""
         m, T = self.model, self.T
         w = state.particle_water[T]
         out = {"mass": ((m.particle_cytosol[T] + w) / np.maximum(m.particle_area[T], 1e-300)).astype(np.float32),
-               "water": (w / np.maximum(m.particle_water0[T], 1e-300)).astype(np.float32)}
+               "water": (w / np.maximum(m.particle_water0[T], 1e-300)).astype(np.float32),
+               "crinkle": np.asarray(self.excess(state) if excess is None else excess, np.float32)[T]}
         if state.pigments is not None:
             for name in PIGMENT_VIEWS:
                 out[name] = np.asarray(getattr(state.pigments, name), np.float32)[T]
@@ -230,7 +238,8 @@ class LeafView:
         colours, tint = self.colours(state, params)
         vein_colours = self.vein_colours(state, params, colours)
         mottle, mottle_size, mottle_amount = self.mottle(state, params)
-        crinkle, crinkle_size = self.crinkle(state, params)
+        excess = self.excess(state)
+        crinkle, crinkle_size = self.crinkle(state, params, excess)
         stalk = ~m.blade_particles
         veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()
                  if not (self.blade_only and stalk[idx].any())]
@@ -247,7 +256,7 @@ class LeafView:
             springs=remap[m.spring_ij].astype(np.int32),
             spring_kind=kind_map[m.spring_type],
             top_positions=state.particle_q[V].astype(np.float32),
-            scalars=self.scalar_fields(state),
+            scalars=self.scalar_fields(state, excess),
             mottle=mottle,
             mottle_rest=self.mottle_rest(state),
             mottle_size=mottle_size,
@@ -259,7 +268,8 @@ class LeafView:
     def update(self, state: State, params) -> dict:
         """Keyword arguments for ``Renderer.update`` with ``state``."""
         colours, tint = self.colours(state, params)
-        out = {"positions": state.particle_q[self.T], "colours": colours, "scalar": self.scalar_fields(state),
+        excess = self.excess(state)
+        out = {"positions": state.particle_q[self.T], "colours": colours, "scalar": self.scalar_fields(state, excess),
                "top_positions": state.particle_q[self.V]}
         if tint is not None:
             out["tint"] = tint
@@ -272,7 +282,7 @@ class LeafView:
         mottle, size, amount = self.mottle(state, params)
         if mottle is not None:
             out["mottle"], out["mottle_size"], out["mottle_amount"] = mottle, size, amount
-        crinkle, crinkle_size = self.crinkle(state, params)
+        crinkle, crinkle_size = self.crinkle(state, params, excess)
         out["crinkle"] = crinkle if crinkle is not None else np.zeros(len(self.T), np.float32)
         out["crinkle_size"] = crinkle_size
         return out

@@ -35,7 +35,8 @@ from leafsim.base.resources import default_config
 from leafsim.export.mesh import export_mesh
 from leafsim.gui.exports import BackgroundJobs, ensure_folder, free_path, new_take, user_path
 from leafsim.gui.fonts import load_ui_font
-from leafsim.gui.layout import BACKGROUND, LEFT_W, MIN_WINDOW, PANEL_BG, RIGHT_W, STATUS_H, fixed_flags, window_rects
+from leafsim.gui.layout import (BACKGROUND, LEFT_W, MIN_WINDOW, OWN_RANGE, PANEL_BG, RIGHT_W, STATUS_H, fixed_flags,
+                                 window_rects)
 from leafsim.gui.panels.controls import ControlsPanel
 from leafsim.gui.panels.stats import StatsPanel
 from leafsim.gui.panels.status_bar import StatusBar
@@ -258,7 +259,7 @@ class LeafApp:
                              background=BACKGROUND, shadow_size=1024, ground=self.show_ground,
                              shadows=self.shadows or self.self_shadow, self_shadow=self.self_shadow)
         opts.ground_shadow = self.shadows  # "shadows": the soft shadow on the ground
-        if not self.heat_fit and self.view != "mass":
+        if not self.heat_fit and self.view not in OWN_RANGE:
             opts.scalar_range = (0.0, 1.0)
         if self.session.use_texture():
             opts.albedo = {"detail": "detail", "photo": "texture", "colours": "colours"}[self.albedo]

@@ -18,10 +18,13 @@ BACKGROUND = (0.80, 0.84, 0.88)
 PANEL_BG = (0.11, 0.11, 0.12)
 #: resolution factors of the 3-D view (llvmpipe's cost is per pixel)
 SCALES = (0.35, 0.5, 0.75, 1.0)
-VIEWS = ("shaded", "wireframe", "particles", "springs", "mass", "water", *PIGMENT_VIEWS)
+VIEWS = ("shaded", "wireframe", "particles", "springs", "mass", "water", *PIGMENT_VIEWS, "crinkle")
 #: heat maps: (label of the colour bar, unit, scale applied to the field for the ticks)
 HEAT_UNITS = {"mass": ("particle mass", "mg", 1.0), "water": ("water / initial water", "%", 100.0),
-              **{p: (f"{p} / summer content", "%", 100.0) for p in PIGMENT_VIEWS}}
+              **{p: (f"{p} / summer content", "%", 100.0) for p in PIGMENT_VIEWS},
+              "crinkle": ("lamina's excess length (render.crinkle)", "%", 100.0)}
+#: heat maps drawn over their own range even when "fit range to the data" is off (not fractions of 1)
+OWN_RANGE = ("mass", "crinkle")
 #: albedo of photo species: pigment colour with the photo's detail, the photo tinted by the
 #: pigment change, or the pigment colour alone
 ALBEDOS = ("detail", "photo", "colours")

@@ -206,7 +206,7 @@ def test_render_mesh(s):
     assert m.triangles.shape == (s.model.tri_count, 3)
     assert m.springs.shape == (s.model.spring_count, 2)
     assert set(np.unique(m.spring_kind)) == {0, 1, 2, 3}
-    assert set(m.scalars) == {"mass", "water", "chlorophyll", "carotenoid", "anthocyanin", "browning", "necrosis"}
+    assert set(m.scalars) == {"mass", "water", "chlorophyll", "carotenoid", "anthocyanin", "browning", "necrosis", "crinkle"}
     assert m.texture_rgba is not None and m.texture_rgba.shape[2] == 4  # oak has a photo
     assert m.tint is not None and m.vein_lines
     u = s.render_update()

@@ -144,3 +144,29 @@ def test_on_the_drying_path_the_excess_is_the_carrier_meshs(maple, override):
     w, mean = np.array(seen).T
     assert mean[0] < 0.2 * mean[-1]  # the fresh blade is nearly free of it; the drying makes it
     assert 0.002 < mean[-1] < 0.05   # tenths of a per cent to a few per cent (maple dried: about 1 %)
+
+
+def test_the_window_draws_the_excess_as_a_heat_map(maple):
+    """The view's ``crinkle`` heat-map field is the excess of its layer-T vertices (the GUI's
+    "crinkle" view), and a dried-looking blade's heat map spreads over the colour map."""
+    from leafsim.appearance.view import LeafView
+    from leafsim.gui.layout import HEAT_UNITS, VIEWS
+    from leafsim.render.offscreen import OffscreenRenderer, default_camera
+    from leafsim.render.options import RenderOptions
+
+    p, m = maple
+    st = replace(m.state(), path=None)
+    rng = np.random.default_rng(0)
+    st.spring_rest[:] = m.spring_rest0 * (1.0 + 0.03 * rng.random(len(m.spring_rest0)))  # patchy excess
+    view = LeafView(m)
+    fields = view.scalar_fields(st)
+    assert np.array_equal(fields["crinkle"], lamina_excess(m, st)[view.T].astype(np.float32))
+    assert "crinkle" in VIEWS and "crinkle" in HEAT_UNITS
+    r = OffscreenRenderer(200, 160)
+    try:
+        mesh = view.mesh(st, p)
+        img = r.render_array(mesh, default_camera(mesh.positions, aspect=200 / 160), RenderOptions(view="crinkle", ground=False))
+    finally:
+        r.release()
+    leaf = np.abs(img.astype(int) - img[0, 0].astype(int)).sum(-1) > 30
+    assert leaf.sum() > 2000 and img[leaf].astype(float).std(axis=0).max() > 20  # a heat map, not one colour
