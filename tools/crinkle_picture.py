@@ -31,34 +31,22 @@ import drying_report as DR  # noqa: E402
 from midrib_crease import _value  # noqa: E402
 
 from leafsim.config.species import get_species  # noqa: E402
-from leafsim.pipeline import build_leaf  # noqa: E402
 from leafsim.sim.crinkle import crinkle_stats  # noqa: E402
-from leafsim.sim.run import Run  # noqa: E402
 
 def dried(key: str, overrides: dict, cache: Path | None):
-    sp = get_species(key)
-    p = sp.params.with_overrides({**overrides, "dynamics.scene": "ground"})
+    """The drying report's dried leaf (:func:`drying_report.dried_state`), from ``cache`` when
+    it holds one."""
     tag = "_".join([key] + [f"{k}={v}" for k, v in sorted(overrides.items())])
     hit = cache / f"{tag}.pkl" if cache is not None else None
     if hit is not None and hit.exists():
         model, st = pickle.loads(hit.read_bytes())
-        return sp, p, model, st
-    _, _, model = build_leaf(sp, p, 0)
-    run = Run(model, p, seed=0, name=key)
-    t_dry = None
-
-    def done(st) -> bool:
-        nonlocal t_dry
-        if t_dry is None and model.water_fraction(st.particle_water) < DR.DRY:
-            t_dry = st.time
-        return (t_dry is not None and st.time >= DR.SETTLE * t_dry) or st.time >= 60.0
-
-    for _ in run.frames(until=done):
-        pass
+        sp = get_species(key)
+        return sp, sp.params.with_overrides({**overrides, "dynamics.scene": "ground"}), model, st
+    sp, p, model, st = DR.dried_state(key, overrides)
     if hit is not None:
         cache.mkdir(parents=True, exist_ok=True)
-        hit.write_bytes(pickle.dumps((model, run.state)))
-    return sp, p, model, run.state
+        hit.write_bytes(pickle.dumps((model, st)))
+    return sp, p, model, st
 
 
 def picture(sp, p, model, st, png: Path) -> None:

@@ -36,6 +36,27 @@ from leafsim.sim.veinframe import vein_frame_curl
 DRY, SETTLE = 0.02, 1.15
 
 
+def dried_state(key: str, overrides: dict | None = None, max_time: float = 60.0):
+    """(species, params, model, state) of ``key`` dried on the ground by this report's protocol
+    (to 2 % of its water, on to 1.15 × that time, at most ``max_time`` simulated seconds), seed 0:
+    what the picture tools (pleats, crinkle) draw."""
+    sp = get_species(key)
+    p = sp.params.with_overrides({**(overrides or {}), "dynamics.scene": "ground"})
+    _, _, model = build_leaf(sp, p, 0)
+    run = Run(model, p, seed=0, name=key)
+    t_dry = None
+
+    def done(st) -> bool:
+        nonlocal t_dry
+        if t_dry is None and model.water_fraction(st.particle_water) < DRY:
+            t_dry = st.time
+        return (t_dry is not None and st.time >= SETTLE * t_dry) or st.time >= max_time
+
+    for _ in run.frames(until=done):
+        pass
+    return sp, p, model, run.state
+
+
 def dry(key: str, scene: str, max_time: float, snap_dir: Path | None, overrides: dict | None = None,
         seed: int = 0) -> dict:
     sp = get_species(key)

@@ -26,28 +26,12 @@ from leafsim.appearance.photo import load_photo_rgba  # noqa: E402
 from leafsim.appearance.view import LeafView  # noqa: E402
 from leafsim.base.fileio import write_png_atomic  # noqa: E402
 from leafsim.config.species import get_species  # noqa: E402
-from leafsim.pipeline import build_leaf  # noqa: E402
 from leafsim.render.offscreen import OffscreenRenderer, default_camera  # noqa: E402
 from leafsim.render.options import RenderOptions  # noqa: E402
-from leafsim.sim.run import Run  # noqa: E402
 
 
 def dried(key: str, depth: float):
-    sp = get_species(key)
-    p = sp.params.with_overrides({"shrink.plication": depth, "dynamics.scene": "ground"})
-    _, _, model = build_leaf(sp, p, 0)
-    run = Run(model, p, seed=0, name=key)
-    t_dry = None
-
-    def done(st) -> bool:
-        nonlocal t_dry
-        if t_dry is None and model.water_fraction(st.particle_water) < DR.DRY:
-            t_dry = st.time
-        return (t_dry is not None and st.time >= DR.SETTLE * t_dry) or st.time >= 60.0
-
-    for _ in run.frames(until=done):
-        pass
-    return sp, p, model, run.state
+    return DR.dried_state(key, {"shrink.plication": depth})
 
 
 def main() -> None:

@@ -98,6 +98,33 @@ def _srgb8(lin):
     return np.clip(np.round(linear_to_srgb(np.clip(lin, 0, 1)).astype(float) * 255.0), 0, 255)
 
 
+def _window_pixels(model, view, src, st, params, options: dict) -> tuple:
+    """The renderer's top-down picture of the flat leaf (``options`` over the scanner's) and, for
+    every pixel well inside its blade: (rows, columns, blade triangle, texture coordinates, the
+    picture's colour there).  The triangle indexes ``view.remap[model.blade_tri_T]``."""
+    from leafsim.compare.metrics import Frame
+    from leafsim.render.topdown import TopDown
+
+    xy = model.particle_rest[view.T][:, :2]
+    scale = 2500.0 / np.ptp(xy, axis=0).max()
+    lo, hi = xy.min(0) - 0.002, xy.max(0) + 0.002
+    fr = Frame(scale, float(lo[0]), float(hi[1]), int((hi[0] - lo[0]) * scale) + 1, int((hi[1] - lo[1]) * scale) + 1)
+    td = TopDown(fr, supersample=1)
+    try:
+        rgb, mask = td.render(view.mesh(st, params), options)
+    finally:
+        td.release()
+    tri = view.remap[model.blade_tri_T].astype(np.int64)
+    tri_id, bary = _locate(fr.to_px(xy), tri, fr.width, fr.height)
+    ok = (tri_id >= 0) & cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    y, x = np.nonzero(ok)
+    k = tri_id[y, x]
+    t = tri[k]
+    s, r = bary[y, x, 0:1], bary[y, x, 1:2]
+    uv = src.uv[t[:, 0]] * (1 - s - r) + src.uv[t[:, 1]] * s + src.uv[t[:, 2]] * r
+    return y, x, k, uv, rgb
+
+
 @pytest.mark.parametrize("key, albedo", [("maple", "colours"), ("oak", "detail"), ("oak", "texture")])
 def test_the_bake_is_what_the_window_draws(key, albedo):
     """The texture sampled where each pixel of the renderer's top-down picture of the same flat
@@ -106,28 +133,10 @@ def test_the_bake_is_what_the_window_draws(key, albedo):
     and, on oak, the photo: with its detail under the pigment colour (the window's default
     albedo) or tinted by the pigment change (its "photo" albedo).  Fails when the bake leaves out
     the mottle (its flecks are 7-9 levels of RMS here) or the photo."""
-    from leafsim.compare.metrics import Frame
-    from leafsim.render.topdown import TopDown
-
     model, params, view, st = _turning(key, photo_tint=albedo == "texture")
     src = MeshSource(model, params, view, "shell", False, "baked", albedo)
     alb, inside = bake_albedo(src, st)
-    xy = model.particle_rest[view.T][:, :2]
-    scale = 2500.0 / np.ptp(xy, axis=0).max()
-    lo, hi = xy.min(0) - 0.002, xy.max(0) + 0.002
-    fr = Frame(scale, float(lo[0]), float(hi[1]), int((hi[0] - lo[0]) * scale) + 1, int((hi[1] - lo[1]) * scale) + 1)
-    td = TopDown(fr, supersample=1)
-    try:
-        rgb, mask = td.render(view.mesh(st, params), {"albedo": albedo, "veins": False})
-    finally:
-        td.release()
-    tri = view.remap[model.blade_tri_T].astype(np.int64)
-    tri_id, bary = _locate(fr.to_px(xy), tri, fr.width, fr.height)
-    ok = (tri_id >= 0) & cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    y, x = np.nonzero(ok)
-    t = tri[tri_id[y, x]]
-    s, r = bary[y, x, 0:1], bary[y, x, 1:2]
-    uv = src.uv[t[:, 0]] * (1 - s - r) + src.uv[t[:, 1]] * s + src.uv[t[:, 2]] * r
+    y, x, _, uv, rgb = _window_pixels(model, view, src, st, params, {"albedo": albedo, "veins": False})
     baked = _srgb8(bilinear(alb, uv[:, 0], uv[:, 1], wrap=False))
     window = rgb[y, x].astype(float)
     d = np.abs(baked - window)
@@ -311,12 +320,10 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key):
     rad RMS slope) lit at 45° from the side (and 45° to both texture axes), drawn by the renderer top-down: every pixel's
     brightness is what a glTF client computes from the baked albedo and the baked normal map
     decoded in its tangent frame (x along increasing u, y up the image), within a couple of
-    levels on average; decoded with v's direction the other way it is not.  The glb carries the
+    levels on average; decoded with u's or v's direction the other way it is not.  The glb carries the
     map as the blade's normalTexture (not the veins'), passes the validator, and a leaf without
     a crinkle (fresh, or render.crinkle 0) carries none."""
-    from leafsim.compare.metrics import Frame
     from leafsim.export.bake import bake_normals
-    from leafsim.render.topdown import TopDown
 
     model, params, view, st = _turning(key, mottle=0.0)
     params = params.with_overrides({"dynamics.path": "own", "render.crinkle_size": 0.002})
@@ -325,26 +332,12 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key):
     alb, inside = bake_albedo(src, st)
     nmap = bake_normals(src, st, (alb.shape[1], alb.shape[0]))
     assert nmap is not None and nmap.shape == alb.shape and nmap.dtype == np.uint8
-    xy = model.particle_rest[view.T][:, :2]
-    scale = 2500.0 / np.ptp(xy, axis=0).max()
-    lo, hi = xy.min(0) - 0.002, xy.max(0) + 0.002
-    fr = Frame(scale, float(lo[0]), float(hi[1]), int((hi[0] - lo[0]) * scale) + 1, int((hi[1] - lo[1]) * scale) + 1)
     s45 = np.sqrt(0.5)
     L = np.array([0.5, 0.5, s45])  # from the side, at 45° to both texture axes: a flip of either shows
     light = dict(light_dir=tuple(L), light_colour=(1.0, 1.0, 1.0), sky_colour=(0.0, 0.0, 0.0))
-    td = TopDown(fr, supersample=1)
-    try:
-        rgb, mask = td.render(view.mesh(st, params), {"albedo": "colours", "veins": False, **light})
-    finally:
-        td.release()
+    y, x, k, uv, rgb = _window_pixels(model, view, src, st, params, {"albedo": "colours", "veins": False, **light})
+    xy = model.particle_rest[view.T][:, :2]
     tri = view.remap[model.blade_tri_T].astype(np.int64)
-    tri_id, bary = _locate(fr.to_px(xy), tri, fr.width, fr.height)
-    ok = (tri_id >= 0) & cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    y, x = np.nonzero(ok)
-    k = tri_id[y, x]
-    t = tri[k]
-    s, r = bary[y, x, 0:1], bary[y, x, 1:2]
-    uv = src.uv[t[:, 0]] * (1 - s - r) + src.uv[t[:, 1]] * s + src.uv[t[:, 2]] * r
     albedo = bilinear(alb, uv[:, 0], uv[:, 1], wrap=False)
     n_ts = bilinear(nmap.astype(np.float64), uv[:, 0], uv[:, 1], wrap=False) / 127.5 - 1.0
     P = np.concatenate([xy, np.zeros((len(xy), 1))], 1)
