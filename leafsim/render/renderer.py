@@ -168,6 +168,20 @@ class Renderer:
         validate_mesh(mesh)
         self.release_mesh()
         self.mesh = mesh
+        uv = self._take_mesh(mesh)
+        self._blade_buffers(uv)
+        self._line_buffers(getattr(mesh, "springs", None), getattr(mesh, "spring_kind", None))
+        self._vein_buffers(getattr(mesh, "vein_lines", None), uv)
+        self._upload_texture(getattr(mesh, "texture_rgba", None))
+        self._dirty_particles = True
+        self._dirty_springs = True
+        self._geometry += 1  # the shadow passes depend on it only
+        self._bounds()
+
+    def _take_mesh(self, mesh) -> np.ndarray:
+        """Keep ``mesh``'s per-vertex arrays as float32 copies the frames overwrite (absent
+        optional ones as their neutral values); returns the texture coordinates (zeros
+        without a photo)."""
         pos = np.ascontiguousarray(mesh.positions, dtype=np.float32)
         n = self.n = pos.shape[0]
         self.tri = orient_up(pos, np.asarray(mesh.triangles))
@@ -203,8 +217,11 @@ class Renderer:
         top = getattr(mesh, "top_positions", None)
         self.top = None if top is None else np.ascontiguousarray(top, dtype=np.float32).copy()
         self.k = 0 if self.top is None else self.top.shape[0]
+        return uv
 
-        # blade
+    def _blade_buffers(self, uv: np.ndarray) -> None:
+        """The blade's vertex buffers, its triangles and the shadow passes' arrays."""
+        rest, n = self.rest, self.n
         self.vbo_pos = self._buf(self.pos, dynamic=True)
         self.vbo_nrm = self._buf(self.nrm, dynamic=True)
         self.vbo_col = self._buf(self.colours, dynamic=True)
@@ -226,7 +243,10 @@ class Renderer:
                                     self.ibo_tri)
         self.vao_gshadow = self._vao("gshadow", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_uv, "2f", "in_uv")],
                                      self.ibo_tri)
-        # wireframe
+
+    def _line_buffers(self, springs, kind) -> None:
+        """The wireframe, the particles (bottom then top layer) and the springs' lines."""
+        n = self.n
         self.ibo_edges = self._buf(self.edges)
         self.vbo_minus1 = self._buf(np.full(n, -1.0, np.float32))
         self.vao_wire = self._vao("lines", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_minus1, "1f", "in_kind")],
@@ -236,18 +256,17 @@ class Renderer:
         self.vbo_particles = self._buf(np.zeros((n + self.k, 3), np.float32), dynamic=True)
         self.vbo_layer = self._buf(layer)
         self.vao_points = self._vao("points", [(self.vbo_particles, "3f", "in_pos"), (self.vbo_layer, "1f", "in_layer")])
-        # springs
-        springs = getattr(mesh, "springs", None)
         self.springs = None if springs is None or len(springs) == 0 else np.asarray(springs, dtype=np.int64)
         if self.springs is not None:
-            kind = getattr(mesh, "spring_kind", None)
             kind = np.zeros(len(self.springs)) if kind is None else np.asarray(kind)
             self.vbo_spring_pos = self._buf(np.zeros((2 * len(self.springs), 3), np.float32), dynamic=True)
             self.vbo_spring_kind = self._buf(np.repeat(kind.astype(np.float32), 2))
             self.vao_springs = self._vao("lines", [(self.vbo_spring_pos, "3f", "in_pos"),
                                                    (self.vbo_spring_kind, "1f", "in_kind")])
-        # veins
-        self.veins = VeinRibbons(getattr(mesh, "vein_lines", None), n, uv if self.has_uv else None)
+
+    def _vein_buffers(self, lines, uv: np.ndarray) -> None:
+        """The drawn veins' ribbons (none without vein lines)."""
+        self.veins = VeinRibbons(lines, self.n, uv if self.has_uv else None)
         if self.veins.count:
             self.vbo_vein_dyn = self._buf(self.veins.frame(self.pos, self.nrm), dynamic=True)
             self.vbo_vein_base = self._buf(self.veins.base_colours(self.colours, self.tint, self.chroma, self.vein_col), dynamic=True)
@@ -259,11 +278,6 @@ class Renderer:
                 (self.vbo_vein_dyn, "3f 3f 3f", "in_center", "in_side", "in_nrm"),
                 (self.vbo_vein_static, "1f 1f 2f 1f", "in_hw", "in_v", "in_uv", "in_order"),
                 (self.vbo_vein_base, "3f 3f 4f 3f", "in_base", "in_tint", "in_chroma", "in_vein")], self.ibo_vein)
-        self._upload_texture(getattr(mesh, "texture_rgba", None))
-        self._dirty_particles = True
-        self._dirty_springs = True
-        self._geometry += 1  # the shadow passes depend on it only
-        self._bounds()
 
     def _upload_texture(self, tex) -> None:
         """The photo (sRGB, mipmapped, dilated past the leaf mask) and its mean leaf colour."""
@@ -333,70 +347,15 @@ class Renderer:
         """
         if self.mesh is None:
             raise LeafsimError("renderer: update() before populate()")
-        pos = np.asarray(positions)
-        if pos.shape != (self.n, 3):
-            raise LeafsimError(f"renderer: positions must be ({self.n}, 3), got {pos.shape}")
-        for name, a in (("colours", colours), ("tint", tint), ("vein_colours", vein_colours)):
-            if a is not None and (np.shape(a) != (self.n, 3) or not np.all(np.isfinite(a))):
-                raise LeafsimError(f"renderer: {name} must be finite, ({self.n}, 3), got {np.shape(a)}")
-        c = None if chroma is None else np.asarray(chroma, dtype=np.float32)
-        if c is not None and (c.shape != (self.n, 4) or not np.all(np.isfinite(c))):
-            raise LeafsimError(f"renderer: chroma must be finite, ({self.n}, 4), got {c.shape}")
-        mt = None if mottle is None else np.asarray(mottle, dtype=np.float32)
-        k = len(MOTTLE_COLUMNS)
-        if mt is not None and (mt.shape != (self.n, k) or not np.all(np.isfinite(mt))):
-            raise LeafsimError(f"renderer: mottle must be finite, ({self.n}, {k}), got {mt.shape}")
-        if mottle_size is not None and not (np.isfinite(mottle_size) and mottle_size >= 0.0):
-            raise LeafsimError(f"renderer: mottle_size must be a finite length >= 0 m, got {mottle_size}")
-        if mottle_size and not self.has_rest:
-            raise LeafsimError("renderer: mottle_size > 0 needs the mesh populated with mottle_rest "
-                               "(where the tissue samples the mottle field)")
-        if mottle_amount is not None and not (np.isfinite(mottle_amount) and 0.0 <= mottle_amount <= 1.0):
-            raise LeafsimError(f"renderer: mottle_amount must be in [0, 1], got {mottle_amount}")
-        ck = None if crinkle is None else np.asarray(crinkle, dtype=np.float32)
-        if ck is not None and (ck.shape != (self.n,) or not np.all(np.isfinite(ck)) or (ck < 0).any()):
-            raise LeafsimError(f"renderer: crinkle must be finite slopes >= 0, ({self.n},), got {ck.shape}")
-        if crinkle_size is not None and not (np.isfinite(crinkle_size) and crinkle_size >= 0.0):
-            raise LeafsimError(f"renderer: crinkle_size must be a finite length >= 0 m, got {crinkle_size}")
-        if crinkle_size and not self.has_rest:
-            raise LeafsimError("renderer: crinkle_size > 0 needs the mesh populated with mottle_rest "
-                               "(where the tissue samples the crinkle field)")
+        pos, c, mt, ck = self._checked_frame(positions, colours, tint, vein_colours, chroma, mottle, mottle_size,
+                                             mottle_amount, crinkle, crinkle_size)
         self.pos[:] = pos
         vertex_normals(self.pos, self.tri, self.nrm)
         self.vbo_pos.write(self.pos)
         self.vbo_nrm.write(self.nrm)
         self._bounds()
-        recolour = False
-        if colours is not None:
-            self.colours[:] = colours
-            self.vbo_col.write(self.colours)
-            recolour = True
-        if tint is not None:
-            self.tint[:] = tint
-            self.vbo_tint.write(self.tint)
-            recolour = True
-        if chroma is not None:
-            self.chroma[:] = c
-            self.vbo_chroma.write(self.chroma)
-            recolour = True
-        if mt is not None:
-            self.mottle[:] = mt
-            self.vbo_mottle.write(self.mottle)
-            if self.veins.count:
-                self.vbo_vein_mottle.write(self.veins.mottle_rows(self.mottle, self.rest))
-        if mottle_size is not None:
-            self.mottle_size = float(mottle_size)
-        if mottle_amount is not None:
-            self.mottle_amount = float(mottle_amount)
-        if ck is not None:
-            self.crinkle[:] = ck
-            self.crinkle_max = float(ck.max()) if self.n else 0.0
-            self.vbo_crinkle.write(self.crinkle)
-        if crinkle_size is not None:
-            self.crinkle_size = float(crinkle_size)
-        if vein_colours is not None and self.vein_col is not None:
-            self.vein_col[:] = vein_colours
-            recolour = True
+        recolour = self._write_albedo(colours, tint, c, vein_colours)
+        self._write_subgrid(mt, mottle_size, mottle_amount, ck, crinkle_size)
         if scalar is not None:
             for k, v in scalar.items():
                 v = np.asarray(v, dtype=np.float32)
@@ -412,6 +371,69 @@ class Renderer:
                 self.vbo_vein_base.write(self.veins.base_colours(self.colours, self.tint, self.chroma, self.vein_col))
         self._dirty_particles = self._dirty_springs = True
         self._geometry += 1
+
+    def _checked_frame(self, positions, colours, tint, vein_colours, chroma, mottle, mottle_size, mottle_amount,
+                       crinkle, crinkle_size):
+        """``update``'s arrays checked before any buffer is written (one line naming the
+        argument and what was expected); returns (positions, chroma, mottle, crinkle) as arrays
+        (None where not given)."""
+        pos = np.asarray(positions)
+        if pos.shape != (self.n, 3):
+            raise LeafsimError(f"renderer: positions must be ({self.n}, 3), got {pos.shape}")
+        for name, a in (("colours", colours), ("tint", tint), ("vein_colours", vein_colours)):
+            if a is not None and (np.shape(a) != (self.n, 3) or not np.all(np.isfinite(a))):
+                raise LeafsimError(f"renderer: {name} must be finite, ({self.n}, 3), got {np.shape(a)}")
+        c = None if chroma is None else np.asarray(chroma, dtype=np.float32)
+        if c is not None and (c.shape != (self.n, 4) or not np.all(np.isfinite(c))):
+            raise LeafsimError(f"renderer: chroma must be finite, ({self.n}, 4), got {c.shape}")
+        mt = None if mottle is None else np.asarray(mottle, dtype=np.float32)
+        k = len(MOTTLE_COLUMNS)
+        if mt is not None and (mt.shape != (self.n, k) or not np.all(np.isfinite(mt))):
+            raise LeafsimError(f"renderer: mottle must be finite, ({self.n}, {k}), got {mt.shape}")
+        if mottle_amount is not None and not (np.isfinite(mottle_amount) and 0.0 <= mottle_amount <= 1.0):
+            raise LeafsimError(f"renderer: mottle_amount must be in [0, 1], got {mottle_amount}")
+        ck = None if crinkle is None else np.asarray(crinkle, dtype=np.float32)
+        if ck is not None and (ck.shape != (self.n,) or not np.all(np.isfinite(ck)) or (ck < 0).any()):
+            raise LeafsimError(f"renderer: crinkle must be finite slopes >= 0, ({self.n},), got {ck.shape}")
+        for name, size, what in (("mottle_size", mottle_size, "mottle"), ("crinkle_size", crinkle_size, "crinkle")):
+            if size is not None and not (np.isfinite(size) and size >= 0.0):
+                raise LeafsimError(f"renderer: {name} must be a finite length >= 0 m, got {size}")
+            if size and not self.has_rest:
+                raise LeafsimError(f"renderer: {name} > 0 needs the mesh populated with mottle_rest "
+                                   f"(where the tissue samples the {what} field)")
+        return pos, c, mt, ck
+
+    def _write_albedo(self, colours, tint, chroma, vein_colours) -> bool:
+        """Write the given albedo arrays; True when the veins' base colours must follow."""
+        recolour = False
+        for a, mine, vbo in ((colours, self.colours, self.vbo_col), (tint, self.tint, self.vbo_tint),
+                             (chroma, self.chroma, self.vbo_chroma)):
+            if a is not None:
+                mine[:] = a
+                vbo.write(mine)
+                recolour = True
+        if vein_colours is not None and self.vein_col is not None:
+            self.vein_col[:] = vein_colours
+            recolour = True
+        return recolour
+
+    def _write_subgrid(self, mottle, mottle_size, mottle_amount, crinkle, crinkle_size) -> None:
+        """Write the sub-grid mottle's pigments and the crinkle's slopes, and their settings."""
+        if mottle is not None:
+            self.mottle[:] = mottle
+            self.vbo_mottle.write(self.mottle)
+            if self.veins.count:
+                self.vbo_vein_mottle.write(self.veins.mottle_rows(self.mottle, self.rest))
+        if mottle_size is not None:
+            self.mottle_size = float(mottle_size)
+        if mottle_amount is not None:
+            self.mottle_amount = float(mottle_amount)
+        if crinkle is not None:
+            self.crinkle[:] = crinkle
+            self.crinkle_max = float(crinkle.max()) if self.n else 0.0
+            self.vbo_crinkle.write(self.crinkle)
+        if crinkle_size is not None:
+            self.crinkle_size = float(crinkle_size)
 
     def _bounds(self):
         self.lo, self.hi = bounds(self.pos)
