@@ -12,7 +12,8 @@ in vec4 v_conc;     // sub-grid mottle: pigment concentrations (common.glsl, mot
 in vec4 v_state;    // the reactions' states
 in vec2 v_extra;    // necrosis concentration, surface reflectance
 in vec2 v_rest;     // where the tissue samples the mottle field (rest position, metres)
-in float v_crinkle; // RMS slope of the sub-grid crinkle (render.crinkle; leafsim.sim.crinkle)
+in vec3 v_crinkle;  // slope tensor of the sub-grid crinkle, xx xy yy over the rest plane, rad²
+                    // (render.crinkle; leafsim.sim.crinkle.crinkle_slopes)
 
 // Compile-time switches (the renderer builds one program per combination; a software
 // rasteriser runs both sides of a branch on a uniform, so switches must not be uniforms):
@@ -58,6 +59,11 @@ uniform float u_crinkle_scale;  // the crinkle's texture coordinates per metre (
 uniform vec2 u_crinkle_offset;  // where it samples the field, away from the mottle's samples
 uniform float u_crinkle_norm;   // 1 / RMS of the field's central difference per texel
 uniform sampler2D u_crinkle_grad;  // that central difference along x and y (crinkle_gradient)
+uniform vec2 u_crinkle_oriented[4];  // where each oriented field samples it (CRINKLE_ORIENTED_OFFSETS)
+const float CRINKLE_CREST = 3.0;   // a one-way crinkle's crest length ÷ spacing (mottle.CRINKLE_CREST)
+const float CRINKLE_STEP = 0.78539816339;  // π / 4: the oriented fields' spacing in angle
+const vec2 CRINKLE_DIRS[4] = vec2[4](vec2(1.0, 0.0), vec2(0.70710678, 0.70710678), vec2(0.0, 1.0),
+                                     vec2(-0.70710678, 0.70710678));  // their compression directions
 
 uniform sampler2DShadow u_shadow;
 uniform mat4 u_light_mat;
@@ -68,17 +74,61 @@ out vec4 f_colour;
 void main() {
     vec3 N = normalize(v_nrm);
 #if LS_CRINKLE
-    // The sub-grid crinkle: a height field h over the rest plane whose slope along each rest
-    // direction has the RMS v_crinkle (its gradient: the mottle field's central difference over
-    // one texel, precomputed as a texture, normalised), carried to the screen by the chain rule and turned into a normal by
-    // Mikkelsen's surface gradient (bump mapping without tangents).  A minified leaf reads a
-    // blurred mip level, so the crinkle fades where the pixels cannot show it.
-    // (first, and with no branch: screen derivatives and implicit-LOD fetches need the whole
-    // 2×2 quad, before any discard; on the front face's normal, then turned with it, so the
-    // back of the blade shows the same sheet's relief from behind)
+    // The sub-grid crinkle: a height field h over the rest plane whose mean squared slope along
+    // a rest direction u is uᵀSu (S = v_crinkle).  Its gradient mixes the field's central
+    // differences (precomputed as a texture, normalised) read as they are with the same
+    // differences read stretched CRINKLE_CREST times along the crests, in the two of four
+    // fixed orientations nearest the compression (weights cos, sin: variance kept), the share
+    // of the oriented ones growing with how one-sided the compression is; each component is
+    // then scaled to the slope asked for (leafsim.appearance.mottle.crinkle_height_gradient is
+    // the same in numpy).  It is carried to the screen by the chain rule and turned into a
+    // normal by Mikkelsen's surface gradient (bump mapping without tangents).  The fetches take
+    // the coordinates' analytic derivatives, so a minified leaf reads a blurred mip level and
+    // the crinkle fades where the pixels cannot show it, with no seam where the orientation
+    // pair changes.  (First, and with no branch: screen derivatives need the whole 2×2 quad,
+    // before any discard; on the front face's normal, then turned with it, so the back of the
+    // blade shows the same sheet's relief from behind.)
     {
-        vec2 g = texture(u_crinkle_grad, v_rest * u_crinkle_scale + u_crinkle_offset).rg;
-        vec2 grad_h = max(v_crinkle, 0.0) * u_crinkle_norm * g;  // dh/d(rest), per rest direction
+        vec3 S = v_crinkle;
+        float half_tr = 0.5 * (S.x + S.z);
+        float dev = sqrt(0.25 * (S.x - S.z) * (S.x - S.z) + S.y * S.y);
+        float l1 = max(half_tr + dev, 0.0);
+        float l2 = max(half_tr - dev, 0.0);
+        float dx = S.x - S.z;
+        float ang = 0.5 * atan(2.0 * S.y, (abs(dx) + abs(S.y) > 0.0) ? dx : 1.0);
+        vec2 d = vec2(cos(ang), sin(ang));
+        vec2 t = vec2(-d.y, d.x);
+        float a = (l1 + l2 > 0.0) ? (l1 - l2) / (l1 + l2) : 0.0;
+        vec2 rx = dFdx(v_rest) * u_crinkle_scale;
+        vec2 ry = dFdy(v_rest) * u_crinkle_scale;
+        vec2 q = v_rest * u_crinkle_scale;
+        vec2 g_iso = u_crinkle_norm * textureGrad(u_crinkle_grad, q + u_crinkle_offset, rx, ry).rg;
+        float x = mod(ang, 3.14159265359) / CRINKLE_STEP;
+        float fl = floor(x);
+        float f = x - fl;
+        int ka = int(fl) & 3;
+        vec2 g_or = vec2(0.0);
+        float Ed = 1.0 - a;
+        float Et = 1.0 - a;
+        for (int j = 0; j < 2; ++j) {
+            int k = (ka + j) & 3;
+            float w = (j == 0) ? cos(1.57079632679 * f) : sin(1.57079632679 * f);
+            float delta = (f - float(j)) * CRINKLE_STEP;
+            vec2 dk = CRINKLE_DIRS[k];
+            vec2 tk = vec2(-dk.y, dk.x);
+            vec2 scale_k = vec2(1.0, 1.0 / CRINKLE_CREST);
+            vec2 qk = vec2(dot(q, dk), dot(q, tk)) * scale_k + u_crinkle_oriented[k];
+            vec2 gxk = vec2(dot(rx, dk), dot(rx, tk)) * scale_k;
+            vec2 gyk = vec2(dot(ry, dk), dot(ry, tk)) * scale_k;
+            vec2 g = u_crinkle_norm * textureGrad(u_crinkle_grad, qk, gxk, gyk).rg;
+            g_or += w * (g.x * dk + g.y / CRINKLE_CREST * tk);
+            float c2 = cos(delta) * cos(delta);
+            float s2 = 1.0 - c2;
+            Ed += a * w * w * (c2 + s2 / (CRINKLE_CREST * CRINKLE_CREST));
+            Et += a * w * w * (s2 + c2 / (CRINKLE_CREST * CRINKLE_CREST));
+        }
+        vec2 G = sqrt(1.0 - a) * g_iso + sqrt(a) * g_or;
+        vec2 grad_h = sqrt(l1) * dot(G, d) / sqrt(Ed) * d + sqrt(l2) * dot(G, t) / sqrt(Et) * t;  // dh/d(rest)
         float dhdx = dot(grad_h, dFdx(v_rest));
         float dhdy = dot(grad_h, dFdy(v_rest));
         vec3 dpdx = dFdx(v_pos);

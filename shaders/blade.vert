@@ -10,7 +10,7 @@ in vec4 in_conc;
 in vec4 in_state;
 in vec2 in_extra;
 in vec2 in_rest;
-in float in_crinkle;
+in vec3 in_crinkle;
 
 uniform mat4 u_viewproj;
 
@@ -25,7 +25,7 @@ out vec4 v_conc;
 out vec4 v_state;
 out vec2 v_extra;
 out vec2 v_rest;
-out float v_crinkle;
+out vec3 v_crinkle;
 
 void main() {
     v_pos = in_pos;

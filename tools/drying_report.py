@@ -154,7 +154,7 @@ def render(rows: list) -> str:
                    + f"{g['inverted']}/{f.get('inverted', '—')} | {g['seconds']:.0f}/{f.get('seconds', float('nan')):.0f} |")
     if any("midrib_fold_deg" in by[(k, "ground")] for k in keys):  # reports made since leafsim.sim.curl
         out += ["", "| species | margin roll (mean / p90) | midrib fold | wrinkle RMS / L | wrinkle wavelength / L | "
-                "lamina excess length: mean (p50 / p90) | crinkle RMS slope |", "|---|---|---|---|---|---|---|"]
+                "lamina excess length: mean (p50 / p90) | crinkle RMS slope | one way |", "|---|---|---|---|---|---|---|---|"]
         for k in keys:
             g = by[(k, "ground")]
             if "midrib_fold_deg" in g:
@@ -162,6 +162,7 @@ def render(rows: list) -> str:
                 ex = g.get("crinkle_excess_p10_p50_p90_p99_pct")
                 crinkle = (f"{g['crinkle_excess_pct']:.2f} % ({ex[1]:.2f} / {ex[2]:.2f} %) | {g['crinkle_slope_rms_deg']:.1f}°"
                            if ex else "— | —")
+                crinkle += f" | {g['crinkle_one_way_share']:.2f}" if "crinkle_one_way_share" in g else " | —"
                 out.append(f"| {k} | {g['margin_roll_deg']:.0f}° / {g['margin_roll_p90_deg']:.0f}° | {g['midrib_fold_deg']:.0f}° | "
                            f"{g['wrinkle_rms_L']:.4f} | {'smooth' if wl is None else f'{wl:.3f}'} | {crinkle} |")
     ground = [by[(k, "ground")] for k in keys]

@@ -72,10 +72,12 @@ class RenderMesh:
         The field's correlation length in metres; 0 = no mottle.
     mottle_amount : float
         ``colour.mottle`` a, 0..1; 0 = no mottle.
-    crinkle : (n,) float32 or None
-        RMS slope [rad] of the sub-grid crinkle at each vertex (``render.crinkle`` times
-        √(2Δ) of :mod:`leafsim.sim.crinkle`), drawn over the same rest positions as the
+    crinkle : (n, 3) float32 or None
+        Slope tensor S of the sub-grid crinkle at each vertex over the rest plane (xx, xy, yy,
+        rad²: along a direction u its mean squared slope is uᵀSu; ``render.crinkle``² × 2K of
+        :func:`leafsim.sim.crinkle.crinkle_slopes`), drawn over the same rest positions as the
         mottle (``mottle_rest``, required with it). None or all 0: a smooth blade.
+        :func:`isotropic_crinkle` makes one of RMS slope s along every direction.
     crinkle_size : float
         The crinkle field's correlation length in metres (``render.crinkle_size``).
     """
@@ -105,6 +107,21 @@ class RenderMesh:
         return int(np.asarray(self.positions).shape[0])
 
 
+def isotropic_crinkle(slope) -> np.ndarray:
+    """(n, 3) float32 slope tensors s² I of an isotropic crinkle of RMS slope ``slope`` (n,)
+    [rad] along every direction."""
+    s2 = np.square(np.asarray(slope, np.float32))
+    return np.stack([s2, np.zeros_like(s2), s2], 1).astype(np.float32)
+
+
+def slope_tensors_ok(tensors) -> bool:
+    """(n, 3) rows xx, xy, yy are positive semi-definite (to float32 rounding)."""
+    T = np.asarray(tensors, np.float64)
+    xx, xy, yy = T[:, 0], T[:, 1], T[:, 2]
+    tol = 1e-6 * (np.abs(xx) + np.abs(yy)) + 1e-12
+    return bool(np.all(xx >= -tol) and np.all(yy >= -tol) and np.all(xx * yy - xy * xy >= -tol * (np.abs(xx) + np.abs(yy))))
+
+
 def validate_mesh(mesh) -> None:
     """Raise :class:`LeafsimError` naming the first malformed field of a render mesh."""
     pos = np.asarray(mesh.positions)
@@ -132,7 +149,7 @@ def validate_mesh(mesh) -> None:
     _check("vein_colours", (3,))
     _check("mottle", (10,))
     _check("mottle_rest", (2,))
-    _check("crinkle", ())
+    _check("crinkle", (3,))
     if getattr(mesh, "crinkle", None) is not None and getattr(mesh, "mottle_rest", None) is None:
         raise LeafsimError("render mesh: crinkle needs mottle_rest (where each vertex samples the crinkle field)")
     csize = float(getattr(mesh, "crinkle_size", 0.0) or 0.0)
@@ -151,8 +168,8 @@ def validate_mesh(mesh) -> None:
         if a is not None and not np.all(np.isfinite(np.asarray(a, dtype=np.float64))):
             raise LeafsimError(f"render mesh: {name} must be finite")
     crinkle = getattr(mesh, "crinkle", None)
-    if crinkle is not None and (np.asarray(crinkle) < 0).any():
-        raise LeafsimError("render mesh: crinkle slopes must be >= 0")
+    if crinkle is not None and not slope_tensors_ok(crinkle):
+        raise LeafsimError("render mesh: crinkle slope tensors (xx, xy, yy) must be positive semi-definite")
     for name, arr in (getattr(mesh, "scalars", None) or {}).items():
         if np.asarray(arr).shape != (n,):
             raise LeafsimError(f"render mesh: scalar field {name!r} must be ({n},)")

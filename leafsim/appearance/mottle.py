@@ -73,6 +73,12 @@ def leaf_offset(seed: int) -> np.ndarray:
 #: the mottle's own samples (the field's period is 256 correlation lengths), so the two are
 #: not alike where their scales meet
 CRINKLE_OFFSET = (0.3719, 0.6113)
+#: a one-way crinkle's crests are this many times longer than they are apart (tension-field
+#: wrinkles run long across the compression; the field is read stretched this much along them)
+CRINKLE_CREST = 3.0
+#: the oriented fields: compression along k·45°, k = 0..3, each read at its own offset
+CRINKLE_ORIENTATIONS = 4
+CRINKLE_ORIENTED_OFFSETS = ((0.1287, 0.8431), (0.7052, 0.2219), (0.5546, 0.9378), (0.8913, 0.4467))
 
 
 def crinkle_gradient(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> np.ndarray:
@@ -109,3 +115,54 @@ def crinkle_gradient_rms(size: int = FIELD_SIZE, seed: int = FIELD_SEED) -> floa
                 total += 0.5 * (np.mean(b[..., 0] ** 2) + np.mean(b[..., 1] ** 2))
         hit = _CACHE[key] = float(np.sqrt(total / len(offsets) ** 2))
     return hit
+
+
+def crinkle_height_gradient(S: np.ndarray, rest: np.ndarray, scale: float, fetch) -> np.ndarray:
+    """(k, 2) the crinkle's height gradient dh/d(rest) at rest positions ``rest`` (k, 2) for
+    slope tensors ``S`` (k, 3: xx, xy, yy, rad²; :func:`leafsim.sim.crinkle.crinkle_slopes`), as
+    the blade shader computes it (shaders/blade.frag; the bake's normal map uses this).
+    ``fetch(u, v)`` returns the field's gradient (:func:`crinkle_gradient`) at texture
+    coordinates, (k, 2), divided by its RMS (:func:`crinkle_gradient_rms`).
+
+    Along the tensor's larger eigenvector d the slope's RMS is √λ₁, along t ⊥ d √λ₂.  The
+    pattern mixes the isotropic field with fields read stretched :data:`CRINKLE_CREST` times
+    along the crests (the two of the :data:`CRINKLE_ORIENTATIONS` fixed orientations nearest d,
+    weights cos and sin of the angle between them, so their variance is kept), the oriented
+    share growing with how one-sided the compression is, a = (λ₁ − λ₂)/(λ₁ + λ₂).  Each
+    direction's component is divided by its expected RMS in that mix and multiplied by the
+    slope asked for, so uᵀSu is the drawn mean squared slope along d and t."""
+    S = np.asarray(S, np.float64)
+    rest = np.asarray(rest, np.float64)
+    half = 0.5 * (S[:, 0] + S[:, 2])
+    dev = np.sqrt(0.25 * (S[:, 0] - S[:, 2]) ** 2 + S[:, 1] ** 2)
+    l1, l2 = np.maximum(half + dev, 0.0), np.maximum(half - dev, 0.0)
+    ang = 0.5 * np.arctan2(2.0 * S[:, 1], S[:, 0] - S[:, 2])
+    d = np.stack([np.cos(ang), np.sin(ang)], 1)
+    t = np.stack([-d[:, 1], d[:, 0]], 1)
+    tot = l1 + l2
+    a = np.where(tot > 0.0, (l1 - l2) / np.where(tot > 0.0, tot, 1.0), 0.0)[:, None]
+    g_iso = fetch(rest[:, 0] * scale + CRINKLE_OFFSET[0], rest[:, 1] * scale + CRINKLE_OFFSET[1])
+    step = np.pi / CRINKLE_ORIENTATIONS
+    x = np.mod(ang, np.pi) / step
+    ka = np.floor(x).astype(np.int64) % CRINKLE_ORIENTATIONS
+    f = (x - np.floor(x))
+    rho = CRINKLE_CREST
+    g_or = np.zeros_like(rest)
+    Ed, Et = 1.0 - a[:, 0], 1.0 - a[:, 0]
+    for which, w, delta in ((ka, np.cos(0.5 * np.pi * f), f * step),
+                            ((ka + 1) % CRINKLE_ORIENTATIONS, np.sin(0.5 * np.pi * f), (f - 1.0) * step)):
+        psi = which * step
+        dk = np.stack([np.cos(psi), np.sin(psi)], 1)
+        tk = np.stack([-dk[:, 1], dk[:, 0]], 1)
+        off = np.asarray(CRINKLE_ORIENTED_OFFSETS, np.float64)[which]
+        u = np.einsum("ij,ij->i", rest, dk) * scale + off[:, 0]
+        v = np.einsum("ij,ij->i", rest, tk) / rho * scale + off[:, 1]
+        g = fetch(u, v)
+        g_or += w[:, None] * (g[:, 0:1] * dk + g[:, 1:2] / rho * tk)
+        c2, s2 = np.cos(delta) ** 2, np.sin(delta) ** 2
+        Ed = Ed + a[:, 0] * w * w * (c2 + s2 / rho ** 2)
+        Et = Et + a[:, 0] * w * w * (s2 + c2 / rho ** 2)
+    G = np.sqrt(1.0 - a) * g_iso + np.sqrt(a) * g_or
+    gd = np.sqrt(l1) * np.einsum("ij,ij->i", G, d) / np.sqrt(Ed)
+    gt = np.sqrt(l2) * np.einsum("ij,ij->i", G, t) / np.sqrt(Et)
+    return gd[:, None] * d + gt[:, None] * t

@@ -185,23 +185,25 @@ class LeafView:
         contents = self.photo_contents(params) if (self.photo_colour and self.pigments0 is not None) else None
         return mottle_pigments(pig, params, contents)[self.T], float(params["colour.mottle_size"]), float(params["colour.mottle"])
 
-    def excess(self, state: State) -> np.ndarray:
-        """(n,) the lamina's excess length Δ of every particle (:func:`leafsim.sim.crinkle.lamina_excess`)."""
-        from leafsim.sim.crinkle import lamina_excess
+    def compression(self, state: State) -> np.ndarray:
+        """(n, 3) the lamina's compression tensor of every particle over the flat rest plane
+        (:func:`leafsim.sim.crinkle.lamina_compression`)."""
+        from leafsim.sim.crinkle import lamina_compression
 
-        return lamina_excess(self.model, state, self._crinkle)
+        return lamina_compression(self.model, state, self._crinkle)
 
-    def crinkle(self, state: State, params, excess: np.ndarray | None = None):
-        """((nT,) float32 RMS slope of the sub-grid crinkle, ``render.crinkle`` × √(2Δ) with Δ
-        the lamina's excess length (:meth:`excess`, or ``excess`` when given), the field's
+    def crinkle(self, state: State, params, compression: np.ndarray | None = None):
+        """((nT, 3) float32 slope tensor of the sub-grid crinkle over the rest plane,
+        ``render.crinkle``² × 2K with K the lamina's compression (:meth:`compression`, or
+        ``compression`` when given; :func:`leafsim.sim.crinkle.crinkle_slopes`), the field's
         correlation length in metres), or (None, 0) with ``render.crinkle`` 0."""
-        from leafsim.sim.crinkle import crinkle_slope
+        from leafsim.sim.crinkle import crinkle_slopes
 
         gain = float(params["render.crinkle"])
         if gain <= 0.0:
             return None, 0.0
-        slope = gain * crinkle_slope(self.excess(state) if excess is None else excess)
-        return slope[self.T].astype(np.float32), float(params["render.crinkle_size"])
+        K = self.compression(state) if compression is None else compression
+        return crinkle_slopes(np.asarray(K)[self.T], gain).astype(np.float32), float(params["render.crinkle_size"])
 
     def mottle_rest(self, state: State) -> np.ndarray:
         """(nT, 2) float32: where each vertex samples the mottle field, its rest position in
@@ -211,15 +213,17 @@ class LeafView:
         seed = state.pigments.seed if state.pigments is not None else 0
         return (self.model.particle_rest[self.T][:, :2] + leaf_offset(seed)).astype(np.float32)
 
-    def scalar_fields(self, state: State, excess: np.ndarray | None = None) -> dict:
+    def scalar_fields(self, state: State, compression: np.ndarray | None = None) -> dict:
         """Per layer-T vertex heat-map fields: ``mass`` per area [kg/m²] now, ``water`` (now / initial),
         the pigment fields (relative to the summer content) and ``crinkle``, the lamina's excess
-        length (:meth:`excess`, or ``excess`` when given; 0.01 = 1 %)."""
+        length ½ tr K (K: :meth:`compression`, or ``compression`` when given; 0.01 = 1 %)."""
+        from leafsim.sim.crinkle import excess_of
+
         m, T = self.model, self.T
         w = state.particle_water[T]
         out = {"mass": ((m.particle_cytosol[T] + w) / np.maximum(m.particle_area[T], 1e-300)).astype(np.float32),
                "water": (w / np.maximum(m.particle_water0[T], 1e-300)).astype(np.float32),
-               "crinkle": np.asarray(self.excess(state) if excess is None else excess, np.float32)[T]}
+               "crinkle": excess_of(self.compression(state) if compression is None else compression)[T].astype(np.float32)}
         if state.pigments is not None:
             for name in PIGMENT_VIEWS:
                 out[name] = np.asarray(getattr(state.pigments, name), np.float32)[T]
@@ -238,8 +242,8 @@ class LeafView:
         colours, tint = self.colours(state, params)
         vein_colours = self.vein_colours(state, params, colours)
         mottle, mottle_size, mottle_amount = self.mottle(state, params)
-        excess = self.excess(state)
-        crinkle, crinkle_size = self.crinkle(state, params, excess)
+        K = self.compression(state)
+        crinkle, crinkle_size = self.crinkle(state, params, K)
         stalk = ~m.blade_particles
         veins = [(remap[idx].astype(np.int64), np.asarray(w, np.float64), order) for idx, w, order in m.vein_polylines()
                  if not (self.blade_only and stalk[idx].any())]
@@ -256,7 +260,7 @@ class LeafView:
             springs=remap[m.spring_ij].astype(np.int32),
             spring_kind=kind_map[m.spring_type],
             top_positions=state.particle_q[V].astype(np.float32),
-            scalars=self.scalar_fields(state, excess),
+            scalars=self.scalar_fields(state, K),
             mottle=mottle,
             mottle_rest=self.mottle_rest(state),
             mottle_size=mottle_size,
@@ -268,8 +272,8 @@ class LeafView:
     def update(self, state: State, params) -> dict:
         """Keyword arguments for ``Renderer.update`` with ``state``."""
         colours, tint = self.colours(state, params)
-        excess = self.excess(state)
-        out = {"positions": state.particle_q[self.T], "colours": colours, "scalar": self.scalar_fields(state, excess),
+        K = self.compression(state)
+        out = {"positions": state.particle_q[self.T], "colours": colours, "scalar": self.scalar_fields(state, K),
                "top_positions": state.particle_q[self.V]}
         if tint is not None:
             out["tint"] = tint
@@ -282,8 +286,8 @@ class LeafView:
         mottle, size, amount = self.mottle(state, params)
         if mottle is not None:
             out["mottle"], out["mottle_size"], out["mottle_amount"] = mottle, size, amount
-        crinkle, crinkle_size = self.crinkle(state, params, excess)
-        out["crinkle"] = crinkle if crinkle is not None else np.zeros(len(self.T), np.float32)
+        crinkle, crinkle_size = self.crinkle(state, params, K)
+        out["crinkle"] = crinkle if crinkle is not None else np.zeros((len(self.T), 3), np.float32)
         out["crinkle_size"] = crinkle_size
         return out
 

@@ -222,14 +222,19 @@ def bake_normals(source, state, size: tuple[int, int]) -> np.ndarray | None:
     fragment shader's height gradient at its rest position (the vertices' slopes and rest
     positions interpolated as the shader has them, the field's central differences
     (:func:`~leafsim.appearance.mottle.crinkle_gradient`, in half floats as the renderer's
-    texture) sampled bilinearly with wrap-around) and tilts the normal against it along the triangle's
+    texture) sampled bilinearly with wrap-around, oriented as the compression asks:
+    :func:`~leafsim.appearance.mottle.crinkle_height_gradient`) and tilts the normal against it along the triangle's
     tangent-space directions (:func:`_tangent_frames`).  Outside the blade: flat (0, 0, 1)
     carried from the nearest blade texel.  None too when no slope reaches :data:`MIN_SLOPE`."""
-    from leafsim.appearance.mottle import CRINKLE_OFFSET, crinkle_gradient, crinkle_gradient_rms, mottle_scale
+    from leafsim.appearance.mottle import crinkle_gradient, crinkle_gradient_rms, crinkle_height_gradient, mottle_scale
 
     view, params, model = source.view, source.params, source.model
-    slope, csize = view.crinkle(state, params)
-    if slope is None or csize <= 0.0 or float(np.max(slope, initial=0.0)) < MIN_SLOPE:
+    slopes, csize = view.crinkle(state, params)
+    if slopes is None or csize <= 0.0:
+        return None
+    from leafsim.sim.crinkle import principal
+
+    if float(np.sqrt(np.max(principal(slopes)[0], initial=0.0))) < MIN_SLOPE:  # the steepest direction's RMS slope
         return None
     tri = _bake_triangles(source)
     uv = np.asarray(source.uv, np.float64)
@@ -240,7 +245,7 @@ def bake_normals(source, state, size: tuple[int, int]) -> np.ndarray | None:
     bary = np.zeros((H, W, 2), np.float32)
     _raster(uv * np.array([W, H], np.float64), tri, tri_id, bary)
     inside = tri_id >= 0
-    attr = np.concatenate([np.asarray(slope, np.float64)[:, None], rest], 1)
+    attr = np.concatenate([np.asarray(slopes, np.float64), rest], 1)
     grad_field = crinkle_gradient().astype(np.float16)  # as the renderer's half-float texture holds it
     scale, norm = mottle_scale(csize), 1.0 / crinkle_gradient_rms()
     out = np.zeros((H, W, 3), np.float32)
@@ -251,8 +256,8 @@ def bake_normals(source, state, size: tuple[int, int]) -> np.ndarray | None:
         t = tri[k]
         s, r = bary[y, x, 0:1].astype(np.float64), bary[y, x, 1:2].astype(np.float64)
         a = attr[t[:, 0]] * (1.0 - s - r) + attr[t[:, 1]] * s + attr[t[:, 2]] * r
-        g = bilinear(grad_field, a[:, 1] * scale + CRINKLE_OFFSET[0], a[:, 2] * scale + CRINKLE_OFFSET[1], wrap=True)
-        grad = np.maximum(a[:, 0:1], 0.0) * norm * g  # dh/d(rest x, y)
+        grad = crinkle_height_gradient(a[:, 0:3], a[:, 3:5], scale,
+                                       lambda u, v: norm * bilinear(grad_field, u, v, wrap=True))  # dh/d(rest x, y)
         ht = np.einsum("ij,ij->i", grad, frames[k, 0])
         hb = np.einsum("ij,ij->i", grad, frames[k, 1])
         nrm = np.stack([-ht, -hb, np.ones_like(ht)], 1)

@@ -12,8 +12,8 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from leafsim.appearance.mesh import NO_CHROMA, validate_mesh
-from leafsim.appearance.mottle import CRINKLE_OFFSET, crinkle_gradient, crinkle_gradient_rms, mottle_levels, mottle_scale
+from leafsim.appearance.mesh import NO_CHROMA, slope_tensors_ok, validate_mesh
+from leafsim.appearance.mottle import CRINKLE_OFFSET, CRINKLE_ORIENTED_OFFSETS, crinkle_gradient, crinkle_gradient_rms, mottle_levels, mottle_scale
 from leafsim.appearance.reflectance import ABSORPTION, BASE_REFLECTANCE, MOTTLE_COLUMNS
 from leafsim.appearance.texture import clean_texture
 from leafsim.base.errors import LeafsimError
@@ -59,6 +59,11 @@ def _set(prog, name, value):
         u.write(_mat(value))
     else:
         u.value = value
+
+
+def _largest_trace(tensors: np.ndarray) -> float:
+    """The largest xx + yy of (n, 3) slope tensors (0 for none): the crinkle is drawn when > 0."""
+    return float((tensors[:, 0] + tensors[:, 2]).max()) if len(tensors) else 0.0
 
 
 def _srgb(c) -> tuple:
@@ -211,9 +216,10 @@ class Renderer:
         self.mottle_size = float(getattr(mesh, "mottle_size", 0.0) or 0.0) if mottle is not None else 0.0
         self.mottle_amount = float(getattr(mesh, "mottle_amount", 0.0) or 0.0)
         crinkle = getattr(mesh, "crinkle", None)
-        self.crinkle = np.zeros(n, np.float32) if crinkle is None else np.ascontiguousarray(crinkle, dtype=np.float32).copy()
+        self.crinkle = (np.zeros((n, 3), np.float32) if crinkle is None
+                        else np.ascontiguousarray(crinkle, dtype=np.float32).copy())
         self.crinkle_size = float(getattr(mesh, "crinkle_size", 0.0) or 0.0)
-        self.crinkle_max = float(self.crinkle.max()) if n else 0.0
+        self.crinkle_max = _largest_trace(self.crinkle)
         top = getattr(mesh, "top_positions", None)
         self.top = None if top is None else np.ascontiguousarray(top, dtype=np.float32).copy()
         self.k = 0 if self.top is None else self.top.shape[0]
@@ -237,7 +243,7 @@ class Renderer:
             (self.vbo_pos, "3f", "in_pos"), (self.vbo_nrm, "3f", "in_nrm"), (self.vbo_col, "3f", "in_col"),
             (self.vbo_tint, "3f", "in_tint"), (self.vbo_chroma, "4f", "in_chroma"), (self.vbo_uv, "2f", "in_uv"),
             (self.vbo_scalar, "1f", "in_scalar"), (self.vbo_mottle, "4f 4f 2f", "in_conc", "in_state", "in_extra"),
-            (self.vbo_rest, "2f", "in_rest"), (self.vbo_crinkle, "1f", "in_crinkle")],
+            (self.vbo_rest, "2f", "in_rest"), (self.vbo_crinkle, "3f", "in_crinkle")],
             self.ibo_tri)
         self.vao_shadow = self._vao("shadow", [(self.vbo_pos, "3f", "in_pos"), (self.vbo_uv, "2f", "in_uv")],
                                     self.ibo_tri)
@@ -340,8 +346,8 @@ class Renderer:
             The mottle field's correlation length in metres; 0 turns the mottle off.
         mottle_amount : float, optional
             ``colour.mottle`` a, 0..1.
-        crinkle : (n,) float, optional
-            RMS slope of the sub-grid crinkle per vertex (:class:`~leafsim.appearance.mesh.RenderMesh`).
+        crinkle : (n, 3) float, optional
+            Slope tensor of the sub-grid crinkle per vertex (:class:`~leafsim.appearance.mesh.RenderMesh`).
         crinkle_size : float, optional
             The crinkle field's correlation length in metres; 0 turns the crinkle off.
         """
@@ -393,8 +399,9 @@ class Renderer:
         if mottle_amount is not None and not (np.isfinite(mottle_amount) and 0.0 <= mottle_amount <= 1.0):
             raise LeafsimError(f"renderer: mottle_amount must be in [0, 1], got {mottle_amount}")
         ck = None if crinkle is None else np.asarray(crinkle, dtype=np.float32)
-        if ck is not None and (ck.shape != (self.n,) or not np.all(np.isfinite(ck)) or (ck < 0).any()):
-            raise LeafsimError(f"renderer: crinkle must be finite slopes >= 0, ({self.n},), got {ck.shape}")
+        if ck is not None and (ck.shape != (self.n, 3) or not np.all(np.isfinite(ck)) or not slope_tensors_ok(ck)):
+            raise LeafsimError(f"renderer: crinkle must be finite positive semi-definite slope tensors (xx, xy, yy), "
+                               f"({self.n}, 3), got {ck.shape}")
         for name, size, what in (("mottle_size", mottle_size, "mottle"), ("crinkle_size", crinkle_size, "crinkle")):
             if size is not None and not (np.isfinite(size) and size >= 0.0):
                 raise LeafsimError(f"renderer: {name} must be a finite length >= 0 m, got {size}")
@@ -430,7 +437,7 @@ class Renderer:
             self.mottle_amount = float(mottle_amount)
         if crinkle is not None:
             self.crinkle[:] = crinkle
-            self.crinkle_max = float(crinkle.max()) if self.n else 0.0
+            self.crinkle_max = _largest_trace(self.crinkle)
             self.vbo_crinkle.write(self.crinkle)
         if crinkle_size is not None:
             self.crinkle_size = float(crinkle_size)
@@ -700,6 +707,8 @@ class Renderer:
         _set(prog, "u_crinkle_scale", mottle_scale(self.crinkle_size))
         _set(prog, "u_crinkle_offset", CRINKLE_OFFSET)
         _set(prog, "u_crinkle_norm", 1.0 / crinkle_gradient_rms())
+        if "u_crinkle_oriented" in prog:
+            prog["u_crinkle_oriented"].write(np.asarray(CRINKLE_ORIENTED_OFFSETS, np.float32).tobytes())
 
     def _crinkle_texture(self):
         """The mottle field's central differences (:func:`leafsim.appearance.mottle.crinkle_gradient`)

@@ -314,10 +314,11 @@ def _client_frames(P: np.ndarray, uv: np.ndarray, tri: np.ndarray, flip_v: bool 
     return t, b
 
 
-@pytest.mark.parametrize("key", ["maple", "oak"])
-def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key):
+@pytest.mark.parametrize("key,way", [("maple", "both"), ("oak", "both"), ("maple", "one")])
+def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
     """A flat leaf whose lamina is held 2 % short of its rest lengths (a crinkle of about 0.2
-    rad RMS slope) lit at 45° from the side (and 45° to both texture axes), drawn by the renderer top-down: every pixel's
+    rad RMS slope; ``way`` "one": 3 % short along the line at 30° only, a one-way crinkle of
+    wrinkles across it) lit at 45° from the side (and 45° to both texture axes), drawn by the renderer top-down: every pixel's
     brightness is what a glTF client computes from the baked albedo and the baked normal map
     decoded in its tangent frame (x along increasing u, y up the image), within a couple of
     levels on average; decoded with u's or v's direction the other way it is not.  The glb carries the
@@ -327,7 +328,12 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key):
 
     model, params, view, st = _turning(key, mottle=0.0)
     params = params.with_overrides({"dynamics.path": "own", "render.crinkle_size": 0.002})
-    st.spring_rest[:] = 1.02 * model.spring_rest0
+    if way == "both":
+        st.spring_rest[:] = 1.02 * model.spring_rest0
+    else:  # rest lengths as if the leaf were 1/0.97 longer along d: the flat leaf is 3 % short that way only
+        d = np.array([np.cos(np.radians(30.0)), np.sin(np.radians(30.0)), 0.0])
+        e = st.particle_q[model.spring_ij[:, 1]] - st.particle_q[model.spring_ij[:, 0]]
+        st.spring_rest[:] = np.linalg.norm(e + (1.0 / 0.97 - 1.0) * (e @ d)[:, None] * d, axis=1)
     src = MeshSource(model, params, view, "shell", False, "baked", "colours")
     alb, inside = bake_albedo(src, st)
     nmap = bake_normals(src, st, (alb.shape[1], alb.shape[0]))

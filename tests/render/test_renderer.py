@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
+from leafsim.appearance.mesh import isotropic_crinkle
 from leafsim.base.errors import LeafsimError
 from leafsim.render import OrbitCamera, RenderMesh, RenderOptions
 
@@ -821,7 +822,7 @@ def test_crinkle_tilts_the_normals_by_the_slope_asked_for(off, leaf):
     rest = leaf.positions[:, :2].astype(np.float32)
     plain = RenderMesh(**{**leaf.__dict__, "mottle_rest": rest})
     slope = 0.1
-    crinkled = RenderMesh(**{**plain.__dict__, "crinkle": np.full(n, slope, np.float32), "crinkle_size": 0.003})
+    crinkled = RenderMesh(**{**plain.__dict__, "crinkle": isotropic_crinkle(np.full(n, slope)), "crinkle_size": 0.003})
     flat = off.render_array(plain, cam, opts)[box]
     got = off.render_array(crinkled, cam, opts)[box]
     g = _srgb_to_linear(got[..., 1])
@@ -832,7 +833,7 @@ def test_crinkle_tilts_the_normals_by_the_slope_asked_for(off, leaf):
     assert 0.8 * slope < measured < 1.2 * slope, measured
     assert abs(g.mean() - g0.mean()) < 0.03 * g0.mean()
     # no slope, or no size: exactly the plain blade (the program without the crinkle)
-    for off_mesh in (RenderMesh(**{**crinkled.__dict__, "crinkle": np.zeros(n, np.float32)}),
+    for off_mesh in (RenderMesh(**{**crinkled.__dict__, "crinkle": np.zeros((n, 3), np.float32)}),
                      RenderMesh(**{**crinkled.__dict__, "crinkle_size": 0.0})):
         assert np.array_equal(off.render_array(off_mesh, cam, opts)[box], flat)
     # the pattern rides with the tissue: the leaf moved by 10 px draws it 10 px on
@@ -841,6 +842,43 @@ def test_crinkle_tilts_the_normals_by_the_slope_asked_for(off, leaf):
     shifted = off.render_array(moved, cam, opts)[box[0], slice(W // 2 - 12, W // 2 + 32)].astype(float)
     assert np.abs(shifted - got).mean() < 0.2 * np.abs(got - got.mean()).mean() + 1.0
     with pytest.raises(LeafsimError, match="crinkle"):
-        off.render_array(RenderMesh(**{**crinkled.__dict__, "crinkle": np.full(n, -0.1, np.float32)}), cam, opts)
+        off.render_array(RenderMesh(**{**crinkled.__dict__, "crinkle": np.tile(np.float32([0.01, 0.02, 0.01]), (n, 1))}),
+                         cam, opts)  # not positive semi-definite
+    with pytest.raises(LeafsimError, match="crinkle"):
+        off.render_array(RenderMesh(**{**crinkled.__dict__, "crinkle": np.full(n, 0.1, np.float32)}), cam, opts)
     with pytest.raises(LeafsimError, match="crinkle"):
         off.render_array(RenderMesh(**{**crinkled.__dict__, "mottle_rest": None}), cam, opts)
+
+
+@pytest.mark.parametrize("deg", [0.0, 30.0, 90.0])
+def test_a_one_way_crinkle_wrinkles_across_its_compression(off, leaf, deg):
+    """A slope tensor with all of its slope along one direction d (a lamina compressed one way,
+    stretched the other): lit along d the blade's brightness gives back the slope asked for,
+    lit across it (along the crests) it hardly varies; and the pattern's crests run across d,
+    so the picture changes along d several times faster than along the crests."""
+    s45 = math.sqrt(0.5)
+    cam = top_camera()
+    box = (slice(H // 2 - 50, H // 2 + 50), slice(W // 2 - 22, W // 2 + 22))  # inside the blade
+    n = leaf.vertex_count
+    rest = leaf.positions[:, :2].astype(np.float32)
+    slope, a = 0.1, math.radians(deg)
+    d = np.array([math.cos(a), math.sin(a)])
+    S = slope * slope * np.array([d[0] * d[0], d[0] * d[1], d[1] * d[1]])
+    mesh = RenderMesh(**{**leaf.__dict__, "mottle_rest": rest, "crinkle": np.tile(S.astype(np.float32), (n, 1)),
+                         "crinkle_size": 0.003})
+    got = {}
+    for name, u in (("along", d), ("across", np.array([-d[1], d[0]]))):
+        opts = RenderOptions(veins=False, shadows=False, ground=False, specular=0.0, translucency=0.0,
+                             light_dir=(s45 * u[0], s45 * u[1], s45), light_colour=(1.0, 1.0, 1.0), sky_colour=(0.0, 0.0, 0.0))
+        flat = _srgb_to_linear(off.render_array(RenderMesh(**{**mesh.__dict__, "crinkle": None}), cam, opts)[box][..., 1])
+        g = _srgb_to_linear(off.render_array(mesh, cam, opts)[box][..., 1])
+        got[name] = g
+        got[name + "_slope"] = g.std() / flat.mean()  # N·L = sin 45° flat: the spread ÷ (albedo × sun × sin 45°)
+    assert 0.8 * slope < got["along_slope"] < 1.2 * slope, got["along_slope"]
+    assert got["across_slope"] < 0.15 * got["along_slope"], got["across_slope"]
+    if deg in (0.0, 90.0):  # the picture's rows are one axis, its columns the other
+        g = got["along"]
+        dx = np.abs(np.diff(g, axis=1)).mean()
+        dy = np.abs(np.diff(g, axis=0)).mean()
+        along_d, along_crest = (dx, dy) if deg == 0.0 else (dy, dx)
+        assert along_d > 1.8 * along_crest, (along_d, along_crest)

@@ -1,6 +1,7 @@
-"""The lamina's excess length (leafsim.sim.crinkle): the compression a blade's triangles carry
-against their springs' rest lengths, lumped to particles, which the renderer draws as a
-sub-grid crinkle of RMS slope √(2Δ) (render.crinkle; the pixels are tested in
+"""The lamina's compression (leafsim.sim.crinkle): the compression a blade's triangles carry
+against their springs' rest lengths, as a tensor over the flat rest plane lumped to particles,
+its excess length Δ = ½ tr K, which the renderer draws as a sub-grid crinkle of mean squared
+slope uᵀ(2K)u along a direction u (render.crinkle; the pixels are tested in
 tests/render/test_renderer.py)."""
 
 import math
@@ -11,8 +12,9 @@ import pytest
 
 from leafsim.config.species import get_species
 from leafsim.pipeline import build_leaf
-from leafsim.sim.crinkle import crinkle_slope, crinkle_stats, lamina_excess, triangle_springs
-from leafsim.sim.kernels.crinkle import lamina_excess as kernel
+from leafsim.sim.crinkle import (crinkle_slope, crinkle_slopes, crinkle_stats, excess_of, lamina_compression, lamina_excess,
+                                 one_way_share, principal, triangle_springs)
+from leafsim.sim.kernels.crinkle import lamina_compression as kernel
 from leafsim.sim.path import transfer_matrix
 from leafsim.sim.simulator import Simulator
 
@@ -20,12 +22,19 @@ from leafsim.sim.simulator import Simulator
 FAST = {"osmosis.evaporation_top": 0.042, "osmosis.evaporation_bottom": 0.0315, "effects.colour": False}
 
 
-def _one(q, rest):
-    """Δ at the three particles of one triangle (0, 1, 2) with rest lengths ``rest`` (ab, bc, ca)."""
-    out, scratch = np.empty(3), np.empty(3)
+def _tensor(q, rest, flat):
+    """K (xx, xy, yy) at the three particles of one triangle (0, 1, 2) with rest lengths
+    ``rest`` (ab, bc, ca) and flat rest positions ``flat`` (3, 2)."""
+    out, scratch = np.empty((3, 3)), np.empty(3)
     kernel(np.array([[0, 1, 2]]), np.array([[0, 1, 2]]), np.asarray(q, np.float64), np.asarray(rest, np.float64),
-           np.zeros(3, bool), out, scratch)
+           np.ascontiguousarray(flat, np.float64), np.zeros(3, bool), out, scratch)
     return out
+
+
+def _one(q, rest, flat=None):
+    """Δ at the three particles of one triangle (0, 1, 2) (flat rest plane: the triangle's rest shape)."""
+    flat = np.array([[0.0, 0.0], [rest[0], 0.0], [0.0, 1.0]]) if flat is None else flat
+    return excess_of(_tensor(q, rest, flat))
 
 
 def _rot(a, b):
@@ -49,6 +58,38 @@ def test_the_excess_of_one_triangle():
     assert crinkle_slope(np.array([0.01]))[0] == pytest.approx(math.sqrt(0.02))
 
 
+def test_the_compression_has_the_directions_of_the_flat_plane():
+    """K = Σ max(0, 1 − sₖ) uₖ uₖᵀ with uₖ the compressed material lines in the flat rest plane:
+    a squeeze along one material direction shows there, turned as the flat plane is turned, and
+    unchanged by a uniform shrink of the rest lengths against the flat plane."""
+    tri = np.array([[0.0, 0.0, 0.0], [2e-3, 0.0, 0.0], [0.7e-3, 1.6e-3, 0.0]])
+    rest = np.array([np.linalg.norm(tri[1] - tri[0]), np.linalg.norm(tri[2] - tri[1]), np.linalg.norm(tri[0] - tri[2])])
+    flat = tri[:, :2]
+    R = _rot(0.7, 1.1)
+    assert np.allclose(_tensor(tri * np.array([0.98, 1.0, 1.0]) @ R.T, rest, flat), [0.02, 0.0, 0.0], atol=1e-12)
+    assert np.allclose(_tensor(tri * np.array([1.0, 0.97, 1.0]), rest, flat), [0.0, 0.0, 0.03], atol=1e-12)
+    for deg, xy in ((45.0, 0.01), (-45.0, -0.01)):  # squeezed 2 % along the material line at ±45°
+        a = math.radians(deg)
+        along = _rot(a, 0.0) @ np.diag([0.98, 1.0, 1.0]) @ _rot(-a, 0.0)
+        assert np.allclose(_tensor(tri @ along.T, rest, flat), [0.01, xy, 0.01], atol=1e-12)
+    b = math.radians(30.0)  # the flat plane turned by 30°: the tensor turns with it
+    turned = flat @ np.array([[math.cos(b), math.sin(b)], [-math.sin(b), math.cos(b)]])
+    c, s_ = math.cos(b), math.sin(b)
+    assert np.allclose(_tensor(tri * np.array([0.98, 1.0, 1.0]), rest, turned), [0.02 * c * c, 0.02 * c * s_, 0.02 * s_ * s_],
+                       atol=1e-12)
+    assert np.allclose(_tensor(0.9 * tri * np.array([0.98, 1.0, 1.0]), 0.9 * rest, flat), [0.02, 0.0, 0.0], atol=1e-12)
+    # the slope tensor: 2K, so along the squeeze √(2 · 0.02) and nothing along the crests
+    S = crinkle_slopes(np.array([[0.01, -0.01, 0.01], [0.02, 0.0, 0.02], [-1e-6, 0.0, 0.01]]), gain=1.0)
+    big, small, ang = principal(S)
+    assert big[0] == pytest.approx(0.04) and small[0] == pytest.approx(0.0, abs=1e-15)
+    assert math.degrees(ang[0]) == pytest.approx(-45.0)
+    assert np.allclose(S[1], [0.04, 0.0, 0.04])      # isotropic: √(2Δ) every way
+    assert S[2, 0] == pytest.approx(0.0, abs=1e-15) and S[2, 2] == pytest.approx(0.02)  # a prolonged tensor's negative part is clipped
+    assert crinkle_slopes(S[:1] * 0.5, gain=2.0)[0] == pytest.approx(2.0 * 4.0 * 0.5 * S[0])
+    assert one_way_share(np.array([[0.02, 0.0, 0.0], [0.01, 0.0, 0.01]]), np.array([1.0, 0.0])) == 1.0
+    assert one_way_share(np.array([[0.02, 0.0, 0.0], [0.01, 0.0, 0.01]]), np.array([0.0, 1.0])) == 0.0
+
+
 def test_the_excess_agrees_with_the_singular_values_of_any_deformation():
     """Random rest triangles under random deformations (shear, rotation, out of plane): the
     principal stretches are the singular values of the map from the rest triangle to the
@@ -67,6 +108,12 @@ def test_the_excess_agrees_with_the_singular_values_of_any_deformation():
         s = np.linalg.svd(D @ np.linalg.inv(E), compute_uv=False)
         want = 0.5 * np.maximum(0.0, 1.0 - s).sum()
         assert np.allclose(_one(q, rest), want, rtol=1e-7, atol=1e-12)
+        # over the rest triangle itself as the flat plane, K's eigenvalues are the compressions
+        # and its directions the right singular vectors
+        _, sv, Vt = np.linalg.svd(D @ np.linalg.inv(E))
+        K = _tensor(q, rest, tri[:, :2])[0]
+        want_K = sum(max(0.0, 1.0 - sk) * np.outer(v, v) for sk, v in zip(sv, Vt))
+        assert np.allclose([K[0], K[1], K[2]], [want_K[0, 0], want_K[0, 1], want_K[1, 1]], rtol=1e-6, atol=1e-10)
 
 
 @pytest.fixture(scope="module")

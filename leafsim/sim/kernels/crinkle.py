@@ -1,6 +1,6 @@
-"""The lamina's excess length (:mod:`leafsim.sim.crinkle`): per blade triangle, the compression
+"""The lamina's compression (:mod:`leafsim.sim.crinkle`): per blade triangle, the compression
 its two principal stretches carry against the triangle of its springs' current rest lengths,
-lumped to the particles by area."""
+as a tensor over the leaf's flat rest plane, lumped to the particles by area."""
 
 from __future__ import annotations
 
@@ -9,16 +9,20 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def lamina_excess(tri, tri_springs, q, rest, zero, out, area):
-    """``out`` (n,) = the area-weighted mean over each particle's blade triangles of
-    ½ (max(0, 1 − s₁) + max(0, 1 − s₂)), s₁ ≤ s₂ the principal stretches of the triangle
-    (vertices ``tri`` (m, 3)) from its rest shape, the triangle whose sides are the rest lengths
-    ``rest`` of its springs ``tri_springs`` (m, 3: a–b, b–c, c–a), to its shape at ``q``.
-    Particles with ``zero`` set get 0; so do particles of no triangle.  ``area`` (n,) is
-    scratch (the rest area each particle's triangles lump to it)."""
+def lamina_compression(tri, tri_springs, q, rest, flat, zero, out, area):
+    """``out`` (n, 3) = the area-weighted mean over each particle's blade triangles of the
+    compression tensor K = Σ max(0, 1 − sₖ) uₖ uₖᵀ (its xx, xy, yy entries), sₖ the principal
+    stretches of the triangle (vertices ``tri`` (m, 3)) from its rest shape, the triangle whose
+    sides are the rest lengths ``rest`` of its springs ``tri_springs`` (m, 3: a–b, b–c, c–a), to
+    its shape at ``q``, and uₖ their directions carried to the flat rest plane ``flat`` (n, 2)
+    (the same material lines there, made unit).  ½ tr K is the excess length
+    ½ (max(0, 1 − s₁) + max(0, 1 − s₂)).  Particles with ``zero`` set get 0; so do particles
+    of no triangle.  ``area`` (n,) is scratch (the rest area each particle's triangles lump to it)."""
     n = out.shape[0]
     for i in range(n):
-        out[i] = 0.0
+        out[i, 0] = 0.0
+        out[i, 1] = 0.0
+        out[i, 2] = 0.0
         area[i] = 0.0
     for t in range(tri.shape[0]):
         a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
@@ -49,18 +53,53 @@ def lamina_excess(tri, tri_springs, q, rest, zero, out, area):
         hi = half + dev
         s1 = np.sqrt(lo) if lo > 0.0 else 0.0
         s2 = np.sqrt(hi) if hi > 0.0 else 0.0
-        d = 0.0
-        if s1 < 1.0:
-            d += 1.0 - s1
-        if s2 < 1.0:
-            d += 1.0 - s2
+        k1 = 1.0 - s1 if s1 < 1.0 else 0.0
+        k2 = 1.0 - s2 if s2 < 1.0 else 0.0
+        if k1 == 0.0 and k2 == 0.0:
+            kxx = kxy = kyy = 0.0
+        else:
+            # the smaller stretch's direction in the rest frame: an eigenvector of C for lo, the
+            # better conditioned of C's two rows' null directions (any direction when C is
+            # isotropic); the larger stretch's is at right angles.  Neither needs its length:
+            # the flat vector is made unit.
+            ux, uy = c01, lo - c00
+            wx, wy = lo - c11, c01
+            if ux * ux + uy * uy < wx * wx + wy * wy:
+                ux, uy = wx, wy
+            if ux * ux + uy * uy <= 1e-30 * (c00 * c00 + c11 * c11):
+                ux, uy = 1.0, 0.0
+            # rest frame → flat plane: a rest vector u has edge coefficients Dm⁻¹ u, the flat
+            # vector the same combination of the flat triangle's edges
+            f1x, f1y = flat[b, 0] - flat[a, 0], flat[b, 1] - flat[a, 1]
+            f2x, f2y = flat[c, 0] - flat[a, 0], flat[c, 1] - flat[a, 1]
+            kxx = kxy = kyy = 0.0
+            for k in range(2):
+                kk = k1 if k == 0 else k2
+                if kk == 0.0:
+                    continue
+                ex, ey = (ux, uy) if k == 0 else (-uy, ux)
+                al = p * ex + r * ey
+                be = s * ey
+                vx = al * f1x + be * f2x
+                vy = al * f1y + be * f2y
+                nv = vx * vx + vy * vy
+                if nv <= 0.0:
+                    continue
+                kxx += kk * vx * vx / nv
+                kxy += kk * vx * vy / nv
+                kyy += kk * vy * vy / nv
         A = 0.5 * lab * cy
-        w = A * 0.5 * d
         for v in (a, b, c):
-            out[v] += w
+            out[v, 0] += A * kxx
+            out[v, 1] += A * kxy
+            out[v, 2] += A * kyy
             area[v] += A
     for i in range(n):
         if zero[i] or area[i] <= 0.0:
-            out[i] = 0.0
+            out[i, 0] = 0.0
+            out[i, 1] = 0.0
+            out[i, 2] = 0.0
         else:
-            out[i] /= area[i]
+            out[i, 0] /= area[i]
+            out[i, 1] /= area[i]
+            out[i, 2] /= area[i]
