@@ -79,9 +79,9 @@ void main() {
     // differences (precomputed as a texture, normalised) read as they are with the same
     // differences read stretched CRINKLE_CREST times along the crests, in the two of four
     // fixed orientations nearest the compression (weights cos, sin: variance kept), the share
-    // of the oriented ones growing with how one-sided the compression is; each component is
-    // then scaled to the slope asked for (leafsim.appearance.mottle.crinkle_height_gradient is
-    // the same in numpy).  It is carried to the screen by the chain rule and turned into a
+    // of the oriented ones growing with how one-sided the compression is; the mix is then
+    // whitened by its own covariance and given S's (leafsim.appearance.mottle.crinkle_height_gradient
+    // is the same in numpy).  It is carried to the screen by the chain rule and turned into a
     // normal by Mikkelsen's surface gradient (bump mapping without tangents).  The fetches take
     // the coordinates' analytic derivatives, so a minified leaf reads a blurred mip level and
     // the crinkle fades where the pixels cannot show it, with no seam where the orientation
@@ -98,7 +98,7 @@ void main() {
         float ang = 0.5 * atan(2.0 * S.y, (abs(dx) + abs(S.y) > 0.0) ? dx : 1.0);
         vec2 d = vec2(cos(ang), sin(ang));
         vec2 t = vec2(-d.y, d.x);
-        float a = (l1 + l2 > 0.0) ? (l1 - l2) / (l1 + l2) : 0.0;
+        float a = clamp((l1 + l2 > 0.0) ? (l1 - l2) / (l1 + l2) : 0.0, 0.0, 1.0);
         vec2 rx = dFdx(v_rest) * u_crinkle_scale;
         vec2 ry = dFdy(v_rest) * u_crinkle_scale;
         vec2 q = v_rest * u_crinkle_scale;
@@ -110,6 +110,7 @@ void main() {
         vec2 g_or = vec2(0.0);
         float Ed = 1.0 - a;
         float Et = 1.0 - a;
+        float Edt = 0.0;
         for (int j = 0; j < 2; ++j) {
             int k = (ka + j) & 3;
             float w = (j == 0) ? cos(1.57079632679 * f) : sin(1.57079632679 * f);
@@ -122,13 +123,25 @@ void main() {
             vec2 gyk = vec2(dot(ry, dk), dot(ry, tk)) * scale_k;
             vec2 g = u_crinkle_norm * textureGrad(u_crinkle_grad, qk, gxk, gyk).rg;
             g_or += w * (g.x * dk + g.y / CRINKLE_CREST * tk);
-            float c2 = cos(delta) * cos(delta);
-            float s2 = 1.0 - c2;
-            Ed += a * w * w * (c2 + s2 / (CRINKLE_CREST * CRINKLE_CREST));
-            Et += a * w * w * (s2 + c2 / (CRINKLE_CREST * CRINKLE_CREST));
+            float cd = cos(delta);
+            float sd = sin(delta);
+            Ed += a * w * w * (cd * cd + sd * sd / (CRINKLE_CREST * CRINKLE_CREST));
+            Et += a * w * w * (sd * sd + cd * cd / (CRINKLE_CREST * CRINKLE_CREST));
+            Edt += a * w * w * sd * cd * (1.0 / (CRINKLE_CREST * CRINKLE_CREST) - 1.0);
         }
         vec2 G = sqrt(1.0 - a) * g_iso + sqrt(a) * g_or;
-        vec2 grad_h = sqrt(l1) * dot(G, d) / sqrt(Ed) * d + sqrt(l2) * dot(G, t) / sqrt(Et) * t;  // dh/d(rest)
+        // the mix's covariance Σ over (d, t) whitened (Σ^(−1/2): √Σ = (Σ + r I) / n, r = √det,
+        // n = √(tr + 2r)) and given the slopes asked for, so the drawn covariance is S itself
+        float xd = dot(G, d);
+        float xt = dot(G, t);
+        float r = sqrt(max(Ed * Et - Edt * Edt, 0.0));
+        float nrm = sqrt(Ed + Et + 2.0 * r);
+        float m11 = Ed + r;
+        float m22 = Et + r;
+        float mdet = m11 * m22 - Edt * Edt;
+        float yd = nrm * (m22 * xd - Edt * xt) / mdet;
+        float yt = nrm * (m11 * xt - Edt * xd) / mdet;
+        vec2 grad_h = sqrt(l1) * yd * d + sqrt(l2) * yt * t;  // dh/d(rest)
         float dhdx = dot(grad_h, dFdx(v_rest));
         float dhdy = dot(grad_h, dFdy(v_rest));
         vec3 dpdx = dFdx(v_pos);

@@ -124,13 +124,14 @@ def crinkle_height_gradient(S: np.ndarray, rest: np.ndarray, scale: float, fetch
     ``fetch(u, v)`` returns the field's gradient (:func:`crinkle_gradient`) at texture
     coordinates, (k, 2), divided by its RMS (:func:`crinkle_gradient_rms`).
 
-    Along the tensor's larger eigenvector d the slope's RMS is √λ₁, along t ⊥ d √λ₂.  The
-    pattern mixes the isotropic field with fields read stretched :data:`CRINKLE_CREST` times
-    along the crests (the two of the :data:`CRINKLE_ORIENTATIONS` fixed orientations nearest d,
-    weights cos and sin of the angle between them, so their variance is kept), the oriented
-    share growing with how one-sided the compression is, a = (λ₁ − λ₂)/(λ₁ + λ₂).  Each
-    direction's component is divided by its expected RMS in that mix and multiplied by the
-    slope asked for, so uᵀSu is the drawn mean squared slope along d and t."""
+    The pattern mixes the isotropic field with fields read stretched :data:`CRINKLE_CREST` times
+    along the crests (the two of the :data:`CRINKLE_ORIENTATIONS` fixed orientations nearest the
+    tensor's larger eigenvector d, weights cos and sin of the angle between them, so their
+    variance is kept), the oriented share growing with how one-sided the compression is,
+    a = (λ₁ − λ₂)/(λ₁ + λ₂).  The mix's covariance Σ over (d, t ⊥ d) is known in closed form
+    (unit-RMS, uncorrelated components; the fields independent); its components are mapped by
+    diag(√λ₁, √λ₂) Σ^(−1/2), so the drawn gradient's covariance is S itself: along any rest
+    direction u the mean squared slope is uᵀSu."""
     S = np.asarray(S, np.float64)
     rest = np.asarray(rest, np.float64)
     half = 0.5 * (S[:, 0] + S[:, 2])
@@ -140,7 +141,7 @@ def crinkle_height_gradient(S: np.ndarray, rest: np.ndarray, scale: float, fetch
     d = np.stack([np.cos(ang), np.sin(ang)], 1)
     t = np.stack([-d[:, 1], d[:, 0]], 1)
     tot = l1 + l2
-    a = np.where(tot > 0.0, (l1 - l2) / np.where(tot > 0.0, tot, 1.0), 0.0)[:, None]
+    a = np.clip(np.where(tot > 0.0, (l1 - l2) / np.where(tot > 0.0, tot, 1.0), 0.0), 0.0, 1.0)
     g_iso = fetch(rest[:, 0] * scale + CRINKLE_OFFSET[0], rest[:, 1] * scale + CRINKLE_OFFSET[1])
     step = np.pi / CRINKLE_ORIENTATIONS
     x = np.mod(ang, np.pi) / step
@@ -148,7 +149,7 @@ def crinkle_height_gradient(S: np.ndarray, rest: np.ndarray, scale: float, fetch
     f = (x - np.floor(x))
     rho = CRINKLE_CREST
     g_or = np.zeros_like(rest)
-    Ed, Et = 1.0 - a[:, 0], 1.0 - a[:, 0]
+    Ed, Et, Edt = 1.0 - a, 1.0 - a, np.zeros_like(a)
     for which, w, delta in ((ka, np.cos(0.5 * np.pi * f), f * step),
                             ((ka + 1) % CRINKLE_ORIENTATIONS, np.sin(0.5 * np.pi * f), (f - 1.0) * step)):
         psi = which * step
@@ -159,10 +160,17 @@ def crinkle_height_gradient(S: np.ndarray, rest: np.ndarray, scale: float, fetch
         v = np.einsum("ij,ij->i", rest, tk) / rho * scale + off[:, 1]
         g = fetch(u, v)
         g_or += w[:, None] * (g[:, 0:1] * dk + g[:, 1:2] / rho * tk)
-        c2, s2 = np.cos(delta) ** 2, np.sin(delta) ** 2
-        Ed = Ed + a[:, 0] * w * w * (c2 + s2 / rho ** 2)
-        Et = Et + a[:, 0] * w * w * (s2 + c2 / rho ** 2)
-    G = np.sqrt(1.0 - a) * g_iso + np.sqrt(a) * g_or
-    gd = np.sqrt(l1) * np.einsum("ij,ij->i", G, d) / np.sqrt(Ed)
-    gt = np.sqrt(l2) * np.einsum("ij,ij->i", G, t) / np.sqrt(Et)
-    return gd[:, None] * d + gt[:, None] * t
+        c, s_ = np.cos(delta), np.sin(delta)
+        Ed = Ed + a * w * w * (c * c + s_ * s_ / rho ** 2)
+        Et = Et + a * w * w * (s_ * s_ + c * c / rho ** 2)
+        Edt = Edt + a * w * w * s_ * c * (1.0 / rho ** 2 - 1.0)
+    G = np.sqrt(1.0 - a)[:, None] * g_iso + np.sqrt(a)[:, None] * g_or
+    xd, xt = np.einsum("ij,ij->i", G, d), np.einsum("ij,ij->i", G, t)
+    # Σ^(−1/2) of [[Ed, Edt], [Edt, Et]]: √Σ = (Σ + r I) / n, r = √det, n = √(tr + 2r)
+    r = np.sqrt(np.maximum(Ed * Et - Edt * Edt, 0.0))
+    n = np.sqrt(Ed + Et + 2.0 * r)
+    m11, m12, m22 = Ed + r, Edt, Et + r
+    det = m11 * m22 - m12 * m12
+    yd = n * (m22 * xd - m12 * xt) / det
+    yt = n * (-m12 * xd + m11 * xt) / det
+    return (np.sqrt(l1) * yd)[:, None] * d + (np.sqrt(l2) * yt)[:, None] * t

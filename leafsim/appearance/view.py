@@ -55,7 +55,7 @@ class LeafView:
         self._young = None   # (photo colour per particle (n, 3) linear, luminance normaliser (nT,))
         self._fit = None     # (vein_pallor, fitted contents)
         self._pure_vein = None  # ones (n,): m̂ of pure vein tissue (vein_colours)
-        self._crinkle = {}  # the lamina excess's per-mesh data and prolongations (leafsim.sim.crinkle)
+        self._crinkle = {}  # the lamina compression's per-mesh data and prolongations (leafsim.sim.crinkle)
 
     def use_texture(self, params) -> bool:
         return bool(params["render.texture"]) and self.photo_rgba is not None

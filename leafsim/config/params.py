@@ -333,7 +333,7 @@ G = "Render"
 _f("render.vein_alpha", 0.8, 0.0, 1.0, "", "Opacity of drawn veins.", G, False)
 _f("render.translucency", 0.35, 0.0, 1.0, "", "Back-lit translucency of the blade.", G, False)
 _f("render.specular", 0.25, 0.0, 1.0, "", "Specular strength of the blade.", G, False)
-_f("render.crinkle", 1.0, 0.0, 2.0, "", "Sub-grid crinkle of a compressed lamina: a dried blade held in compression between its veins takes the excess length Δ up in crinkles finer than the mesh (leafsim.sim.crinkle), whose RMS slope is √(2Δ) whatever their wavelength; the renderer tilts the blade's normals by this factor × that slope over a seeded field. 1 = the excess the simulation leaves, 0 = a smooth blade. Drawing only: the mechanics never see it.", G, False)
+_f("render.crinkle", 1.0, 0.0, 2.0, "", "Sub-grid crinkle of a compressed lamina: a dried blade held in compression between its veins takes the excess length Δ up in crinkles finer than the mesh (leafsim.sim.crinkle), whose RMS slope is √(2Δ) whatever their wavelength; where the lamina is squeezed one way and stretched the other, the crinkle is parallel wrinkles across the squeeze, all of the slope along it. The renderer tilts the blade's normals by this factor × that slope over seeded fields. 1 = the compression the simulation leaves, 0 = a smooth blade. Drawing only: the mechanics never see it.", G, False)
 _f("render.crinkle_size", 0.001, 0.0002, 0.005, "m", "Correlation length of the crinkle field (render.crinkle): about the veinlets' spacing, the scale at which a dried lamina bulges between them (crests ≈ 2.5 × this apart).", G, False, log=True)
 _b("render.texture", True, "Use the species photo as the blade's albedo when the species has one.", G, False)
 

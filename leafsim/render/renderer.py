@@ -219,7 +219,7 @@ class Renderer:
         self.crinkle = (np.zeros((n, 3), np.float32) if crinkle is None
                         else np.ascontiguousarray(crinkle, dtype=np.float32).copy())
         self.crinkle_size = float(getattr(mesh, "crinkle_size", 0.0) or 0.0)
-        self.crinkle_max = _largest_trace(self.crinkle)
+        self.crinkle_peak = _largest_trace(self.crinkle)  # rad²: the crinkle is drawn when > 0
         top = getattr(mesh, "top_positions", None)
         self.top = None if top is None else np.ascontiguousarray(top, dtype=np.float32).copy()
         self.k = 0 if self.top is None else self.top.shape[0]
@@ -437,7 +437,7 @@ class Renderer:
             self.mottle_amount = float(mottle_amount)
         if crinkle is not None:
             self.crinkle[:] = crinkle
-            self.crinkle_max = _largest_trace(self.crinkle)
+            self.crinkle_peak = _largest_trace(self.crinkle)
             self.vbo_crinkle.write(self.crinkle)
         if crinkle_size is not None:
             self.crinkle_size = float(crinkle_size)
@@ -699,7 +699,7 @@ class Renderer:
         return self.mottle_size > 0.0 and self.mottle_amount > 0.0 and self.has_rest
 
     def _crinkle_on(self) -> bool:
-        return self.crinkle_size > 0.0 and self.crinkle_max > 0.0 and self.has_rest
+        return self.crinkle_size > 0.0 and self.crinkle_peak > 0.0 and self.has_rest
 
     def _crinkle_uniforms(self, prog) -> None:
         self._crinkle_texture().use(location=4)

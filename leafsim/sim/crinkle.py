@@ -53,7 +53,7 @@ def triangle_springs(model: Model) -> np.ndarray:
 
 
 class _Mesh:
-    """What one mesh needs for its excess, made once: its blade triangles, their springs, the
+    """What one mesh needs for its compression tensors, made once: its blade triangles, their springs, the
     particles that get none (the main and lateral veins, rods that do not crinkle, and every
     particle off layer T).  Its arrays are only read, so one may serve several threads (the
     window's worker and its drawing thread)."""
@@ -161,11 +161,6 @@ def crinkle_slopes(compression: np.ndarray, gain: float = 1.0) -> np.ndarray:
     big, small = 2.0 * gain * gain * np.maximum(big, 0.0), 2.0 * gain * gain * np.maximum(small, 0.0)
     c, s = np.cos(ang), np.sin(ang)
     return np.stack([big * c * c + small * s * s, (big - small) * c * s, big * s * s + small * c * c], 1)
-
-
-def crinkle_slope(excess: np.ndarray) -> np.ndarray:
-    """RMS slope √(2Δ) [rad] of the isotropic crinkle that takes up the excess length Δ."""
-    return np.sqrt(2.0 * np.maximum(np.asarray(excess, np.float64), 0.0))
 
 
 def crinkle_stats(model: Model, state: State) -> dict:

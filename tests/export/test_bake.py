@@ -314,11 +314,11 @@ def _client_frames(P: np.ndarray, uv: np.ndarray, tri: np.ndarray, flip_v: bool 
     return t, b
 
 
-@pytest.mark.parametrize("key,way", [("maple", "both"), ("oak", "both"), ("maple", "one")])
+@pytest.mark.parametrize("key,way", [("maple", "both"), ("oak", "both"), ("maple", 30.0), ("oak", 160.0)])
 def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
     """A flat leaf whose lamina is held 2 % short of its rest lengths (a crinkle of about 0.2
-    rad RMS slope; ``way`` "one": 3 % short along the line at 30° only, a one-way crinkle of
-    wrinkles across it) lit at 45° from the side (and 45° to both texture axes), drawn by the renderer top-down: every pixel's
+    rad RMS slope; ``way`` an angle: 3 % short along the line at that angle only, a one-way
+    crinkle of wrinkles across it; 160° lies where the shader's orientations wrap) lit at 45° from the side (and 45° to both texture axes), drawn by the renderer top-down: every pixel's
     brightness is what a glTF client computes from the baked albedo and the baked normal map
     decoded in its tangent frame (x along increasing u, y up the image), within a couple of
     levels on average; decoded with u's or v's direction the other way it is not.  The glb carries the
@@ -331,7 +331,7 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
     if way == "both":
         st.spring_rest[:] = 1.02 * model.spring_rest0
     else:  # rest lengths as if the leaf were 1/0.97 longer along d: the flat leaf is 3 % short that way only
-        d = np.array([np.cos(np.radians(30.0)), np.sin(np.radians(30.0)), 0.0])
+        d = np.array([np.cos(np.radians(way)), np.sin(np.radians(way)), 0.0])
         e = st.particle_q[model.spring_ij[:, 1]] - st.particle_q[model.spring_ij[:, 0]]
         st.spring_rest[:] = np.linalg.norm(e + (1.0 / 0.97 - 1.0) * (e @ d)[:, None] * d, axis=1)
     src = MeshSource(model, params, view, "shell", False, "baked", "colours")
@@ -359,8 +359,9 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
     assert (window - flat).std() > 3.0  # the crinkle is drawn: several levels of shading (0 without it)
     right = errors["none"]
     assert right.mean() < 2.0 and np.percentile(right, 90) <= 5, (right.mean(), np.percentile(right, 90))
-    for wrong in ("u", "v"):
-        assert errors[wrong].mean() > 2.0 * right.mean() + 2.0, (wrong, errors[wrong].mean(), right.mean())
+    for wrong in ("u", "v"):  # (a one-way crinkle tilts the normals in one plane: a flip shows less)
+        margin = 2.0 if way == "both" else 1.0
+        assert errors[wrong].mean() > 2.0 * right.mean() + margin, (wrong, errors[wrong].mean(), right.mean())
 
     path = tmp_path / f"{key}.glb"
     export_mesh(model, st, path, params=params, view=view, veins=True, texture="baked", albedo="colours")

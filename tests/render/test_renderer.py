@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 
 import numpy as np
 import pytest
@@ -850,12 +851,14 @@ def test_crinkle_tilts_the_normals_by_the_slope_asked_for(off, leaf):
         off.render_array(RenderMesh(**{**crinkled.__dict__, "mottle_rest": None}), cam, opts)
 
 
-@pytest.mark.parametrize("deg", [0.0, 30.0, 90.0])
+@pytest.mark.parametrize("deg", [0.0, 30.0, 90.0, 160.0])
 def test_a_one_way_crinkle_wrinkles_across_its_compression(off, leaf, deg):
     """A slope tensor with all of its slope along one direction d (a lamina compressed one way,
     stretched the other): lit along d the blade's brightness gives back the slope asked for,
     lit across it (along the crests) it hardly varies; and the pattern's crests run across d,
-    so the picture changes along d several times faster than along the crests."""
+    so the picture changes along d several times faster than along the crests.  (160°: the
+    orientations the shader mixes wrap from 135° to 0°.)  A blade populated smooth and given
+    the tensors by ``update`` draws the same."""
     s45 = math.sqrt(0.5)
     cam = top_camera()
     box = (slice(H // 2 - 50, H // 2 + 50), slice(W // 2 - 22, W // 2 + 22))  # inside the blade
@@ -876,9 +879,34 @@ def test_a_one_way_crinkle_wrinkles_across_its_compression(off, leaf, deg):
         got[name + "_slope"] = g.std() / flat.mean()  # N·L = sin 45° flat: the spread ÷ (albedo × sun × sin 45°)
     assert 0.8 * slope < got["along_slope"] < 1.2 * slope, got["along_slope"]
     assert got["across_slope"] < 0.15 * got["along_slope"], got["across_slope"]
+    plain = RenderMesh(**{**mesh.__dict__, "crinkle": None})
+    off.render_array(plain, cam, opts)
+    updated = off.render_array({"positions": plain.positions, "crinkle": mesh.crinkle, "crinkle_size": 0.003}, cam, opts)
+    assert np.array_equal(updated, off.render_array(mesh, cam, opts))
+    zeros = off.render_array({"positions": plain.positions, "crinkle": np.zeros((n, 3), np.float32), "crinkle_size": 0.003},
+                             cam, opts)
+    assert np.array_equal(zeros, off.render_array(plain, cam, opts))
     if deg in (0.0, 90.0):  # the picture's rows are one axis, its columns the other
         g = got["along"]
         dx = np.abs(np.diff(g, axis=1)).mean()
         dy = np.abs(np.diff(g, axis=0)).mean()
         along_d, along_crest = (dx, dy) if deg == 0.0 else (dy, dx)
         assert along_d > 1.8 * along_crest, (along_d, along_crest)
+
+
+def test_the_shader_s_crinkle_constants_are_the_bake_s():
+    """The blade shader spells out the crinkle's crest stretch and its oriented fields'
+    directions; the bake (leafsim.appearance.mottle) must read the field alike."""
+    from leafsim.appearance import mottle
+    from leafsim.base.resources import shader_dir
+
+    src = (shader_dir() / "blade.frag").read_text()
+    crest = float(re.search(r"const float CRINKLE_CREST = ([0-9.]+);", src).group(1))
+    step = float(re.search(r"const float CRINKLE_STEP = ([0-9.]+);", src).group(1))
+    dirs = re.search(r"const vec2 CRINKLE_DIRS\[4\] = vec2\[4\]\((.*?)\);", src, re.S).group(1)
+    dirs = np.array([[float(x) for x in v.split(",")] for v in re.findall(r"vec2\(([^)]*)\)", dirs)])
+    assert crest == mottle.CRINKLE_CREST and mottle.CRINKLE_ORIENTATIONS == 4 and "& 3" in src
+    assert step == pytest.approx(np.pi / mottle.CRINKLE_ORIENTATIONS, abs=1e-10)
+    k = np.arange(4) * np.pi / 4
+    assert np.allclose(dirs, np.stack([np.cos(k), np.sin(k)], 1), atol=1e-8)
+    assert len(mottle.CRINKLE_ORIENTED_OFFSETS) == 4

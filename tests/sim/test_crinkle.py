@@ -12,7 +12,7 @@ import pytest
 
 from leafsim.config.species import get_species
 from leafsim.pipeline import build_leaf
-from leafsim.sim.crinkle import (crinkle_slope, crinkle_slopes, crinkle_stats, excess_of, lamina_compression, lamina_excess,
+from leafsim.sim.crinkle import (crinkle_slopes, crinkle_stats, excess_of, lamina_compression, lamina_excess,
                                  one_way_share, principal, triangle_springs)
 from leafsim.sim.kernels.crinkle import lamina_compression as kernel
 from leafsim.sim.path import transfer_matrix
@@ -55,7 +55,6 @@ def test_the_excess_of_one_triangle():
     sheared = tri * np.array([0.98, 1.03, 1.0])                             # squeezed one way, stretched the other
     assert np.allclose(_one(sheared, rest), 0.01, rtol=1e-9)
     assert np.allclose(_one(tri, np.zeros(3)), 0.0)                         # a degenerate rest triangle carries nothing
-    assert crinkle_slope(np.array([0.01]))[0] == pytest.approx(math.sqrt(0.02))
 
 
 def test_the_compression_has_the_directions_of_the_flat_plane():
@@ -78,6 +77,16 @@ def test_the_compression_has_the_directions_of_the_flat_plane():
     assert np.allclose(_tensor(tri * np.array([0.98, 1.0, 1.0]), rest, turned), [0.02 * c * c, 0.02 * c * s_, 0.02 * s_ * s_],
                        atol=1e-12)
     assert np.allclose(_tensor(0.9 * tri * np.array([0.98, 1.0, 1.0]), 0.9 * rest, flat), [0.02, 0.0, 0.0], atol=1e-12)
+    # a shrink that was not the same every way (the flat plane is no scaled copy of the rest
+    # triangle): K keeps the compressions as its eigenvalues, and an even squeeze stays k I
+    skewed = flat * np.array([1.2, 0.9])
+    for q, want in ((tri * np.array([0.98, 0.995, 1.0]), (0.02, 0.005)), (tri * np.array([0.97, 0.97, 1.0]), (0.03, 0.03))):
+        K = _tensor(q, rest, skewed)[0]
+        big, small, _ = principal(K[None])
+        assert big[0] == pytest.approx(want[0], rel=1e-9) and small[0] == pytest.approx(want[1], rel=1e-9)
+    assert np.allclose(_tensor(tri * np.array([0.97, 0.97, 1.0]), rest, skewed)[0], [0.03, 0.0, 0.03], atol=1e-15)
+    mirrored = flat * np.array([1.0, -1.0])  # the flat triangle runs the other way round
+    assert np.allclose(_tensor(tri * np.array([0.98, 1.0, 1.0]), rest, mirrored)[0], [0.02, 0.0, 0.0], atol=1e-12)
     # the slope tensor: 2K, so along the squeeze √(2 · 0.02) and nothing along the crests
     S = crinkle_slopes(np.array([[0.01, -0.01, 0.01], [0.02, 0.0, 0.02], [-1e-6, 0.0, 0.01]]), gain=1.0)
     big, small, ang = principal(S)

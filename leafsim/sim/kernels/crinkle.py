@@ -14,8 +14,9 @@ def lamina_compression(tri, tri_springs, q, rest, flat, zero, out, area):
     compression tensor K = Σ max(0, 1 − sₖ) uₖ uₖᵀ (its xx, xy, yy entries), sₖ the principal
     stretches of the triangle (vertices ``tri`` (m, 3)) from its rest shape, the triangle whose
     sides are the rest lengths ``rest`` of its springs ``tri_springs`` (m, 3: a–b, b–c, c–a), to
-    its shape at ``q``, and uₖ their directions carried to the flat rest plane ``flat`` (n, 2)
-    (the same material lines there, made unit).  ½ tr K is the excess length
+    its shape at ``q``, and uₖ their directions, turned into the flat rest plane ``flat`` (n, 2)
+    by the rotation that carries the rest triangle onto its flat one (the polar factor of that
+    map: K keeps its eigenvalues).  ½ tr K is the excess length
     ½ (max(0, 1 − s₁) + max(0, 1 − s₂)).  Particles with ``zero`` set get 0; so do particles
     of no triangle.  ``area`` (n,) is scratch (the rest area each particle's triangles lump to it)."""
     n = out.shape[0]
@@ -58,36 +59,37 @@ def lamina_compression(tri, tri_springs, q, rest, flat, zero, out, area):
         if k1 == 0.0 and k2 == 0.0:
             kxx = kxy = kyy = 0.0
         else:
-            # the smaller stretch's direction in the rest frame: an eigenvector of C for lo, the
-            # better conditioned of C's two rows' null directions (any direction when C is
-            # isotropic); the larger stretch's is at right angles.  Neither needs its length:
-            # the flat vector is made unit.
-            ux, uy = c01, lo - c00
-            wx, wy = lo - c11, c01
-            if ux * ux + uy * uy < wx * wx + wy * wy:
-                ux, uy = wx, wy
-            if ux * ux + uy * uy <= 1e-30 * (c00 * c00 + c11 * c11):
-                ux, uy = 1.0, 0.0
-            # rest frame → flat plane: a rest vector u has edge coefficients Dm⁻¹ u, the flat
-            # vector the same combination of the flat triangle's edges
+            # K in the rest frame from C's spectral projectors (Sylvester): k₁ on lo's
+            # eigenspace, k₂ on hi's; k I when C is isotropic (no direction to pick)
+            if dev > 1e-12 * half:
+                g = (k2 - k1) / (2.0 * dev)  # K = k₁ P_lo + k₂ P_hi = k̄ I + g (C − half I)
+                kbar = 0.5 * (k1 + k2)
+                rxx = kbar + g * (c00 - half)
+                rxy = g * c01
+                ryy = kbar + g * (c11 - half)
+            else:
+                rxx = ryy = 0.5 * (k1 + k2)
+                rxy = 0.0
+            # rest frame → flat plane: A = Df Dm⁻¹ carries a rest vector to the same material
+            # line in the flat plane; K turns with A's rotation (its polar factor), which keeps
+            # its eigenvalues, so a shrink that is not the same every way cannot skew it
             f1x, f1y = flat[b, 0] - flat[a, 0], flat[b, 1] - flat[a, 1]
             f2x, f2y = flat[c, 0] - flat[a, 0], flat[c, 1] - flat[a, 1]
-            kxx = kxy = kyy = 0.0
-            for k in range(2):
-                kk = k1 if k == 0 else k2
-                if kk == 0.0:
-                    continue
-                ex, ey = (ux, uy) if k == 0 else (-uy, ux)
-                al = p * ex + r * ey
-                be = s * ey
-                vx = al * f1x + be * f2x
-                vy = al * f1y + be * f2y
-                nv = vx * vx + vy * vy
-                if nv <= 0.0:
-                    continue
-                kxx += kk * vx * vx / nv
-                kxy += kk * vx * vy / nv
-                kyy += kk * vy * vy / nv
+            a11, a12 = f1x * p, f1x * r + f2x * s
+            a21, a22 = f1y * p, f1y * r + f2y * s
+            if a11 * a22 - a12 * a21 < 0.0:  # the flat triangle runs the other way round: mirror y first
+                a12, a22, rxy = -a12, -a22, -rxy
+            cr, sr = a11 + a22, a21 - a12
+            nr = np.sqrt(cr * cr + sr * sr)
+            if nr > 0.0:
+                cr /= nr
+                sr /= nr
+            else:
+                cr, sr = 1.0, 0.0
+            # K_flat = R K Rᵀ, R = [[cr, −sr], [sr, cr]]
+            kxx = cr * cr * rxx - 2.0 * cr * sr * rxy + sr * sr * ryy
+            kxy = cr * sr * (rxx - ryy) + (cr * cr - sr * sr) * rxy
+            kyy = sr * sr * rxx + 2.0 * cr * sr * rxy + cr * cr * ryy
         A = 0.5 * lab * cy
         for v in (a, b, c):
             out[v, 0] += A * kxx
