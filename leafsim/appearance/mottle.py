@@ -126,8 +126,8 @@ def crinkle_height_gradient(S: np.ndarray, rest: np.ndarray, scale: float, fetch
 
     The pattern mixes the isotropic field with fields read stretched :data:`CRINKLE_CREST` times
     along the crests (the two of the :data:`CRINKLE_ORIENTATIONS` fixed orientations nearest the
-    tensor's larger eigenvector d, weights cos and sin of the angle between them, so their
-    variance is kept), the oriented share growing with how one-sided the compression is,
+    tensor's larger eigenvector d, weights cos 2δ and sin 2δ with δ d's angle past the lower of
+    the two, so their variance is kept), the oriented share growing with how one-sided the compression is,
     a = (λ₁ − λ₂)/(λ₁ + λ₂).  The mix's covariance Σ over (d, t ⊥ d) is known in closed form
     (unit-RMS, uncorrelated components; the fields independent); its components are mapped by
     diag(√λ₁, √λ₂) Σ^(−1/2), so the drawn gradient's covariance is S itself: along any rest
