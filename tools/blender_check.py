@@ -1,5 +1,5 @@
-"""Render a leafsim glTF in Blender at the first and last frame of its drying, imported with
-the add-on (leafsim/export/blender_import.py), with Cycles on the CPU:
+"""Render a leafsim glTF (or OBJ) in Blender at the first and last frame of its drying, imported
+with the add-on (leafsim/export/blender_import.py), with Cycles on the CPU:
 
     python3.11 -m venv /tmp/bpyenv && /tmp/bpyenv/bin/pip install bpy==4.2.0
     /tmp/bpyenv/bin/python tools/blender_check.py [--plain] maple.glb OUT_DIR
@@ -24,7 +24,10 @@ OUT.mkdir(parents=True, exist_ok=True)
 spec = importlib.util.spec_from_file_location("blender_import", ADDON)
 bi = importlib.util.module_from_spec(spec); spec.loader.exec_module(bi)
 bpy.ops.wm.read_factory_settings(use_empty=True)
-if PLAIN:
+if PLAIN and GLB.lower().endswith(".obj"):  # Blender's OBJ importer alone (normal map as sRGB, vertex colours unused)
+    bpy.ops.wm.obj_import(filepath=GLB)
+    objs = list(bpy.data.objects)
+elif PLAIN:
     bpy.ops.import_scene.gltf(filepath=GLB)
     objs = list(bpy.data.objects)
     for o in objs:

@@ -15,6 +15,11 @@ factor the ageing multiplies the photo by, as ``_AGEING`` with its own morph del
 must stay within 0-1, the factor does not); the base colour is then the photo times it.  It also sets the scene's frame range to the
 drying action's.
 
+An OBJ exported with ``--texture baked`` carries the crinkle's normal map as the MTL's
+``map_Bump``, which Blender's own OBJ importer wires as a normal map but reads as sRGB colour,
+and its vertex colours, which that importer keeps but leaves unused; this add-on imports an
+``.obj`` with Blender's importer, marks those images as data and draws the vertex colours.
+
 Install: Blender → Edit → Preferences → Add-ons → Install from Disk… → this file (its path:
 ``leafsim export … --json`` reports it as ``blender_addon``); then File → Import → "leafsim
 glTF (drying colour)".  Without the add-on: ``import_leafsim(path)`` from Blender's Python.
@@ -158,12 +163,47 @@ def _wire_material(obj, morph: dict) -> None:
         links.new(acc, bsdf.inputs["Base Color"])
 
 
+def _finish_obj(objects) -> None:
+    """What Blender's OBJ importer leaves undone on a leafsim OBJ.  It reads an MTL's ``map_Bump``
+    as a tangent-space normal map but leaves its image in the sRGB colour space, which bends
+    every normal (a flat texel 128 reads as 0.22): the images feeding a Normal Map node are
+    data, Non-Color.  It reads the ``v x y z r g b`` vertex colours as a colour attribute but
+    leaves the material a plain grey: a mesh without a texture (the veins over a drawn leaf,
+    every mesh of a ``--texture colours`` export) takes its base colour from the attribute."""
+    for obj in objects:
+        if obj.type != "MESH":
+            continue
+        attrs = obj.data.color_attributes
+        for slot in obj.material_slots:
+            mat = slot.material
+            if mat is None or not mat.use_nodes:
+                continue
+            nodes, links = mat.node_tree.nodes, mat.node_tree.links
+            for node in nodes:
+                if node.type == "NORMAL_MAP":
+                    for link in node.inputs["Color"].links:
+                        image = getattr(link.from_node, "image", None)
+                        if image is not None:
+                            image.colorspace_settings.name = "Non-Color"
+            bsdf = next((n for n in nodes if n.type == "BSDF_PRINCIPLED"), None)
+            if bsdf is not None and len(attrs) and not bsdf.inputs["Base Color"].links:
+                col = nodes.new("ShaderNodeVertexColor")
+                col.layer_name = attrs[0].name
+                links.new(col.outputs["Color"], bsdf.inputs["Base Color"])
+
+
 def import_leafsim(path) -> list:
-    """Import a leafsim glTF into the current Blender scene with its drying colour; returns
+    """Import a leafsim glTF into the current Blender scene with its drying colour, or a leafsim
+    OBJ with its baked crinkle's normal map and vertex colours wired up (:func:`_finish_obj`); returns
     the imported objects."""
     import bpy
 
     before = set(bpy.data.objects)
+    if Path(path).suffix.lower() == ".obj":
+        bpy.ops.wm.obj_import(filepath=str(path))
+        objects = [o for o in bpy.data.objects if o not in before]
+        _finish_obj(objects)
+        return objects
     bpy.ops.import_scene.gltf(filepath=str(path))
     objects = [o for o in bpy.data.objects if o not in before]
     morphs = colour_morphs(path)
@@ -196,12 +236,12 @@ def _operator():
     from bpy_extras.io_utils import ImportHelper
 
     class ImportLeafsim(bpy.types.Operator, ImportHelper):
-        """Import a leafsim glTF with its drying colour"""
+        """Import a leafsim glTF with its drying colour (or a leafsim OBJ with its normal map)"""
 
         bl_idname = "import_scene.leafsim_gltf"
         bl_label = "Import leafsim glTF"
         filename_ext = ".glb"
-        filter_glob: bpy.props.StringProperty(default="*.glb;*.gltf", options={"HIDDEN"})
+        filter_glob: bpy.props.StringProperty(default="*.glb;*.gltf;*.obj", options={"HIDDEN"})
 
         def execute(self, context):
             try:

@@ -323,13 +323,13 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     src = MeshSource(model, params, view, layers, veins, texture, albedo)
     frames = [src.surfaces(s) for s in states]
     times = [s.time for s in states] if times is None else times
-    png, normal_png = src.texture_pngs(states[-1], normals=fmt in ("glb", "gltf"))
+    png, normal_png = src.texture_pngs(states[-1], normals=fmt in ("glb", "gltf", "obj"))
     if fmt in ("glb", "gltf"):
         from leafsim.export.gltf import write_gltf
 
         files = write_gltf(Path(path), frames, times, png, binary=fmt == "glb", image_name=texture, normal_png=normal_png)
     elif fmt == "obj":
-        files = write_obj(Path(path), frames[0], png, texture_file(path, texture))
+        files = write_obj(Path(path), frames[0], png, texture_file(path, texture), normal_png, normal_file(path))
     else:
         files = write_ply(Path(path), frames[0])
     return {"format": fmt, "path": str(path), "files": [str(f) for f in files], "targets": len(states) - 1,
@@ -349,6 +349,8 @@ def side_files(path, fmt: str, texture: str = "colours") -> list:
     OBJ's material and texture."""
     path = Path(path)
     png = [(texture_file(path, texture), "texture")] if texture != "colours" else []
+    if texture == "baked":  # (written only when the blade has a crinkle)
+        png.append((normal_file(path), "normal map"))
     return {"gltf": [(path.with_suffix(".bin"), "glTF buffer")],
             "obj": [(path.with_suffix(".mtl"), "material"), *png]}.get(fmt, [])
 
@@ -359,12 +361,29 @@ def texture_file(path, texture: str) -> Path:
     return path.with_name(f"{path.stem}_{texture}.png")
 
 
-def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None = None, png: Path | None = None) -> list[Path]:
+def normal_file(path) -> Path:
+    """The PNG an OBJ export of ``path`` with ``texture`` "baked" writes beside it for the blade's
+    crinkle (the glTF's normalTexture), when the blade has one."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}_baked_normal.png")
+
+
+def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None = None, png: Path | None = None,
+              normal_png: bytes | None = None, normal: Path | None = None) -> list[Path]:
     """OBJ + MTL (+ the texture PNG, ``png``, default ``<stem>_photo.png``): one object per mesh,
     ``v x y z r g b`` vertex colours (sRGB, the common extension trimesh, Blender and MeshLab
-    read), ``vt``, ``vn``; a mesh without texture coordinates is not textured."""
+    read), ``vt``, ``vn``; a mesh without texture coordinates is not textured.
+
+    ``normal_png`` (the baked crinkle, :func:`~leafsim.export.bake.bake_normals`) goes to
+    ``normal`` (default ``<stem>_baked_normal.png``) and onto the blade's material as
+    ``map_Bump -bm 1``: MTL has no normal-map statement of its own, and ``map_Bump`` is the one
+    Blender's importer (and its exporter) read as a tangent-space normal map, tangents from the
+    texture coordinates (MikkTSpace, as a glTF client without TANGENT makes them).  Its y is up
+    the image, the increasing OBJ ``vt``; a reader that takes ``map_Bump`` as a height map
+    shades it wrongly, one that ignores it draws the blade smooth."""
     mtl = path.with_suffix(".mtl")
     png = png if png is not None else texture_file(path, "photo")
+    normal = normal if normal is not None else normal_file(path)
     lines = ["# leafsim mesh export", f"mtllib {mtl.name}"]
     mat = ["# leafsim materials"]
     base = 0
@@ -374,6 +393,8 @@ def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None 
         mat += [f"newmtl {name}", "Ka 0 0 0", "Kd 0.8 0.8 0.8", "Ks 0.05 0.05 0.05", "d 1", "illum 2"]
         if photo_png is not None and s.uv is not None:
             mat.append(f"map_Kd {png.name}")
+        if normal_png is not None and s.uv is not None and name == "blade":
+            mat.append(f"map_Bump -bm 1 {normal.name}")
         rgb = None if s.colours is None else _srgb8(s.colours) / 255.0
         for i, p in enumerate(s.positions):
             lines.append(f"v {p[0]:.7g} {p[1]:.7g} {p[2]:.7g}" + ("" if rgb is None else f" {rgb[i, 0]:.4f} {rgb[i, 1]:.4f} {rgb[i, 2]:.4f}"))
@@ -386,6 +407,8 @@ def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None 
     written = []
     if photo_png is not None:
         written.append(atomic_write_bytes(png, photo_png, "texture"))
+    if normal_png is not None:
+        written.append(atomic_write_bytes(normal, normal_png, "normal map"))
     written.append(atomic_write_bytes(mtl, ("\n".join(mat) + "\n").encode(), "material"))
     written.append(atomic_write_bytes(path, ("\n".join(lines) + "\n").encode(), "mesh"))
     return written

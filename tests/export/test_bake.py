@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import struct
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -394,9 +395,28 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
     up = np.cross(Nf[v], Tf[v, :3]) * Tf[v, 3:4]
     assert np.median(np.sum(Tf[v, :3] * tx[first[v]], axis=1)) > 0.99
     assert np.median(np.sum(up * by[first[v]], axis=1)) > 0.99
+    # OBJ: the same map beside it, on the blade's material as map_Bump (Blender's normal map),
+    # and the frame a reader derives from the file's vt (x along increasing u, y along increasing
+    # vt, i.e. up the image) is the glTF's
+    obj = tmp_path / f"{key}.obj"
+    files = export_mesh(model, st, obj, params=params, view=view, veins=True, texture="baked", albedo="colours")["files"]
+    normal = tmp_path / f"{key}_baked_normal.png"
+    assert str(normal) in files
+    assert np.array_equal(cv2.cvtColor(cv2.imread(str(normal), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB), nmap)
+    mtl = {m.split()[0]: m for m in (tmp_path / f"{key}.mtl").read_text().split("newmtl ")[1:]}
+    assert f"map_Bump -bm 1 {normal.name}" in mtl["blade"] and "map_Bump" not in mtl["veins"]
+    lines = obj.read_text().splitlines()
+    blade_end = lines.index("o veins")
+    vt = np.array([[float(a) for a in ln.split()[1:3]] for ln in lines[:blade_end] if ln.startswith("vt ")])
+    assert np.allclose(vt, np.c_[Uf[:, 0], 1.0 - Uf[:, 1]], atol=1e-6)
+    tx_o, vt_dir = _client_frames(Pf, vt, trif, flip_v=True)  # y along +∂P/∂vt: OBJ's vt grows up the image
+    assert np.median(np.sum(Tf[v, :3] * tx_o[first[v]], axis=1)) > 0.99 and np.median(np.sum(up * vt_dir[first[v]], axis=1)) > 0.99
     for quiet in (Simulator(model, params, seed=0).state(), None):
         p = params if quiet is not None else params.with_overrides({"render.crinkle": 0.0})
         plain = tmp_path / "plain.glb"
         export_mesh(model, quiet if quiet is not None else st, plain, params=p, view=view, texture="baked")
         doc, _ = _glb_json(plain)
         assert all("normalTexture" not in m for m in doc["materials"]) and len(doc["images"]) == 1
+        plain_obj = tmp_path / "plain.obj"
+        written = export_mesh(model, quiet if quiet is not None else st, plain_obj, params=p, view=view, texture="baked")["files"]
+        assert "map_Bump" not in (tmp_path / "plain.mtl").read_text() and not any("normal" in Path(f).name for f in written)
