@@ -121,15 +121,10 @@ def _vol_grad(x, u):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def elastic(q, ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest, smap, hmap, vmap, grad, data, hessian, spd=True):
-    """Elastic energy at ``q``; ``grad`` (n, 3) ← its gradient and, with ``hessian``, ``data``
-    (nnzb, 3, 3) ← the Hessian blocks: exact, or with ``spd`` positive semi-definite (module
-    doc)."""
-    grad[:] = 0.0
-    if hessian:
-        data[:] = 0.0
-    energy = 0.0
-    u = np.empty((4, 3))
+def _spring_terms(q, ij, sk, srest, smap, grad, data, hessian, spd, energy):
+    """The springs' share of :func:`elastic`, added to ``energy`` (returned), ``grad`` and
+    ``data``: the exact Hessian k (d̂d̂ᵀ + (1 − ℓ/|d|)(I − d̂d̂ᵀ)), the transverse part clamped at
+    zero in compression with ``spd``."""
     for s in range(ij.shape[0]):
         a = ij[s, 0]
         b = ij[s, 1]
@@ -156,8 +151,14 @@ def elastic(q, ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest, smap, hmap, vmap
                     data[smap[s, 1, 1], r, c] += v
                     data[smap[s, 0, 1], r, c] -= v
                     data[smap[s, 1, 0], r, c] -= v
-    x = np.empty((4, 3))
-    w = np.empty((4, 3))
+    return energy
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _hinge_terms(q, hidx, hk, hrest, hmap, grad, data, hessian, spd, energy, x, u, w):
+    """The hinges' share of :func:`elastic`, added to ``energy`` (returned), ``grad`` and
+    ``data``: k ∇θ ∇θᵀ, plus the residual term k C ∇²θ by forward differences of the exact ∇θ
+    (symmetrised) without ``spd``.  ``x``, ``u``, ``w`` (4, 3) are scratch."""
     for e in range(hidx.shape[0]):
         for p in range(4):
             for c in range(3):
@@ -177,7 +178,6 @@ def elastic(q, ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest, smap, hmap, vmap
                 for r in range(4):
                     _add_outer(data, hmap[e, p, r], k, u[p, 0], u[p, 1], u[p, 2], u[r, 0], u[r, 1], u[r, 2])
             if not spd and f != 0.0:
-                # the residual term k C ∇²θ by forward differences of the exact ∇θ (symmetrised)
                 el = math.sqrt((x[3, 0] - x[2, 0]) ** 2 + (x[3, 1] - x[2, 1]) ** 2 + (x[3, 2] - x[2, 2]) ** 2)
                 dlt = 1e-7 * el
                 for r in range(4):
@@ -194,6 +194,14 @@ def elastic(q, ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest, smap, hmap, vmap
                                 v = 0.5 * f * (w[p, d] - u[p, d]) / dlt
                                 data[blk, d, c] += v
                                 data[blt, c, d] += v
+    return energy
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _volume_terms(q, vidx, vk, vrest, vmap, grad, data, hessian, spd, energy, x, u, w):
+    """The thickness volumes' share of :func:`elastic`, added to ``energy`` (returned), ``grad``
+    and ``data``: k ∇C ∇Cᵀ, plus k C ∇²C without ``spd`` (∇C is bilinear, so forward
+    differences are exact).  ``x``, ``u``, ``w`` (4, 3) are scratch."""
     for t in range(vidx.shape[0]):
         for p in range(4):
             for c in range(3):
@@ -210,7 +218,6 @@ def elastic(q, ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest, smap, hmap, vmap
                 for r in range(4):
                     _add_outer(data, vmap[t, p, r], k, u[p, 0], u[p, 1], u[p, 2], u[r, 0], u[r, 1], u[r, 2])
             if not spd and f != 0.0:
-                # the residual term k C ∇²C: ∇C is bilinear, so forward differences are exact
                 for r in range(4):
                     for c in range(3):
                         x[r, c] += 1.0
@@ -221,6 +228,23 @@ def elastic(q, ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest, smap, hmap, vmap
                             for d in range(3):
                                 data[blk, d, c] += f * (w[p, d] - u[p, d])
     return energy
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def elastic(q, ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest, smap, hmap, vmap, grad, data, hessian, spd=True):
+    """Elastic energy at ``q``; ``grad`` (n, 3) ← its gradient and, with ``hessian``, ``data``
+    (nnzb, 3, 3) ← the Hessian blocks: exact, or with ``spd`` positive semi-definite (module
+    doc).  Springs, hinges, then volumes, each adding onto the running sums (:func:`_spring_terms`,
+    :func:`_hinge_terms`, :func:`_volume_terms`)."""
+    grad[:] = 0.0
+    if hessian:
+        data[:] = 0.0
+    x = np.empty((4, 3))
+    u = np.empty((4, 3))
+    w = np.empty((4, 3))
+    energy = _spring_terms(q, ij, sk, srest, smap, grad, data, hessian, spd, 0.0)
+    energy = _hinge_terms(q, hidx, hk, hrest, hmap, grad, data, hessian, spd, energy, x, u, w)
+    return _volume_terms(q, vidx, vk, vrest, vmap, grad, data, hessian, spd, energy, x, u, w)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
