@@ -33,7 +33,8 @@ elif PLAIN:
     for o in objs:
         act = o.data.shape_keys.animation_data.action if o.type == "MESH" and o.data.shape_keys else None
         if act is not None:
-            bpy.context.scene.frame_end = int(round(act.frame_range[1]))
+            bpy.context.scene.frame_start = math.floor(act.frame_range[0])
+            bpy.context.scene.frame_end = math.ceil(act.frame_range[1] - 1e-6)
 else:
     objs = bi.import_leafsim(GLB)
 sc = bpy.context.scene
@@ -44,11 +45,14 @@ for o in objs:
         print(o.name, "attrs", [a.name for a in o.data.color_attributes][:5], "keys", len(o.data.shape_keys.key_blocks) if o.data.shape_keys else 0)
 # camera + light
 mins = Vector((1e9,)*3); maxs = Vector((-1e9,)*3)
-for o in objs:
-    if o.type == "MESH":
-        for v in o.data.vertices:
-            w = o.matrix_world @ v.co
-            mins = Vector(map(min, mins, w)); maxs = Vector(map(max, maxs, w))
+for f in (sc.frame_start, sc.frame_end):  # the shapes as drawn at both frames (shape keys applied)
+    sc.frame_set(f)
+    dg = bpy.context.evaluated_depsgraph_get()
+    for o in objs:
+        if o.type == "MESH":
+            for v in o.evaluated_get(dg).data.vertices:
+                w = o.matrix_world @ v.co
+                mins = Vector(map(min, mins, w)); maxs = Vector(map(max, maxs, w))
 c = (mins + maxs) / 2; size = (maxs - mins).length
 cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam")); sc.collection.objects.link(cam)
 cam.location = c + Vector((0, -0.9 * size, 1.1 * size))

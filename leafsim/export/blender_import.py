@@ -31,6 +31,7 @@ reads the file with the standard library alone (tests use it outside Blender).
 from __future__ import annotations
 
 import json
+import math
 import struct
 from array import array
 from pathlib import Path
@@ -226,8 +227,10 @@ def import_leafsim(path) -> list:
               if o.type == "MESH" and o.data.shape_keys and o.data.shape_keys.animation_data
               and o.data.shape_keys.animation_data.action]
     if ranges:
-        scene.frame_start = int(min(r[0] for r in ranges))
-        scene.frame_end = int(round(max(r[1] for r in ranges)))
+        # the key times are seconds × fps, rarely whole frames: the range reaches the last key
+        # (the dried leaf; the shape holds there), not the frame before it
+        scene.frame_start = math.floor(min(r[0] for r in ranges))
+        scene.frame_end = math.ceil(max(r[1] for r in ranges) - 1e-6)
     return objects
 
 

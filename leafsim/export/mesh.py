@@ -86,13 +86,13 @@ def _surface(pos, nrm, tri, uv, col, thick=None) -> Surface:
                    thickness=None if thick is None else thick.astype(np.float32))
 
 
-def blade_surface(model, state, T, remap, layers, uv, col) -> tuple[Surface, np.ndarray, np.ndarray]:
-    """The blade as a :class:`Surface`; also the upper-surface points and normals (z-up) the
-    veins lie on."""
+def blade_surface(model, state, T, remap, layers, uv, col) -> tuple[Surface, np.ndarray, np.ndarray, np.ndarray]:
+    """The blade as a :class:`Surface`; also the upper- and lower-surface points and the
+    normals (z-up) the veins lie on."""
     p, tri, n, h = blade_frame(model, state, T, remap)
     if layers == "mid":
         mid = p + 0.5 * h[:, None] * n
-        return _surface(mid, n, tri, uv, col, h), mid + 0.5 * h[:, None] * n, n
+        return _surface(mid, n, tri, uv, col, h), mid + 0.5 * h[:, None] * n, n, mid - 0.5 * h[:, None] * n
     top = p + h[:, None] * n
     nT = len(p)
     be = boundary_edges(tri)
@@ -100,39 +100,59 @@ def blade_surface(model, state, T, remap, layers, uv, col) -> tuple[Surface, np.
     sides = np.concatenate([np.column_stack([a, b, b + nT]), np.column_stack([a, b + nT, a + nT])])
     faces = np.concatenate([tri[:, ::-1], tri + nT, sides])
     twice = lambda x: None if x is None else np.concatenate([x, x])
-    return _surface(np.concatenate([p, top]), np.concatenate([-n, n]), faces, twice(uv), twice(col)), top, n
+    return _surface(np.concatenate([p, top]), np.concatenate([-n, n]), faces, twice(uv), twice(col)), top, n, p
 
 
-def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray, uv, col,
-                 max_order: int | None = None) -> Surface | None:
-    """Flat ribbons of the vein widths on the upper surface ``top`` (nT, 3) with normals ``n``;
-    2 vertices per vein point, 2 triangles per segment, coloured ``col`` (nT, 3) (the vein
-    tissue's own albedo, as the renderer draws it).  None when the model has no veins."""
+def _ribbons(model: Model, remap: np.ndarray, sheet: np.ndarray, n: np.ndarray, up: float, uv, col,
+             max_order: int | None, base: int) -> tuple:
+    """The vein ribbons on one face of the blade: ``sheet`` (nT, 3) its points, ``up`` +1 on the
+    upper face (normals ``n``), −1 on the lower one (normals −n, the winding turned); vertex
+    numbers from ``base``.  Returns the lists (positions, normals, triangles, uvs, colours) and
+    the next free vertex number."""
     pos, nrm, tris, uvs, cols = [], [], [], [], []
-    base = 0
     for k, (idx, width, order) in enumerate(model.vein_polylines()):
         if len(idx) < 2 or (max_order is not None and order > max_order):
             continue
-        # each ribbon a hair above the blade at its own height, the main veins highest: where
+        # each ribbon a hair off the blade at its own height, the main veins farthest: where
         # ribbons met at one height (a branch point), Cycles drew the coplanar faces black
         lift = (0.02 + 0.03 * (3 - min(int(order), 3)) + 0.002 * (k % 5)) * model.thickness
         i = remap[idx]
-        c = top[i] + lift * n[i]
+        out = up * n[i]
+        c = sheet[i] + lift * out
         t = np.gradient(c, axis=0)
         side = _unit(np.cross(n[i], t), fallback=(1.0, 0.0, 0.0)) * (0.5 * np.asarray(width))[:, None]
         pos.append(np.concatenate([c - side, c + side]))
-        nrm.append(np.concatenate([n[i], n[i]]))
-        k = len(i)
-        s = np.arange(k - 1)
-        l0, l1, r0, r1 = s, s + 1, s + k, s + k + 1
+        nrm.append(np.concatenate([out, out]))
+        m = len(i)
+        s = np.arange(m - 1)
+        l0, l1, r0, r1 = s, s + 1, s + m, s + m + 1
         # side = n × t puts r to the right of the walk seen from n: (l0, r1, r0), (l0, l1, r1) turn
-        # counter-clockwise about n, so the faces agree with their normals (clients light by winding)
-        tris.append(base + np.concatenate([np.column_stack([l0, r1, r0]), np.column_stack([l0, l1, r1])]))
+        # counter-clockwise about n, so the faces agree with their normals (clients light by
+        # winding); seen from −n the other way round
+        if up > 0:
+            tris.append(base + np.concatenate([np.column_stack([l0, r1, r0]), np.column_stack([l0, l1, r1])]))
+        else:
+            tris.append(base + np.concatenate([np.column_stack([l0, r0, r1]), np.column_stack([l0, r1, l1])]))
         if uv is not None:
             uvs.append(np.concatenate([uv[i], uv[i]]))
         if col is not None:
             cols.append(np.concatenate([col[i], col[i]]))
-        base += 2 * k
+        base += 2 * m
+    return (pos, nrm, tris, uvs, cols), base
+
+
+def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray, uv, col,
+                 max_order: int | None = None, bottom: np.ndarray | None = None) -> Surface | None:
+    """Flat ribbons of the vein widths on the upper surface ``top`` (nT, 3) with normals ``n``,
+    and with ``bottom`` (nT, 3) the same on the lower surface (the window draws the veins from
+    either side; on a real leaf they stand out below most); 2 vertices per vein point, 2
+    triangles per segment, coloured ``col`` (nT, 3) (the vein tissue's own albedo, as the
+    renderer draws it).  None when the model has no veins."""
+    parts, base = _ribbons(model, remap, top, n, 1.0, uv, col, max_order, 0)
+    if bottom is not None and base:
+        below, _ = _ribbons(model, remap, bottom, n, -1.0, uv, col, max_order, base)
+        parts = tuple(a + b for a, b in zip(parts, below))
+    pos, nrm, tris, uvs, cols = parts
     if not pos:
         return None
     cat = lambda x: np.concatenate(x) if x else None
@@ -187,7 +207,7 @@ class MeshSource:
         # over a photo the window draws the veins as the photo under them (the photo shows its
         # own veins): their ribbons take the baked texture too; otherwise their own colour per vertex
         veins_textured = baked and self.view.use_texture(self.params) and self.albedo != "colours"
-        blade, top, n = blade_surface(self.model, state, self.view.T, self.view.remap, self.layers, self.uv,
+        blade, top, n, bottom = blade_surface(self.model, state, self.view.T, self.view.remap, self.layers, self.uv,
                                       None if baked else col)
         out = {"blade": blade}
         if self.veins:
@@ -196,7 +216,7 @@ class MeshSource:
             # orders it grew would cross the photo's areoles as a second pattern)
             v = vein_surface(self.model, self.view.remap, top, n, None if baked and not veins_textured else self.uv,
                              None if veins_textured else (col if vcol is None else np.asarray(vcol, np.float64)),
-                             max_order=1 if veins_textured else None)
+                             max_order=1 if veins_textured else None, bottom=bottom)
             if v is not None:
                 out["veins"] = v
         if self.texture == "photo":  # the ageing as a factor on the photo, per vertex of each surface
@@ -204,8 +224,9 @@ class MeshSource:
             f = np.ones((len(self.view.T), 3)) if tint is None else np.clip(np.asarray(tint, np.float64), 0.0, MAX_AGEING)
             blade.ageing = (f if self.layers == "mid" else np.concatenate([f, f])).astype(np.float32)
             if "veins" in out:
-                out["veins"].ageing = np.concatenate([np.concatenate([f[self.view.remap[i]], f[self.view.remap[i]]])
-                                                      for i, _, _ in self.model.vein_polylines() if len(i) >= 2]).astype(np.float32)
+                one = np.concatenate([np.concatenate([f[self.view.remap[i]], f[self.view.remap[i]]])
+                                      for i, _, _ in self.model.vein_polylines() if len(i) >= 2])
+                out["veins"].ageing = np.concatenate([one, one]).astype(np.float32)  # the upper and lower ribbons
         return out
 
     def texture_png(self, state: State) -> bytes | None:
@@ -368,6 +389,21 @@ def normal_file(path) -> Path:
     return path.with_name(f"{path.stem}_baked_normal.png")
 
 
+#: the MTL's specular colour and exponent, as Blender's OBJ importer turns them into the glTF
+#: export's material (Principled BSDF: Specular IOR Level = mean Ks, the dielectric default
+#: 0.5; Roughness = 1 − √(Ns / 1000) = 0.75, the glTF's roughnessFactor)
+MTL_GLOSS = ("Ks 0.5 0.5 0.5", "Ns 62.5")
+
+
+def _diffuse(colours) -> np.ndarray:
+    """An MTL material's Kd: 1 under a texture (readers that multiply map_Kd by Kd keep the
+    texture's colour); the mean of the mesh's vertex colours (linear) without one, so a reader
+    that does not draw vertex colours shows the mesh in its mean colour, not grey."""
+    if colours is None or not len(colours):
+        return np.ones(3)
+    return np.clip(np.asarray(colours, np.float64).mean(axis=0), 0.0, 1.0)
+
+
 def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None = None, png: Path | None = None,
               normal_png: bytes | None = None, normal: Path | None = None) -> list[Path]:
     """OBJ + MTL (+ the texture PNG, ``png``, default ``<stem>_photo.png``): one object per mesh,
@@ -390,8 +426,10 @@ def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None 
     for name, s in surfaces.items():
         lines.append(f"o {name}")
         lines.append(f"usemtl {name}")
-        mat += [f"newmtl {name}", "Ka 0 0 0", "Kd 0.8 0.8 0.8", "Ks 0.05 0.05 0.05", "d 1", "illum 2"]
-        if photo_png is not None and s.uv is not None:
+        textured = photo_png is not None and s.uv is not None
+        kd = _diffuse(None if textured else s.colours)
+        mat += [f"newmtl {name}", "Ka 0 0 0", f"Kd {kd[0]:.4f} {kd[1]:.4f} {kd[2]:.4f}", *MTL_GLOSS, "d 1", "illum 2"]
+        if textured:
             mat.append(f"map_Kd {png.name}")
         if normal_png is not None and s.uv is not None and name == "blade":
             mat.append(f"map_Bump -bm 1 {normal.name}")

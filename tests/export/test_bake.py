@@ -255,6 +255,8 @@ def test_a_baked_export_opens_as_a_textured_glb_and_obj(tmp_path, key):
     assert sorted(p.rsplit("/", 1)[-1] for p in files) == sorted([f"{key}.mtl", f"{key}.obj", f"{key}_baked.png"])
     mtl = (tmp_path / f"{key}.mtl").read_text().split("newmtl ")
     assert [m.split()[0] for m in mtl if f"map_Kd {key}_baked.png" in m] == (["blade", "veins"] if photo else ["blade"])
+    # a textured material's Kd is white: a reader that multiplies map_Kd by Kd keeps the texture's colour
+    assert [m.split()[0] for m in mtl if "Kd 1.0000 1.0000 1.0000" in m] == (["blade", "veins"] if photo else ["blade"])
 
     before = sorted(p.name for p in tmp_path.iterdir())
     with pytest.raises(LeafsimError, match="one state"):

@@ -17,7 +17,7 @@ from leafsim.appearance.photo import load_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.config.species import get_species
-from leafsim.export.mesh import boundary_edges, export_mesh
+from leafsim.export.mesh import MeshSource, boundary_edges, export_mesh
 from leafsim.pipeline import build_leaf
 from leafsim.sim.model import LAYER_T
 from leafsim.sim.simulator import Simulator
@@ -53,8 +53,9 @@ def _counts(model):
 
 
 def _vein_counts(model):
+    """(vertices, triangles) of the vein ribbons: 2 per point and per segment on each face."""
     lines = [i for i, _, _ in model.vein_polylines() if len(i) >= 2]
-    return 2 * sum(len(i) for i in lines), 2 * sum(len(i) - 1 for i in lines)
+    return 4 * sum(len(i) for i in lines), 4 * sum(len(i) - 1 for i in lines)
 
 
 def test_animated_glb_is_valid_and_loads_with_expected_counts(leaf, tmp_path):
@@ -73,6 +74,14 @@ def test_animated_glb_is_valid_and_loads_with_expected_counts(leaf, tmp_path):
     assert (len(blade.vertices), len(blade.faces)) == (2 * n, 2 * m + 2 * b)
     assert blade.is_watertight and blade.is_winding_consistent and blade.volume > 0  # a closed shell, outward
     assert (len(veins.vertices), len(veins.faces)) == _vein_counts(model)
+    # the ribbons on both faces, as the window draws the veins from either side: the second half
+    # is the first mirrored through the blade, a thickness and two lifts below it, facing down
+    half = len(veins.vertices) // 2
+    up, down = np.asarray(veins.vertices[:half]), np.asarray(veins.vertices[half:])
+    nu, nd = np.asarray(veins.vertex_normals[:half]), np.asarray(veins.vertex_normals[half:])
+    gap = np.sum((up - down) * nu, axis=1)
+    assert np.all(gap > 0.5 * model.thickness) and np.all(gap < 2 * model.thickness)  # (h shrinks as it dries)
+    assert np.median(np.sum(nu * nd, axis=1)) < -0.99
     # the morph targets and the animation: one target per key frame after the first, keyed one-hot
     doc = _glb_json(path)
     prim = doc["meshes"][0]["primitives"][0]
@@ -223,6 +232,17 @@ def test_static_obj_and_ply_load_in_trimesh(leaf, tmp_path):
     obj = trimesh.load(tmp_path / "oak.obj", process=False, group_material=False)
     got = sorted((len(g.vertices), len(g.faces)) for g in obj.geometry.values())
     assert got == sorted([(2 * n, 2 * m + 2 * b), _vein_counts(model)])
+    # each untextured mesh's Kd is its vertex colours' mean (linear), so a reader that draws no
+    # vertex colours shows that, not grey; the gloss is the glTF material's in Blender's mapping
+    # (roughness 1 − √(Ns / 1000) = 0.75)
+    surf = MeshSource(model, params, view, "shell", True, "colours").surfaces(states[-1])
+    mtl = {m.split()[0]: m.splitlines() for m in (tmp_path / "oak.mtl").read_text().split("newmtl ")[1:]}
+    assert set(mtl) == {"blade", "veins"}
+    for name, lines in mtl.items():
+        kd = np.array([float(v) for v in next(ln for ln in lines if ln.startswith("Kd ")).split()[1:]])
+        assert np.allclose(kd, surf[name].colours.mean(axis=0), atol=1e-4) and kd.std() > 0.01, (name, kd)
+        ns = float(next(ln for ln in lines if ln.startswith("Ns ")).split()[1])
+        assert abs((1.0 - np.sqrt(ns / 1000.0)) - 0.75) < 1e-9
     export_mesh(model, states[-1], tmp_path / "oak.ply", params=params, view=view, layers="mid")
     ply = trimesh.load(tmp_path / "oak.ply", process=False)
     assert (len(ply.vertices), len(ply.faces)) == (n, m)
