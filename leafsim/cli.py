@@ -89,6 +89,16 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--version", action="version", version=f"leafsim {__version__}")
     sub = ap.add_subparsers(dest="cmd", parser_class=_Parser)
 
+    _gui_parser(sub)
+    _library_parsers(sub)
+    _run_parsers(sub)
+    _bench_accuracy_parsers(sub)
+    _scene_export_parsers(sub)
+    return ap
+
+
+def _gui_parser(sub) -> None:
+    """gui: the window, and its scripted runs (screenshots, timing)."""
     g = sub.add_parser("gui", help="interactive application (default)")
     _common(g)
     g.add_argument("--frames", type=_int, default=None, metavar="N",
@@ -101,6 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--screenshot", default=None, help="save the final window to this PNG (with --frames or --window-frames)")
     g.add_argument("--play", action="store_true", help="start with the simulation playing")
 
+
+def _library_parsers(sub) -> None:
+    """species, params, outline, veins, build: what the library holds and each stage alone."""
     s = sub.add_parser("species", help="list the species library")
     s.add_argument("--config", default=None, metavar="FILE", help=CONFIG_HELP)
     s.add_argument("--json", action="store_true", help=JSON_HELP)
@@ -125,6 +138,9 @@ def build_parser() -> argparse.ArgumentParser:
     _common(b)
     b.add_argument("--json", action="store_true", help=JSON_HELP)
 
+
+def _run_parsers(sub) -> None:
+    """run, compare: a leaf simulated headless, and against its photos."""
     r = sub.add_parser("run", help="simulate headless")
     _common(r)
     add_stop_options(r, frames_help="simulate to frame N (with --resume: to absolute frame N)")
@@ -146,6 +162,9 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--out", default=None, help="montage PNG: photo | model | overlay per row, metrics, colour classes")
     cp.add_argument("--json", action="store_true", help=JSON_HELP)
 
+
+def _bench_accuracy_parsers(sub) -> None:
+    """bench, accuracy: what the kernels cost and what accuracy costs."""
     be = sub.add_parser("bench", help="benchmark the simulation kernels")
     be.add_argument("--json", action="store_true", help=JSON_HELP)
     be.add_argument("--quick", action="store_true", help="small sizes only")
@@ -167,8 +186,6 @@ def build_parser() -> argparse.ArgumentParser:
                          "and every setting's error against it with its CPU seconds per dried leaf")
     ac.add_argument("--cache", default=None, metavar="DIR", help="with --limit: keep every run here and reuse it (resume)")
     ac.add_argument("--json", action="store_true", help=JSON_HELP)
-    _scene_export_parsers(sub)
-    return ap
 
 
 def _scene_export_parsers(sub) -> None:
