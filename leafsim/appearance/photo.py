@@ -35,6 +35,8 @@ def load_photo_rgba(path, max_pixels: int | None = None, traced=None) -> np.ndar
     mask = fit(traced.mask)
     if traced.hole_mask is not None:
         mask = cv2.bitwise_and(mask, cv2.bitwise_not(fit(traced.hole_mask)))
+    if img.shape[2] < 4 or bool((img[:, :, 3] == 255).all()):  # a cut-out photo has no background to show
+        mask[background_specks(rgb, mask > 0)] = 0
     if traced.petiole_mask is not None:
         band = cv2.dilate(fit(traced.petiole_mask), np.ones((5, 5), np.uint8))
         smooth = cv2.inpaint(rgb, band, max(3.0, 0.01 * max(size)), cv2.INPAINT_TELEA)
@@ -42,6 +44,44 @@ def load_photo_rgba(path, max_pixels: int | None = None, traced=None) -> np.ndar
         rgb = mirrored_detail(rgb, smooth, band > 0, mask > 0, k * np.asarray(traced.base_px, float),
                               k * np.asarray(traced.apex_px, float))
     return np.ascontiguousarray(np.dstack([rgb, mask]))
+
+
+#: background specks: within this share of the photo's larger side of the blade's edge ...
+SPECK_REACH = 0.015
+#: ... within this much L* of the background's lightness and this chroma distance of its (a, b)
+SPECK_L = 15.0
+SPECK_CHROMA = 10.0
+#: ... and grown by this many pixels within the blade (their anti-aliased rims, a grid line)
+SPECK_GROW = 2
+
+
+def background_specks(rgb: np.ndarray, blade: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels of the ``blade`` mask that show the background — openings too thin or
+    small for the tracer to keep as holes, such as the wedge where a closed sinus narrows
+    between two overlapping lobes (grapevine: the paper in 7 specks of up to 78 px): the
+    background's colour (the median outside the mask, CIELAB; :data:`SPECK_L`,
+    :data:`SPECK_CHROMA`) within :data:`SPECK_REACH` of the mask's edge (an outline or a hole),
+    grown by :data:`SPECK_GROW` px.  The texture takes them out of the blade (alpha 0), so
+    :func:`~leafsim.appearance.texture.clean_texture` gives them the nearest leaf colour and no
+    mean or sampled photo colour counts them; the mesh's outline does not change.  Tissue is
+    not the paper's colour (a pale vein is green, a lesion dark)."""
+    import cv2
+    from scipy.ndimage import distance_transform_edt
+
+    blade = np.asarray(blade, bool)
+    if not blade.any() or blade.all():
+        return np.zeros(blade.shape, bool)
+    lab = cv2.cvtColor(np.ascontiguousarray(rgb, np.uint8), cv2.COLOR_RGB2LAB).astype(np.float32)
+    lab[..., 0] *= 100.0 / 255.0
+    lab[..., 1:] -= 128.0
+    bg = np.median(lab[~blade], axis=0)
+    near = distance_transform_edt(blade) <= SPECK_REACH * max(blade.shape)
+    like = (np.abs(lab[..., 0] - bg[0]) <= SPECK_L) & (np.hypot(lab[..., 1] - bg[1], lab[..., 2] - bg[2]) <= SPECK_CHROMA)
+    specks = blade & near & like
+    if not specks.any():
+        return specks
+    grown = cv2.dilate(specks.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=SPECK_GROW) > 0
+    return grown & blade
 
 
 def mirrored_detail(rgb: np.ndarray, smooth: np.ndarray, band: np.ndarray, blade: np.ndarray, base, apex) -> np.ndarray:
