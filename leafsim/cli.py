@@ -237,6 +237,28 @@ def _interrupted_json(args, signum: int, what: str) -> None:
         pass
 
 
+def _error_json(args, message: str, code: int) -> None:
+    """``--json`` promises exactly one JSON object, a failed command's too: the error line's
+    message and the exit status, unless the command printed its object already."""
+    from leafsim.commands.common import EMITTED
+
+    if args is None or not getattr(args, "json", False) or EMITTED[0]:
+        return
+    try:
+        print(json.dumps({"command": args.cmd, "error": message, "exit": code}, sort_keys=True), flush=True)
+    except (BrokenPipeError, ValueError):
+        pass
+
+
+def _path_error(e: OSError) -> str:
+    """One line for an operating-system error on a file the user named (a name too long for the
+    file system, a file where a folder should be, no permission, a full disk)."""
+    name = str(e.filename)
+    if len(name) > 80:
+        name = name[:40] + "…" + name[-30:] + f" ({len(name)} characters)"
+    return f"{name}: {e.strerror or type(e).__name__}"
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version"):
@@ -251,6 +273,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         return command(args.cmd)(args) or 0
     except LeafsimError as e:
+        _error_json(args, one_line(str(e)), 2)
         print(f"leafsim: {one_line(str(e))}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, Interrupted) as e:
@@ -261,14 +284,27 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + int(signum)
     except BrokenPipeError:
         return 0
+    except OSError as e:
+        if e.filename is None or os.environ.get("LEAFSIM_DEBUG"):
+            return _internal(args, e)
+        _error_json(args, one_line(_path_error(e)), 2)
+        print(f"leafsim: {one_line(_path_error(e))}", file=sys.stderr)
+        return 2
     except Exception as e:  # never a traceback for the user
-        if os.environ.get("LEAFSIM_DEBUG"):
-            raise
-        print(f"leafsim: internal error: {type(e).__name__}: {one_line(str(e))[:300]} (set LEAFSIM_DEBUG=1 for a traceback)", file=sys.stderr)
-        return 1
+        return _internal(args, e)
     finally:
         if old_term is not None:
             signal.signal(signal.SIGTERM, old_term)
+
+
+def _internal(args, e: Exception) -> int:
+    """An error leafsim did not foresee: one line (a traceback with LEAFSIM_DEBUG set)."""
+    if os.environ.get("LEAFSIM_DEBUG"):
+        raise e
+    msg = f"internal error: {type(e).__name__}: {one_line(str(e))[:300]}"
+    _error_json(args, msg, 1)
+    print(f"leafsim: {msg} (set LEAFSIM_DEBUG=1 for a traceback)", file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":

@@ -71,7 +71,8 @@ def output_target(path: str | os.PathLike, what: str = "file") -> Path:
     except FileNotFoundError:
         return path
     except OSError as e:
-        raise LeafsimError(f"{path}: cannot write {what} ({_os_reason(e)})") from None
+        reason = _no_folder(path.parent) if e.errno == errno.ENOTDIR else _os_reason(e)
+        raise LeafsimError(f"{path}: cannot write {what} ({reason})") from None
     if stat.S_ISLNK(st.st_mode):
         try:
             os.stat(path)
@@ -106,7 +107,7 @@ def check_output(path: str | os.PathLike, what: str = "file", need_bytes: int = 
         parent = target.parent
     parent = parent if str(parent) else Path(".")
     if not parent.is_dir():
-        raise LeafsimError(f"{path}: cannot write {what} (folder {parent} does not exist)")
+        raise LeafsimError(f"{path}: cannot write {what} ({_no_folder(parent)})")
     try:
         with tempfile.TemporaryFile(dir=parent):
             pass
@@ -121,6 +122,24 @@ def check_output(path: str | os.PathLike, what: str = "file", need_bytes: int = 
         raise LeafsimError(f"{path}: cannot write {what} (only {free / 2**20:.1f} MiB free on its disk, "
                            f"{(need_bytes + MIN_FREE_BYTES) / 2**20:.1f} MiB needed)")
     return target
+
+
+def _no_folder(folder: Path) -> str:
+    """Why ``folder`` (not a folder) cannot take a file: it is missing, or it or a folder above
+    it is something else (a file, a named pipe)."""
+    p = Path(folder)
+    while True:
+        try:
+            st = os.stat(p)
+        except OSError:
+            if p.parent == p:
+                break
+            p = p.parent
+            continue
+        if not stat.S_ISDIR(st.st_mode):
+            return f"{p} is {'a file' if stat.S_ISREG(st.st_mode) else _kind(st.st_mode)}, not a folder"
+        break
+    return f"folder {folder} does not exist"
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
@@ -162,7 +181,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, what: str = "file")
     path = output_target(path, what)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
-        raise LeafsimError(f"{path}: cannot write {what} (folder {folder} does not exist)")
+        raise LeafsimError(f"{path}: cannot write {what} ({_no_folder(folder)})")
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
     except OSError as e:

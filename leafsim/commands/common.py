@@ -66,9 +66,22 @@ def ready_kernels() -> None:
 def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
     """The species of ``--species`` (default maple) and its parameters with ``--quality``,
     ``--set`` and (``effects``) ``--effects`` applied."""
-    sp = get_species(DEFAULT_SPECIES if args.species is None else args.species, args.config)
+    if args.species is None and args.config is not None:  # the default may not be in the user's file
+        try:
+            sp = get_species(DEFAULT_SPECIES, args.config)
+        except LeafsimError as e:
+            raise LeafsimError(f"no --species given, and the default '{DEFAULT_SPECIES}' is not in --config "
+                               f"{args.config}: name one with --species ({one_line_tail(str(e))})") from None
+    else:
+        sp = get_species(DEFAULT_SPECIES if args.species is None else args.species, args.config)
     extra = effects_overrides(getattr(args, "effects", None)) if effects else {}
     return sp, sp.params.with_overrides({**overrides(args), **extra}, where="--set")
+
+
+def one_line_tail(message: str) -> str:
+    """The part of a species lookup's error in its last parentheses (``known: ...``), or all of it."""
+    i = message.rfind("(")
+    return message[i + 1:].rstrip(")") if i >= 0 else message
 
 
 def species_inputs(sp) -> tuple:

@@ -114,6 +114,11 @@ class _Outputs:
         if self.ck is not None and a.checkpoint_every and (stopping or k % a.checkpoint_every == 0) and not st["nan"]:
             save_checkpoint(self.ck, self.run.model, self.run.state, self.meta, self.run.sim.carry())
 
+    def finish(self) -> None:
+        """The run ended by its stop (not a signal): a --stats file exists even with no frame."""
+        if self.stream is not None:
+            self.stream.finish()
+
     def close(self) -> None:
         if self.stream is not None:
             self.stream.close()
@@ -135,6 +140,8 @@ def _simulate(run: Run, until: Stop, outputs: _Outputs, progress: Progress) -> t
                 progress.update()
                 if stopping or st["nan"]:
                     break
+            if stop.signum is None:
+                outputs.finish()
     finally:
         progress.close()
         outputs.close()

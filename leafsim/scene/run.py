@@ -200,7 +200,7 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
     params = g.get("params", {})
     if not isinstance(params, dict):
         raise w.err("params", "expected an object of parameter values")
-    lib[sp].params.with_overrides(params, where=f"{w.path}: {w.ctx}, key 'params'")
+    group_params = lib[sp].params.with_overrides(params, where=f"{w.path}: {w.ctx}, key 'params'")
     effects = g.get("effects")
     if effects is not None:
         if not isinstance(effects, list) or not effects or any(e not in EFFECTS for e in effects):
@@ -209,6 +209,7 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
         effects = tuple(effects)
     stop = _stop(w, g.get("stop"))
     lod, check = _lod(w, g.get("lod"))
+    _check_budget(w, lib[sp], group_params, lod)
     output = _output(w, g.get("output", {}))
     if output["mesh"] and output["texture"] == "photo" and lib[sp].image is None:
         raise w.err("output.texture", f"'photo' needs a species with a photo; {sp!r} has a drawn outline (use 'colours')")
@@ -222,6 +223,22 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
                             effects=effects, stop=st, lod=lod, check_lod=lod is not None and k < check,
                             output=output, config_digest=digest, meta={"group": name}))
     return jobs
+
+
+def _check_budget(w: _Where, sp, params, lod: dict | None) -> None:
+    """The group's finest mesh (``lod.show`` with a level of detail, else ``mesh.spacing``) within
+    ``limits.max_particles`` and the machine's memory, checked now (every leaf of the group
+    failed as it started, after the scene's files were begun)."""
+    from leafsim.blade.budget import check_mesh_budget
+    from leafsim.pipeline import leaf_shape
+
+    key = "lod.show" if lod is not None else "params"
+    p = params if lod is None else params.with_overrides({"mesh.spacing": lod["show"]})
+    try:
+        check_mesh_budget(leaf_shape(sp, p), p)
+    except LeafsimError as e:
+        msg = str(e) if lod is None else str(e).replace("mesh.spacing", "lod.show")
+        raise w.err(key, msg) from None
 
 
 def _seeds(w: _Where, g: dict, count: int) -> list[int]:

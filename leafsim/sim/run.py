@@ -280,6 +280,8 @@ def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stat
                 stream.write(st)
             if (on_frame is not None and on_frame(run.state.frame, run.state, st) is False) or st["nan"]:
                 break
+        if own is not None:
+            own.finish()  # (a run of no frame: the file, empty)
     finally:
         if own is not None:
             own.close()

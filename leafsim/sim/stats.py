@@ -52,16 +52,23 @@ class StatsStream:
 
     def __init__(self, path, keep_until: int | None = None):
         self.path = Path(path)
+        self.append = keep_until is not None
+        self.f = None
         try:
-            if keep_until is not None:
+            if self.append:
                 self._keep(keep_until)
-            # checked again now (the build ran since the command checked it): a regular file or
-            # nothing, never through a link (O_NOFOLLOW closes the gap to the open)
-            output_target(self.path, "statistics")
-            flags = os.O_WRONLY | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | (os.O_APPEND if keep_until is not None else os.O_TRUNC)
-            self.f = os.fdopen(os.open(self.path, flags, 0o666), "a" if keep_until is not None else "w", encoding="utf-8")
+                self._open()
+            else:  # a fresh file replaces the old one at the first line: a run stopped before any
+                output_target(self.path, "statistics")  # frame leaves the old one as it was
         except OSError as e:
             raise LeafsimError(f"--stats {self.path}: cannot write statistics ({e.strerror or e})") from None
+
+    def _open(self) -> None:
+        # checked again now (the build ran since the command checked it): a regular file or
+        # nothing, never through a link (O_NOFOLLOW closes the gap to the open)
+        output_target(self.path, "statistics")
+        flags = os.O_WRONLY | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | (os.O_APPEND if self.append else os.O_TRUNC)
+        self.f = os.fdopen(os.open(self.path, flags, 0o666), "a" if self.append else "w", encoding="utf-8")
 
     def _keep(self, frame: int) -> None:
         kept, last = [], 0
@@ -83,11 +90,24 @@ class StatsStream:
         atomic_write_bytes(self.path, "".join(kept).encode(), "statistics")
 
     def write(self, st: dict) -> None:
+        if self.f is None:
+            try:
+                self._open()
+            except OSError as e:
+                raise LeafsimError(f"--stats {self.path}: cannot write statistics ({e.strerror or e})") from None
         self.f.write(json.dumps(st, sort_keys=True) + "\n")
         self.f.flush()
 
+    def finish(self) -> None:
+        """The run ended normally: its file exists even when it wrote no line (no frame ran)."""
+        if self.f is None:
+            try:
+                self._open()
+            except OSError as e:
+                raise LeafsimError(f"--stats {self.path}: cannot write statistics ({e.strerror or e})") from None
+
     def close(self) -> None:
-        if not self.f.closed:
+        if self.f is not None and not self.f.closed:
             self.f.flush()
             os.fsync(self.f.fileno())
             self.f.close()

@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 
+from helpers.cli_contract import stdout_of_a_failure
 from leafsim.cli import main
 
 
@@ -55,7 +56,7 @@ def test_outline_json(capsys, tmp_path):
 def _bad(capsys, argv, needle):
     code, out, err = run(capsys, *argv)
     assert code == 2, (code, err)
-    assert out == ""
+    stdout_of_a_failure(code, out, err)
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("leafsim: "), err
     assert needle in err, err

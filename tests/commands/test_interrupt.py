@@ -132,6 +132,29 @@ def test_resume_refuses_a_statistics_file_with_a_gap(tmp_path, capsys):
     assert stats.read_bytes() == before
 
 
+def test_a_run_stopped_before_its_first_frame_leaves_the_old_statistics(tmp_path, capsys, monkeypatch):
+    """--stats replaces its file at the run's first line, not when the run starts: a signal
+    during the frame-0 picture left an empty file where the last run's statistics had been.
+    A run that ends normally without a frame (--frames 0) still leaves its (empty) file."""
+    import leafsim.commands.run as cr
+
+    stats = tmp_path / "s.jsonl"
+    stats.write_text('{"frame": 1}\n{"frame": 2}\n')
+
+    def interrupted(*a, **k):
+        os.kill(os.getpid(), signal.SIGINT)
+        raise AssertionError("SIGINT did not interrupt")
+
+    monkeypatch.setattr(cr.FrameWriter, "write", interrupted)
+    assert main(BASE + ["--frames", "50", "--every", "5", "--out", str(tmp_path / "o"), "--stats", str(stats)]) == 130
+    assert stats.read_text() == '{"frame": 1}\n{"frame": 2}\n'
+    monkeypatch.undo()
+    capsys.readouterr()
+    assert main(BASE[:5] + ["--frames", "0", "--stats", str(stats)]) == 0, capsys.readouterr().err
+    assert stats.exists() and stats.read_text() == ""
+    capsys.readouterr()
+
+
 def test_sigterm_during_the_build(capsys, monkeypatch):
     import leafsim.commands.shape
 

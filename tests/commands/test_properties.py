@@ -24,6 +24,7 @@ import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from helpers.cli_contract import stdout_of_a_failure
 from leafsim.base.errors import LeafsimError
 from leafsim.base.geometry import crossing_pairs, distance_to_polygon, points_in_polygon
 from leafsim.cli import main
@@ -47,7 +48,7 @@ def run_cli(argv):
 def assert_contract(code, out, err, *needles):
     """Exit 2, nothing on stdout, one line on stderr naming ``needles``, no traceback."""
     assert code == 2, (code, err)
-    assert out == ""
+    stdout_of_a_failure(code, out, err)
     assert err.startswith("leafsim: ") and err.endswith("\n") and err.count("\n") == 1, repr(err)
     assert "Traceback" not in err and "internal error" not in err, err
     for n in needles:

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from helpers import leafimg
+from helpers.cli_contract import stdout_of_a_failure
 from leafsim.cli import main
 
 OAK = ["--species", "oak", "--set", "mesh.spacing=0.06"]
@@ -28,7 +29,8 @@ def run_cli(*argv):
 
 
 def one_line(code, out, err, *needles):
-    assert code == 2 and out == "", (code, out, err)
+    assert code == 2, (code, out, err)
+    stdout_of_a_failure(code, out, err)
     assert err.startswith("leafsim: ") and err.count("\n") == 1 and "Traceback" not in err and "internal error" not in err, err
     for n in needles:
         assert n in err, (n, err)
@@ -98,6 +100,12 @@ def test_scene_size_guards_come_before_any_work(tmp_path):
     (tmp_path / "o2" / "placement.json").mkdir()
     one_line(*run_cli("scene", scene(), "--out", tmp_path / "o2"), "placement.json", "it is a folder")
     assert not any((tmp_path / "o2" / "leaves").iterdir())
+    # a group's finest mesh over limits.max_particles is refused before the scene's files are begun,
+    # naming the key that sets it (lod.show overrides mesh.spacing)
+    err = one_line(*run_cli("scene", scene(lod={"simulate": 0.07, "show": 0.035, "check": 0},
+                                            params={"limits.max_particles": 1000}), "--out", tmp_path / "o3"),
+                   "key 'lod.show'", "more than limits.max_particles = 1,000", "use lod.show ≥")
+    assert "mesh.spacing" not in err and not (tmp_path / "o3").exists()
     p = tmp_path / "d.json"
     p.write_text('{"groups": [{"name": "a", "species": "oak", "count": 2, "count": 100000, "stop": {"frames": 1}}]}')
     one_line(*run_cli("scene", p, "--out", tmp_path / "o"), "duplicate key 'count'")
@@ -106,6 +114,24 @@ def test_scene_size_guards_come_before_any_work(tmp_path):
 
 def test_errors_name_their_real_cause(tmp_path):
     one_line(*run_cli("build", "--species", ""), "no species given")
+    # operating-system errors on the user's paths are one line too (ENAMETOOLONG was an internal error)
+    long = tmp_path / ("c" * 300)
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--out", long), "File name too long", " characters)")
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--stats", long / "s.jsonl"), " characters)")
+    (tmp_path / "a.txt").write_text("x")
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--out", tmp_path / "a.txt" / "sub"), "a.txt is a file, not a folder")
+    one_line(*run_cli("export", *OAK, "--out", tmp_path / "a.txt" / "x.glb"), "a.txt is a file, not a folder")
+    # --json: exactly one JSON object, a failed command's too, with the error line's message
+    code, out, err = run_cli("run", "--species", "mapel", "--frames", "5", "--json")
+    doc = json.loads(out)
+    assert code == 2 and doc["exit"] == 2 and doc["command"] == "run" and "did you mean 'maple'?" in doc["error"]
+    assert err.count("\n") == 1 and doc["error"] in err
+    # no --species, and a --config without the default one: the message says so
+    cfg = json.loads(Path("configs/leaves.json").read_text())
+    cfg["species"] = {"oak": cfg["species"]["oak"]}
+    cfg["species"]["oak"]["image"] = str(Path("images/quercus_01.png").resolve())
+    (tmp_path / "oak_only.json").write_text(json.dumps(cfg))
+    one_line(*run_cli("build", "--config", tmp_path / "oak_only.json"), "no --species given", "default 'maple'", "known: oak")
     one_line(*run_cli("build", "--species", "mapel"), "did you mean 'maple'?")
     one_line(*run_cli("outline", "images/quercus_01.png", "--set", "limits.image_pixels=10000"),
              "limits.image_pixels = 10,000", "too coarse")
