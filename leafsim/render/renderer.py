@@ -359,6 +359,8 @@ class Renderer:
         vertex_normals(self.pos, self.tri, self.nrm)
         self.vbo_pos.write(self.pos)
         self.vbo_nrm.write(self.nrm)
+        if top_positions is not None and self.top is not None:
+            self.top[:] = top_positions  # before the bounds, which frame the shadow map and the camera
         self._bounds()
         recolour = self._write_albedo(colours, tint, c, vein_colours)
         self._write_subgrid(mt, mottle_size, mottle_amount, ck, crinkle_size)
@@ -369,8 +371,6 @@ class Renderer:
                     raise LeafsimError(f"renderer: scalar field {k!r} must be ({self.n},), got {v.shape}")
                 self.scalars[k] = v
             self._scalar_name = None
-        if top_positions is not None and self.top is not None:
-            self.top[:] = top_positions
         if self.veins.count:
             self.vbo_vein_dyn.write(self.veins.frame(self.pos, self.nrm))
             if recolour:
