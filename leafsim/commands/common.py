@@ -75,7 +75,12 @@ def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
     else:
         sp = get_species(DEFAULT_SPECIES if args.species is None else args.species, args.config)
     extra = effects_overrides(getattr(args, "effects", None)) if effects else {}
-    return sp, sp.params.with_overrides({**overrides(args), **extra}, where="--set")
+    given = overrides(args)
+    both = sorted(k for k in parse_set_args(args.sets) if k in extra)
+    if both:  # --effects sets every effect: a --set of one would be dropped without a word
+        raise LeafsimError(f"--set {both[0]} with --effects {args.effects}: --effects switches every effect on or off; "
+                           f"list the effects you want in --effects, or use --set effects.* without it")
+    return sp, sp.params.with_overrides({**given, **extra}, where="--set")
 
 
 def one_line_tail(message: str) -> str:

@@ -121,6 +121,9 @@ def test_errors_name_their_real_cause(tmp_path):
     (tmp_path / "a.txt").write_text("x")
     one_line(*run_cli("run", *OAK, "--frames", "2", "--out", tmp_path / "a.txt" / "sub"), "a.txt is a file, not a folder")
     one_line(*run_cli("export", *OAK, "--out", tmp_path / "a.txt" / "x.glb"), "a.txt is a file, not a folder")
+    # --effects sets every effect: a --set of one beside it is refused, not dropped
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--effects", "osmosis", "--set", "effects.shrink=true"),
+             "--set effects.shrink with --effects osmosis")
     # --json: exactly one JSON object, a failed command's too, with the error line's message
     code, out, err = run_cli("run", "--species", "mapel", "--frames", "5", "--json")
     doc = json.loads(out)
