@@ -90,7 +90,7 @@ class GltfBuilder:
             if "normalTexture" in self.doc["materials"][material]:
                 if len(frames) > 1:
                     raise ValueError("glTF: a normal map on an animated mesh would need its tangents morphed too")
-                attrs["TANGENT"] = self.accessor(tangents(s0.positions, s0.normals, s0.uv, s0.triangles))
+                attrs["TANGENT"] = self.accessor(tangents(s0.positions, s0.normals, s0.uv, s0.triangles, s0.lower))
         if s0.colours is not None:
             attrs["COLOR_0"] = self.accessor(s0.colours)
         if s0.thickness is not None:
@@ -153,12 +153,14 @@ class GltfBuilder:
         return self._json(bin_name), bytes(self.bin)
 
 
-def tangents(positions: np.ndarray, normals: np.ndarray, uv: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+def tangents(positions: np.ndarray, normals: np.ndarray, uv: np.ndarray, triangles: np.ndarray,
+             lower: np.ndarray | None = None) -> np.ndarray:
     """(n, 4) float32 glTF TANGENT of a surface: xyz the direction of increasing u (the sum over
     each vertex's triangles of ∂P/∂u, made orthogonal to the vertex normal, unit), w the sign
     that makes cross(normal, tangent) · w point up the image (decreasing v, v = 0 the top row),
-    the normal map's +y (the bake's frame, :func:`leafsim.export.bake.bake_normals`).  A vertex
-    of no usable triangle gets any unit vector across its normal and w = 1."""
+    the normal map's +y (the bake's frame, :func:`leafsim.export.bake.bake_normals`), turned
+    by 180° about the normal on the vertices ``lower`` flags (a shell's lower face).  A
+    vertex of no usable triangle gets any unit vector across its normal and w = 1."""
     P = np.asarray(positions, np.float64)
     N = np.asarray(normals, np.float64)
     U = np.asarray(uv, np.float64)
@@ -183,6 +185,14 @@ def tangents(positions: np.ndarray, normals: np.ndarray, uv: np.ndarray, triangl
         norm[bad] = np.linalg.norm(t[bad], axis=1)
     t /= norm[:, None]
     w = np.where(np.sum(np.cross(N, t) * -b, axis=1) < 0.0, -1.0, 1.0)
+    if lower is not None:
+        # a shell's lower face (normal −n, the upper face's texture coordinates): the frame turned
+        # by 180° about the normal (x along decreasing u, y down the image), so the map tilts its
+        # normal against the upper face's, as the same relief seen from below (the upper face's
+        # frame, which a client that makes its own tangents from the texture coordinates uses,
+        # shows it mirrored)
+        low = np.asarray(lower, bool)
+        t[low] = -t[low]
     return np.concatenate([t, w[:, None]], 1).astype(np.float32)
 
 

@@ -53,7 +53,9 @@ class Surface:
     colours : (n, 3) float32 linear RGB or None; thickness : (n,) float32 or None (mid-surface);
     ageing : (n, 3) float32 or None: with the photo as texture, the factor rgb(now) / rgb(young)
         the ageing multiplies it by (above 1 where green turns red or yellow);
-    triangles : (m, 3) uint32, counter-clockwise seen from outside.
+    triangles : (m, 3) uint32, counter-clockwise seen from outside;
+    lower : (n,) bool or None: the vertices of a shell's lower face (their normal-map frame is
+        turned, :func:`leafsim.export.gltf.tangents`).
     """
 
     positions: np.ndarray
@@ -63,6 +65,7 @@ class Surface:
     colours: np.ndarray | None = None
     thickness: np.ndarray | None = None
     ageing: np.ndarray | None = None
+    lower: np.ndarray | None = None  # (n,) bool: the vertex is on a shell's lower face (the blade's)
 
 
 def to_y_up(p: np.ndarray) -> np.ndarray:
@@ -100,7 +103,9 @@ def blade_surface(model, state, T, remap, layers, uv, col) -> tuple[Surface, np.
     sides = np.concatenate([np.column_stack([a, b, b + nT]), np.column_stack([a, b + nT, a + nT])])
     faces = np.concatenate([tri[:, ::-1], tri + nT, sides])
     twice = lambda x: None if x is None else np.concatenate([x, x])
-    return _surface(np.concatenate([p, top]), np.concatenate([-n, n]), faces, twice(uv), twice(col)), top, n, p
+    shell = _surface(np.concatenate([p, top]), np.concatenate([-n, n]), faces, twice(uv), twice(col))
+    shell.lower = np.arange(2 * nT) < nT
+    return shell, top, n, p
 
 
 def _ribbons(model: Model, remap: np.ndarray, sheet: np.ndarray, n: np.ndarray, up: float, uv, col,
