@@ -237,15 +237,21 @@ def _interrupted_json(args, signum: int, what: str) -> None:
         pass
 
 
-def _error_json(args, message: str, code: int) -> None:
+def _error_json(args, message: str, code: int, argv: list[str] | None = None) -> None:
     """``--json`` promises exactly one JSON object, a failed command's too: the error line's
-    message and the exit status, unless the command printed its object already."""
+    message and the exit status, unless the command printed its object already.  A command line
+    that did not parse (``args`` None) counts ``--json`` among its words."""
     from leafsim.commands.common import EMITTED
 
-    if args is None or not getattr(args, "json", False) or EMITTED[0]:
+    if args is not None:
+        wanted, cmd = getattr(args, "json", False), args.cmd
+    else:
+        wanted = argv is not None and "--json" in argv
+        cmd = argv[0] if argv and argv[0] in COMMANDS else None
+    if not wanted or EMITTED[0]:
         return
     try:
-        print(json.dumps({"command": args.cmd, "error": message, "exit": code}, sort_keys=True), flush=True)
+        print(json.dumps({"command": cmd, "error": message, "exit": code}, sort_keys=True), flush=True)
     except (BrokenPipeError, ValueError):
         pass
 
@@ -273,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         return command(args.cmd)(args) or 0
     except LeafsimError as e:
-        _error_json(args, one_line(str(e)), 2)
+        _error_json(args, one_line(str(e)), 2, argv)
         print(f"leafsim: {one_line(str(e))}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, Interrupted) as e:

@@ -53,6 +53,8 @@ SPECK_L = 15.0
 SPECK_CHROMA = 10.0
 #: ... and grown by this many pixels within the blade (their anti-aliased rims, a grid line)
 SPECK_GROW = 2
+#: only on a light background (paper: L* 88-100 on the shipped scans), lighter than any leaf tissue
+SPECK_MIN_L = 70.0
 
 
 def background_specks(rgb: np.ndarray, blade: np.ndarray) -> np.ndarray:
@@ -75,6 +77,8 @@ def background_specks(rgb: np.ndarray, blade: np.ndarray) -> np.ndarray:
     lab[..., 0] *= 100.0 / 255.0
     lab[..., 1:] -= 128.0
     bg = np.median(lab[~blade], axis=0)
+    if bg[0] < SPECK_MIN_L:  # a dark background: dark tissue by the margin (a necrotic rim) is not it
+        return np.zeros(blade.shape, bool)
     near = distance_transform_edt(blade) <= SPECK_REACH * max(blade.shape)
     like = (np.abs(lab[..., 0] - bg[0]) <= SPECK_L) & (np.hypot(lab[..., 1] - bg[1], lab[..., 2] - bg[2]) <= SPECK_CHROMA)
     specks = blade & near & like

@@ -71,7 +71,7 @@ def output_target(path: str | os.PathLike, what: str = "file") -> Path:
     except FileNotFoundError:
         return path
     except OSError as e:
-        reason = _no_folder(path.parent) if e.errno == errno.ENOTDIR else _os_reason(e)
+        reason = no_folder(path.parent) if e.errno == errno.ENOTDIR else _os_reason(e)
         raise LeafsimError(f"{path}: cannot write {what} ({reason})") from None
     if stat.S_ISLNK(st.st_mode):
         try:
@@ -107,7 +107,7 @@ def check_output(path: str | os.PathLike, what: str = "file", need_bytes: int = 
         parent = target.parent
     parent = parent if str(parent) else Path(".")
     if not parent.is_dir():
-        raise LeafsimError(f"{path}: cannot write {what} ({_no_folder(parent)})")
+        raise LeafsimError(f"{path}: cannot write {what} ({no_folder(parent)})")
     try:
         with tempfile.TemporaryFile(dir=parent):
             pass
@@ -124,7 +124,7 @@ def check_output(path: str | os.PathLike, what: str = "file", need_bytes: int = 
     return target
 
 
-def _no_folder(folder: Path) -> str:
+def no_folder(folder: Path) -> str:
     """Why ``folder`` (not a folder) cannot take a file: it is missing, or it or a folder above
     it is something else (a file, a named pipe)."""
     p = Path(folder)
@@ -181,7 +181,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, what: str = "file")
     path = output_target(path, what)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
-        raise LeafsimError(f"{path}: cannot write {what} ({_no_folder(folder)})")
+        raise LeafsimError(f"{path}: cannot write {what} ({no_folder(folder)})")
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
     except OSError as e:

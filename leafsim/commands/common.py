@@ -11,7 +11,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output, not_an_input
 from leafsim.config.params import NUMBER, PARAMS, ParamSet, parse_set_args
 from leafsim.config.presets import quality_overrides
-from leafsim.config.species import DEFAULT_SPECIES, Species, get_species
+from leafsim.config.species import DEFAULT_SPECIES, Species, get_species, load_library
 from leafsim.interactive.eta import DryingEta, duration
 
 
@@ -67,13 +67,11 @@ def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
     """The species of ``--species`` (default maple) and its parameters with ``--quality``,
     ``--set`` and (``effects``) ``--effects`` applied."""
     if args.species is None and args.config is not None:  # the default may not be in the user's file
-        try:
-            sp = get_species(DEFAULT_SPECIES, args.config)
-        except LeafsimError as e:
+        lib = load_library(args.config)  # (a file that cannot be read says so itself)
+        if DEFAULT_SPECIES not in lib:
             raise LeafsimError(f"no --species given, and the default '{DEFAULT_SPECIES}' is not in --config "
-                               f"{args.config}: name one with --species ({one_line_tail(str(e))})") from None
-    else:
-        sp = get_species(DEFAULT_SPECIES if args.species is None else args.species, args.config)
+                               f"{args.config}: name one with --species (known: {', '.join(sorted(lib))})")
+    sp = get_species(DEFAULT_SPECIES if args.species is None else args.species, args.config)
     extra = effects_overrides(getattr(args, "effects", None)) if effects else {}
     given = overrides(args)
     both = sorted(k for k in parse_set_args(args.sets) if k in extra)
@@ -81,12 +79,6 @@ def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
         raise LeafsimError(f"--set {both[0]} with --effects {args.effects}: --effects switches every effect on or off; "
                            f"list the effects you want in --effects, or use --set effects.* without it")
     return sp, sp.params.with_overrides({**given, **extra}, where="--set")
-
-
-def one_line_tail(message: str) -> str:
-    """The part of a species lookup's error in its last parentheses (``known: ...``), or all of it."""
-    i = message.rfind("(")
-    return message[i + 1:].rstrip(")") if i >= 0 else message
 
 
 def species_inputs(sp) -> tuple:

@@ -14,7 +14,7 @@ import numpy as np
 
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import check_output, not_an_input, output_target, remove_stale_temps
+from leafsim.base.fileio import check_output, no_folder, not_an_input, output_target, remove_stale_temps
 from leafsim.base.signals import DeferredSignals, Interrupted
 from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
 from leafsim.commands.common import Progress, emit, ready_kernels, species_inputs, species_params, stop_of
@@ -47,8 +47,8 @@ def check_run_args(args) -> Path | None:
             raise LeafsimError(f"--out {out}: a broken symbolic link (expected a folder or nothing)")
         if out.exists() and not out.is_dir():
             raise LeafsimError(f"--out {out}: exists and is not a folder")
-        if not out.parent.exists():
-            raise LeafsimError(f"--out {out}: parent folder {out.parent} does not exist")
+        if not out.parent.is_dir():
+            raise LeafsimError(f"--out {out}: {no_folder(out.parent)}")
         check_output(out, "--out folder", folder=True)
         ck = out / CHECKPOINT
         if args.resume and (ck.exists() or ck.is_symlink()) and not ck.is_file():
@@ -66,8 +66,8 @@ def check_run_args(args) -> Path | None:
     if args.stats is not None and not args.stats.strip():
         raise LeafsimError("--stats '': expected a file name for the per-frame statistics")
     if args.stats:
-        if not Path(args.stats).parent.exists():
-            raise LeafsimError(f"--stats {args.stats}: folder {Path(args.stats).parent} does not exist")
+        if not Path(args.stats).parent.is_dir():
+            raise LeafsimError(f"--stats {args.stats}: {no_folder(Path(args.stats).parent)}")
         check_output(args.stats, "--stats file")
         if out is not None:
             if os.path.realpath(args.stats) == os.path.realpath(out):  # refused now, before --out is made

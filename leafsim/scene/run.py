@@ -234,8 +234,9 @@ def _check_budget(w: _Where, sp, params, lod: dict | None) -> None:
 
     key = "lod.show" if lod is not None else "params"
     p = params if lod is None else params.with_overrides({"mesh.spacing": lod["show"]})
+    shape = leaf_shape(sp, p)  # (an outline that cannot be made says so itself)
     try:
-        check_mesh_budget(leaf_shape(sp, p), p)
+        check_mesh_budget(shape, p)
     except LeafsimError as e:
         msg = str(e) if lod is None else str(e).replace("mesh.spacing", "lod.show")
         raise w.err(key, msg) from None

@@ -60,3 +60,8 @@ def test_a_cut_out_or_speckless_photo_is_untouched():
     rgb[199:201, 100:106] = (240, 240, 240)  # a slit of background at the margin (reach: 6 px)
     got = background_specks(rgb, blade)
     assert got[199:201, 100:106].all() and not got[:, 120:].any() and not got[125:127].any()
+    # on a dark background nothing is searched: dark tissue by the margin (a necrotic rim) is no speck
+    dark = rgb.copy()
+    dark[~blade] = (15, 15, 15)
+    dark[150:152, 100:106] = (15, 15, 15)
+    assert not background_specks(dark, blade).any()

@@ -121,6 +121,14 @@ def test_errors_name_their_real_cause(tmp_path):
     (tmp_path / "a.txt").write_text("x")
     one_line(*run_cli("run", *OAK, "--frames", "2", "--out", tmp_path / "a.txt" / "sub"), "a.txt is a file, not a folder")
     one_line(*run_cli("export", *OAK, "--out", tmp_path / "a.txt" / "x.glb"), "a.txt is a file, not a folder")
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--out", tmp_path / "a.txt" / "sub" / "o"), "a.txt is a file, not a folder")
+    one_line(*run_cli("run", *OAK, "--frames", "2", "--stats", tmp_path / "a.txt" / "sub" / "s.jsonl"),
+             "a.txt is a file, not a folder")
+    # a command line that does not parse, with --json, prints its one object too
+    code, out, err = run_cli("run", "--frames", "abc", "--json")
+    assert code == 2 and json.loads(out) == {"command": "run", "error": err.strip().removeprefix("leafsim: "), "exit": 2}
+    # a --config that cannot be read says so, with or without --species
+    one_line(*run_cli("build", "--config", tmp_path / "none.json"), "species config not found")
     # --effects sets every effect: a --set of one beside it is refused, not dropped
     one_line(*run_cli("run", *OAK, "--frames", "2", "--effects", "osmosis", "--set", "effects.shrink=true"),
              "--set effects.shrink with --effects osmosis")

@@ -384,3 +384,16 @@ def test_overview_image_shows_every_leaf(tmp_path):
     blobs = sorted(st[1:, cv2.CC_STAT_AREA])
     assert len(blobs) == 3 and blobs[0] > 500, blobs  # three green leaves, side by side, none lost
     assert len(load_views(tmp_path / "out", scene.jobs)) == 3
+
+
+def test_every_file_a_leaf_export_writes_is_one_the_scene_may_replace():
+    """A leaf's folder is cleared file by file, only of the files leafsim writes there: every
+    name an export of ``leaf.FMT`` writes beside it (a glTF's buffer, an OBJ's material, texture
+    and crinkle normal map) is among them (the normal map was not: a re-run refused the folder)."""
+    from leafsim.export.mesh import FORMATS, TEXTURES, side_files
+    from leafsim.scene.layout import _LEAF_FILES
+
+    for fmt in FORMATS:
+        for texture in TEXTURES:
+            for path in [Path(f"leaf.{fmt}"), *(p for p, _ in side_files(Path(f"leaf.{fmt}"), fmt, texture))]:
+                assert _LEAF_FILES.fullmatch(path.name), (fmt, texture, path.name)
