@@ -192,7 +192,7 @@ def _scene_export_parsers(sub) -> None:
     sc = sub.add_parser("scene", help="simulate a scene file of many leaves in parallel")
     sc.add_argument("scene", help="scene JSON (see configs/scenes/ and docs/scenes.md)")
     sc.add_argument("--out", default=None, help="output folder (default out/SCENE_NAME)")
-    sc.add_argument("--workers", type=_int, default=None, help="local worker processes (default: the CPU count)")
+    sc.add_argument("--workers", type=_int, default=None, help="local worker processes (default: the CPUs this process may use)")
     sc.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this Dask scheduler, e.g. tcp://host:8786")
     sc.add_argument("--json", action="store_true", help=JSON_HELP)
 

@@ -7,8 +7,16 @@ import sys
 from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
-from leafsim.commands.common import emit, ready_kernels
+from leafsim.commands.common import emit, ready_kernels, warn
 from leafsim.scene.run import load_scene, run_scene
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may run on (its affinity where the OS tells it, else the count)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
 
 
 def cmd_scene(args):
@@ -18,7 +26,11 @@ def cmd_scene(args):
         raise LeafsimError("--scheduler '': expected a Dask scheduler address (e.g. tcp://host:8786), or no --scheduler "
                            "for the local process pool")
     scene = load_scene(args.scene)
-    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    cpus = usable_cpus()
+    workers = args.workers if args.workers is not None else cpus
+    if args.scheduler is None and workers > cpus:
+        warn(f"--workers {workers} is more than the {cpus} CPUs this process may use: the leaves will share "
+             f"cores (each worker holds its own leaf in memory; the results are the same for any worker count)")
     out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem
     rep = run_scene(scene, out, workers=workers, scheduler=args.scheduler, before=ready_kernels)
     bad = rep["failed"]

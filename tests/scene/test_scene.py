@@ -397,3 +397,19 @@ def test_every_file_a_leaf_export_writes_is_one_the_scene_may_replace():
         for texture in TEXTURES:
             for path in [Path(f"leaf.{fmt}"), *(p for p, _ in side_files(Path(f"leaf.{fmt}"), fmt, texture))]:
                 assert _LEAF_FILES.fullmatch(path.name), (fmt, texture, path.name)
+
+
+def test_more_workers_than_cpus_warns_in_one_line_and_runs(tmp_path):
+    """--workers beyond the CPUs this process may use: one warning line, the scene still runs
+    (on no more processes than it has leaves)."""
+    from leafsim.commands.scene import usable_cpus
+
+    path = _scene(tmp_path, name="one", groups=[{"name": "c", "species": "chestnut", "count": 1, "seed": 3,
+                                                 "params": dict(TINY), "stop": {"water_left": 0.99}}])
+    many = usable_cpus() + 997
+    r = subprocess.run([sys.executable, "-m", "leafsim", "scene", str(path), "--out", str(tmp_path / "out"),
+                        "--workers", str(many), "--json"], capture_output=True, text=True, timeout=HANG_S, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    warnings = [l for l in r.stderr.splitlines() if "warning" in l]
+    assert len(warnings) == 1 and f"--workers {many} is more than the {usable_cpus()} CPUs" in warnings[0], r.stderr
+    assert json.loads(r.stdout)["ran"] == 1
