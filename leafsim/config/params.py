@@ -412,6 +412,24 @@ def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
+def json_typed(tree: Mapping[str, Any], where: str = "") -> Mapping[str, Any]:
+    """``tree`` (parameter values read from a JSON file) when every number is a JSON number and
+    every switch a JSON true / false; a LeafsimError naming the first one written as a string
+    otherwise.  ``--set`` values are text by nature and are parsed by :meth:`Param.coerce`; in
+    a file a quoted "0.3" is most often a slip (a value meant for another key, a unit kept), so
+    it is refused rather than read."""
+    if not isinstance(tree, Mapping):
+        return tree  # ParamSet says what it expected
+    at = f"{where}: " if where else ""
+    for key, value in flatten(tree).items():
+        p = PARAMS.get(key)
+        if p is not None and p.kind != "choice" and isinstance(value, str):
+            kind = "JSON true or false" if p.kind == "bool" else "JSON number"
+            raise LeafsimError(f"{at}parameter '{key}' = {show(value)} is a string: expected {p.describe()}, "
+                               f"written as a {kind} without quotes")
+    return tree
+
+
 class ParamSet(Mapping[str, Any]):
     """Immutable, validated mapping of every declared parameter to its value."""
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes, read_json
-from leafsim.config.params import PARAMS, ParamSet, check_seed, flatten, unknown_key_message
+from leafsim.config.params import PARAMS, ParamSet, check_seed, flatten, json_typed, unknown_key_message
 from leafsim.config.species import get_species
 
 #: file format tag of saved parameter sets
@@ -74,4 +74,4 @@ def read_param_set(path, species: str, seed: int, config=None, species_params: P
         base = species_params
     else:
         base = get_species(file_species, config).params
-    return file_species, int(seed), base.with_overrides(values, where=str(path))
+    return file_species, int(seed), base.with_overrides(json_typed(values, str(path)), where=str(path))

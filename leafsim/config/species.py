@@ -22,7 +22,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import read_json
 from leafsim.base.geometry import outline_problem, targets_problem
 from leafsim.base.resources import default_config, display_path
-from leafsim.config.params import ParamSet
+from leafsim.config.params import ParamSet, json_typed
 from leafsim.config.params import show as _show
 
 DEFAULT_SPECIES = "maple"
@@ -256,7 +256,8 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
     overrides = e.get("params", {})
     if not isinstance(overrides, dict):
         raise _err(path, key, "params", "expected an object of parameter values")
-    params = ParamSet(overrides, where=f"{path}: species '{key}'")
+    where = f"{path}: species '{key}'"
+    params = ParamSet(json_typed(overrides, where), where=where)
     return Species(
         key=key,
         name=str(e.get("name", key)),

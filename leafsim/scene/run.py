@@ -29,7 +29,7 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes, not_an_input, output_target, read_json
-from leafsim.config.params import SEED_MAX
+from leafsim.config.params import SEED_MAX, json_typed
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
 from leafsim.scene.layout import leaf_dir, leaf_folder_entries
@@ -200,7 +200,8 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
     params = g.get("params", {})
     if not isinstance(params, dict):
         raise w.err("params", "expected an object of parameter values")
-    group_params = lib[sp].params.with_overrides(params, where=f"{w.path}: {w.ctx}, key 'params'")
+    where = f"{w.path}: {w.ctx}, key 'params'"
+    group_params = lib[sp].params.with_overrides(json_typed(params, where), where=where)
     effects = g.get("effects")
     if effects is not None:
         if not isinstance(effects, list) or not effects or any(e not in EFFECTS for e in effects):

@@ -123,3 +123,20 @@ def test_quality_lines_name_a_level_another_one_beats():
     assert lines[1].endswith("; draft is as accurate for less CPU on maple; fine is as accurate for less CPU on oak")
     assert lines[2].startswith("fine (default): 13 / 9 %") and "as accurate" not in lines[2]
     assert lines[3] == "reference: not measured"
+
+
+def test_json_values_must_be_json_numbers_and_switches_but_set_values_are_text():
+    """A file's quoted "0.3" or "true" is refused in one line naming the key; --set's text is
+    parsed (it is text by nature); a choice is a string either way."""
+    from leafsim.config.params import json_typed, parse_set_args
+
+    ok = {"mesh": {"spacing": 0.03}, "veins.lateral.enabled": False, "osmosis.solver": "direct"}
+    assert json_typed(ok, "f.json") is ok
+    for bad, key in [({"mesh.spacing": "0.03"}, "mesh.spacing"), ({"veins": {"lateral": {"enabled": "true"}}}, "veins.lateral.enabled"),
+                     ({"outline.points": "2000"}, "outline.points")]:
+        with pytest.raises(LeafsimError) as e:
+            json_typed(bad, "f.json")
+        msg = str(e.value)
+        assert msg.startswith("f.json: parameter '" + key) and "is a string" in msg and "\n" not in msg
+    assert "true or false" in str(pytest.raises(LeafsimError, json_typed, {"veins.lateral.enabled": "1"}).value)
+    assert parse_set_args(["mesh.spacing=0.03"]) == {"mesh.spacing": 0.03}

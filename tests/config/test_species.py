@@ -63,6 +63,10 @@ def _entry(**kw):
     ({"species": {"x": _entry(colour="red")}}, "species 'x', key 'colour'"),
     ({"species": {"x": _entry(params={"veins.main.kappa": 99})}}, "species 'x': parameter 'veins.main.kappa'"),
     ({"species": {"x": _entry(params={"veins.nope": 1})}}, "species 'x': unknown parameter 'veins.nope'"),
+    # a quoted number or switch was read as one: refused, naming the key and the JSON type wanted
+    ({"species": {"x": _entry(params={"shrink.alpha": "0.3"})}}, "parameter 'shrink.alpha' = '0.3' is a string"),
+    ({"species": {"x": _entry(params={"veins": {"main": {"kappa": "4"}}})}}, "'veins.main.kappa' = '4' is a string"),
+    ({"species": {"x": _entry(variants={"red": {"params": {"mesh.spacing": "0.03"}}})}}, "written as a JSON number"),
     ({"species": {"x": _entry(image="images/missing.png")}}, "species 'x', key 'image'"),
     ({"species": {"x": {"length_m": 0.1}}}, "needs either 'image'"),
     ({"species": {"x": _entry(outline={"points": [[0, 0], [1]]})}}, "key 'outline.points'"),

@@ -338,6 +338,9 @@ def test_cli_bad_input_exit_2_and_no_files(tmp_path):
     cases.append(([str(bad), "--out", str(tmp_path / "bad")], "malformed JSON"))
     neg = _scene(tmp_path, name="neg", groups=[{"name": "a", "species": "oak", "count": -1, "stop": {"frames": 1}}])
     cases.append(([str(neg), "--out", str(tmp_path / "neg")], "key 'count'"))
+    quoted = _scene(tmp_path, name="quoted", groups=[{"name": "a", "species": "oak", "count": 1, "params": {"mesh.spacing": "0.08"},
+                                                       "stop": {"frames": 1}}])
+    cases.append(([str(quoted), "--out", str(tmp_path / "neg")], "parameter 'mesh.spacing' = '0.08' is a string"))
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
     cases.append(([str(_scene(tmp_path)), "--out", str(blocker / "out")], "cannot create the output folder"))
