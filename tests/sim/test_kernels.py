@@ -296,3 +296,66 @@ def test_block_compute_loops_are_vectorised():
         asm = fresh.inspect_asm(fresh.signatures[0])
         assert "sqrtpd" in asm and "divpd" in asm  # packed square roots and divisions
 
+
+
+def _uninvert_exact(q, invm, vidx, hmin, vonly, ground, dint):
+    """The un-inversion pass as it was before its early skip (plain Python floats: IEEE
+    doubles, no contraction, the kernel's FASTMATH arithmetic)."""
+    moved = 0
+    for iv, ia, ib, ic in vidx.tolist():
+        b = [q[ib, k] - q[ia, k] for k in range(3)]
+        c = [q[ic, k] - q[ia, k] for k in range(3)]
+        n = [b[1] * c[2] - b[2] * c[1], b[2] * c[0] - b[0] * c[2], b[0] * c[1] - b[1] * c[0]]
+        nl = math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+        if nl < 1e-14:
+            continue
+        n = [x / nl for x in n]
+        d = [q[iv, k] - (q[ia, k] + q[ib, k] + q[ic, k]) / 3.0 for k in range(3)]
+        h = d[0] * n[0] + d[1] * n[1] + d[2] * n[2]
+        if h < hmin:
+            w = [0.0 if vonly or (ground and n[2] > 0.0 and q[j, 2] <= 1e-12) else invm[j] for j in (ia, ib, ic)]
+            W = invm[iv] + (w[0] + w[1] + w[2]) / 9.0
+            if W <= 0.0:
+                continue
+            dl = (hmin - h) / W
+            f = invm[iv] * dl
+            for k in range(3):
+                q[iv, k] += f * n[k]
+                dint[iv, k] += f * n[k]
+            for j, wj in zip((ia, ib, ic), w):
+                g = -wj * dl / 3.0
+                for k in range(3):
+                    q[j, k] += g * n[k]
+                    dint[j, k] += g * n[k]
+            moved += 1
+    return moved
+
+
+def test_uninvert_early_skip_changes_no_bit():
+    """The skip without a square root takes exactly the pairs the exact height test skips:
+    V particles at heights spread around hmin, down to a few ulps of it, inverted, degenerate
+    triangles and pinned particles give the same positions, displacements and count to the bit."""
+    rng = np.random.default_rng(3)
+    n_pairs, hmin = 600, 5e-5
+    q = rng.normal(scale=2e-3, size=(4 * n_pairs, 3))
+    vidx = np.arange(4 * n_pairs, dtype=np.int64).reshape(n_pairs, 4)[:, [3, 0, 1, 2]].copy()
+    invm = rng.uniform(0.5, 2.0, 4 * n_pairs)
+    invm[rng.random(4 * n_pairs) < 0.05] = 0.0
+    for t, (iv, ia, ib, ic) in enumerate(vidx):
+        a, b, c = q[ia], q[ib], q[ic]
+        nrm = np.cross(b - a, c - a)
+        nrm /= np.linalg.norm(nrm)
+        kind = t % 6
+        h = {0: hmin * (1 + rng.uniform(-1e-15, 1e-15)), 1: hmin * (1 + 1e-7 * rng.normal()),
+             2: rng.uniform(-3, 3) * hmin, 3: hmin * (1 + 1e-6 * rng.uniform(0.5, 2.0)), 4: rng.uniform(1, 100) * hmin,
+             5: -rng.uniform(0, 2) * hmin}[kind]
+        q[iv] = (a + b + c) / 3.0 + h * nrm
+    q[vidx[::50, 2]] = q[vidx[::50, 1]]  # degenerate triangles
+    q[rng.random(len(q)) < 0.1, 2] = 0.0  # on the ground
+    for vonly, ground, hm in ((False, True, hmin), (True, False, 0.8 * hmin), (False, False, hmin), (False, True, 0.0)):
+        qa, qb = q.copy(), q.copy()
+        da, db = np.zeros_like(q), np.zeros_like(q)
+        ka = kp.uninvert(qa, invm, vidx, hm, vonly, ground, da)
+        kb_ = _uninvert_exact(qb, invm, vidx, hm, vonly, ground, db)
+        assert ka == kb_ and ka > 0
+        assert np.array_equal(qa, qb) and np.array_equal(da, db)
