@@ -108,7 +108,7 @@ def _gui_parser(sub) -> None:
                    help="dry the leaf to the end as fast as possible (the 'Dry to end' button), draw it and exit")
     g.add_argument("--window-frames", type=_int, default=None, metavar="N",
                    help="exit after N window frames drawn with the leaf, playing (timing the window)")
-    g.add_argument("--screenshot", default=None, help="save the final window to this PNG (with --frames or --window-frames)")
+    g.add_argument("--screenshot", default=None, help="save the final window to this PNG (with --frames, --window-frames or --until)")
     g.add_argument("--play", action="store_true", help="start with the simulation playing")
 
 

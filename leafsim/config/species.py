@@ -123,6 +123,11 @@ def _points(path, sp, key, value, min_len=1) -> np.ndarray:
     if isinstance(value, list) and len(value) > MAX_POINTS:
         raise _err(path, sp, key, f"{len(value):,} points, expected at most {MAX_POINTS:,} (it is resampled to "
                                   "outline.points anyway)")
+    if isinstance(value, list):  # "0.3" or true in a pair were read as numbers by numpy
+        for i, pair in enumerate(value):
+            if isinstance(pair, list) and any(isinstance(v, (str, bool)) for v in pair):
+                raise _err(path, sp, key, f"pair {i + 1} is {_show(pair)}: expected [x, y] as JSON numbers, not "
+                                          "strings or true/false")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError, OverflowError):
@@ -283,8 +288,9 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
 
 def _image(path: Path, key: str, name: str, value: Any) -> Path:
     """A photo path of an entry (relative to the config's project), checked to exist."""
-    if not isinstance(value, str):
-        raise _err(path, key, name, "expected a path string relative to the config's project")
+    if not isinstance(value, str) or not value.strip():
+        raise _err(path, key, name, "expected a path string relative to the config's project"
+                   + (", not an empty one" if isinstance(value, str) else ""))
     image = Path(value)
     if not image.is_absolute():
         folder = path.absolute().parent  # as typed, `leaves.json` or `./x.json` has no folder name to test
@@ -295,7 +301,8 @@ def _image(path: Path, key: str, name: str, value: Any) -> Path:
     if image.exists() and not image.is_file():
         raise _err(path, key, name, f"photo {image} is not a regular file (a device or a pipe), expected an image file")
     if not image.is_file():
-        raise _err(path, key, name, f"photo {image} not found")
+        where = "" if Path(value).is_absolute() else f" (a relative path is read from {base_dir})"
+        raise _err(path, key, name, f"photo {image} not found{where}")
     return image
 
 
@@ -304,7 +311,10 @@ def _reference(path: Path, key: str, value: Any) -> Reference:
     name = "senescent_photo"
     if isinstance(value, str):
         return Reference(_image(path, key, name, value))
-    if not isinstance(value, dict) or "image" not in value or set(value) - _REFERENCE_KEYS:
+    if isinstance(value, dict) and set(value) - _REFERENCE_KEYS:
+        raise _err(path, key, f"{name}.{sorted(set(value) - _REFERENCE_KEYS)[0]}",
+                   f"unknown key (expected {', '.join(sorted(_REFERENCE_KEYS))})")
+    if not isinstance(value, dict) or "image" not in value:
         raise _err(path, key, name, "expected a photo path, or an object with 'image' and optional 'base_px', 'apex_px'")
     return Reference(_image(path, key, f"{name}.image", value["image"]), _pair(path, key, f"{name}.base_px", value.get("base_px")),
                      _pair(path, key, f"{name}.apex_px", value.get("apex_px")))
@@ -334,7 +344,10 @@ _TEETH = {"count": (int, 0, 400, 0), "depth": (float, 0.0, 0.2, 0.0), "skip_base
 
 def _teeth(path: Path, key: str, teeth: Any) -> dict:
     """Validated ``outline.teeth``: count (integer 0–400), depth and skip_base (leaf units)."""
-    if not isinstance(teeth, dict) or set(teeth) - _TEETH_KEYS:
+    if isinstance(teeth, dict) and set(teeth) - _TEETH_KEYS:
+        raise _err(path, key, f"outline.teeth.{sorted(set(teeth) - _TEETH_KEYS)[0]}",
+                   f"unknown key (expected {', '.join(sorted(_TEETH_KEYS))})")
+    if not isinstance(teeth, dict):
         raise _err(path, key, "outline.teeth", "expected an object with count, depth and skip_base")
     out = {}
     for name, (kind, lo, hi, default) in _TEETH.items():

@@ -71,6 +71,18 @@ def _entry(**kw):
     ({"species": {"x": {"length_m": 0.1}}}, "needs either 'image'"),
     ({"species": {"x": _entry(outline={"points": [[0, 0], [1]]})}}, "key 'outline.points'"),
     ({"species": {"x": _entry(lateral_profile=[[50, 1], [10, 1]])}}, "key 'lateral_profile'"),
+    # strings and true/false in a coordinate list were read as numbers
+    ({"species": {"x": _entry(outline={"points": [[0, 0], ["0.3", "0.5"], [0, 1], [-0.3, 0.5]]})}},
+     "key 'outline.points': pair 2 is ['0.3', '0.5']: expected [x, y] as JSON numbers"),
+    ({"species": {"x": _entry(targets=[[False, True]])}}, "key 'targets': pair 1 is [False, True]"),
+    ({"species": {"x": _entry(lateral_profile=[["0", "1"], [100, 0.5]])}}, "key 'lateral_profile': pair 1"),
+    # an unknown key inside teeth or senescent_photo is named
+    ({"species": {"x": _entry(outline={"points": [[0, 0], [0.3, 0.5], [0, 1], [-0.3, 0.5]],
+                                       "teeth": {"count": 30, "dept": 0.02}})}}, "key 'outline.teeth.dept': unknown key"),
+    ({"species": {"x": _entry(senescent_photo={"image": "images/a.png", "base": [1, 2]})}},
+     "key 'senescent_photo.base': unknown key"),
+    ({"species": {"x": {"length_m": 0.1, "image": ""}}}, "key 'image': expected a path string relative to the config's project, not an empty one"),
+    ({"species": {"x": {"length_m": 0.1, "image": "nowhere/leaf.png"}}}, "not found (a relative path is read from"),
     # the README's entry pasted at the top level used to be silently ignored
     ({"species": {"x": _entry()}, "birch": _entry()}, "unknown top-level key 'birch'"),
     ({"species": {"x": _entry(variants=[1])}}, "species 'x', key 'variants'"),
