@@ -197,7 +197,7 @@ def photo_veins_world(sp: Species, shape: LeafShape, params: ParamSet) -> dict:
     mains = [world(p) for p in pv.all_mains()]
     mains[0][0] = shape.base  # the midrib starts at the base exactly, ends near the apex
     return {"mains": mains, "laterals": [world(p) for p in pv.laterals] if lat else [],
-            "parents": list(pv.parents) if lat else []}
+            "parents": list(pv.parents) if lat else [], "lateral_test": dict(pv.lateral_test) if lat else {}}
 
 
 class BuiltLeaf(NamedTuple):

@@ -33,6 +33,16 @@ def cmd_outline(args):
                     f"{len(rep['lobes'])} lobe tips, IoU {rep['iou']:.4f}" + (f" -> {args.out}" if args.out else ""))
 
 
+def _photo_laterals(test) -> str:
+    """The text line's note on a photo's laterals: traced, or grown because the photo shows none."""
+    if not test:
+        return ""
+    if test["shown"]:
+        return f"; {test['traced']} laterals traced from the photo"
+    return (f"; the photo shows no laterals above its texture (strongest path {test['best']:.2f} against "
+            f"{test['null']:.2f} in the shuffled blade): laterals grown")
+
+
 def cmd_veins(args):
     sp, params = species_params(args)
     png_output("--out", args.out, (sp.image,))
@@ -47,6 +57,7 @@ def cmd_veins(args):
     c = graph.stats["counts"]
     emit(args, rep, f"{sp.key} seed {args.seed}: main {c['main']}, lateral {c['lateral']}, sublateral {c['sublateral']}, net {c['net']}; "
                     f"crossings {graph.stats['crossings']}, outside {graph.stats['outside_length']:.3g} m ({dt * 1000:.0f} ms)"
+                    + _photo_laterals(graph.stats.get("photo_laterals"))
                     + (f" -> {args.out}" if args.out else ""))
 
 

@@ -296,3 +296,25 @@ def test_vein_leaving_a_main_vein_at_a_sharp_angle_by_the_base_is_traced():
     # and it leaves the main vein where the branch does, not further out
     assert float(np.linalg.norm(lat[0] - p0)) < 0.04 * L, float(np.linalg.norm(lat[0] - p0)) / L
 
+
+
+@pytest.mark.parametrize("noise", [6.0, 12.0])
+def test_a_noisy_blade_without_laterals_gets_none_traced(noise):
+    """A photo whose blade shows pixel noise and a midrib but no laterals: the cheapest paths
+    through the noise score no better than in the same blade shuffled, so no lateral is taken
+    from it (they are grown); the same noise over drawn laterals keeps them."""
+    img, mask, base, apex, _ = _veined_photo(laterals=0)
+    rng = np.random.default_rng(int(noise))
+    leaf = mask > 0
+    noisy = img.astype(float)
+    noisy[leaf] += rng.normal(0.0, noise, (int(leaf.sum()), 3))
+    noisy = np.clip(noisy, 0, 255).astype(np.uint8)
+    pv = trace_venation(noisy, mask, base, apex)
+    assert pv.strength > 3.0  # the midrib is traced
+    assert pv.laterals == [] and pv.lateral_test["shown"] is False
+    assert pv.lateral_test["best"] < 1.25 * pv.lateral_test["null"]
+    img, mask, base, apex, drawn = _veined_photo()
+    noisy = img.astype(float)
+    noisy[leaf] += rng.normal(0.0, noise, (int(leaf.sum()), 3))
+    pv = trace_venation(np.clip(noisy, 0, 255).astype(np.uint8), mask, base, apex)
+    assert pv.lateral_test["shown"] is True and len(pv.laterals) >= 0.75 * len(drawn)
