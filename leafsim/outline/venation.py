@@ -82,6 +82,14 @@ LATERAL_SCORE = 2.5
 #: candidates each), where their strongest laterals score 3.9–20; on a photo whose blade
 #: shows pixel noise but no laterals the real search's best (2.9–3.0) is the null's own
 LATERAL_NULL_MARGIN = 1.25
+#: a lateral is lighter (darker) than both its flanks on at least this share of its points
+#: (:func:`_ridge_share`): the shipped photos' laterals 0.32–1.0, a path along the edge of a
+#: dark lesion 0.18
+MIN_RIDGE_SHARE = 0.25
+#: the null test above compares the photo's strongest lateral that is a ridge on at least this
+#: share of its points (the shipped photos' strongest: 0.78–0.98; a path that follows a dark
+#: lesion's edge for part of its way 0.33–0.38)
+CLEAR_RIDGE_SHARE = 0.5
 #: the colour channels a vein may show in (CIELAB): its lightness, or its yellowness — the
 #: midrib of a back-lit oak leaf is a yellow band with darker flanks, no lighter than the blade
 CHANNELS = (("lightness", 0), ("yellowness", 2))
@@ -332,7 +340,10 @@ def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list, d
     shuffled[pool] = vals[np.random.default_rng(0).permutation(len(vals))]
     null = max((sc for sc, _, _ in _scored_paths(shuffled, inner, near_main, band, cands, d_main, L, k, 0.0)[0]),
                default=0.0)
-    best = max((sc for sc, _, _ in scored), default=0.0)
+    # whether the photo shows laterals is judged by its clear ridges: a path that is a ridge on
+    # under half its length may owe its score to an edge it runs along for a while
+    g = _flanks(image, inner, L)
+    best = max((sc for sc, _, p in scored if _ridge_share(p, g, L, k) >= CLEAR_RIDGE_SHARE), default=0.0)
     test = {"best": round(best, 2), "null": round(null, 2), "shown": bool(best > LATERAL_NULL_MARGIN * null)}
     if not test["shown"]:
         return [], [], test
@@ -355,6 +366,7 @@ def _scored_paths(image, inner, near_main, band, cands, d_main, L, k, least=LATE
     cost[near_main] = 1e4
     grid = _Grid(cost)
     _, pred = grid.tree(np.flatnonzero(band.reshape(-1)))
+    g = _flanks(image, inner, L)
     scored, short = [], []
     for mi, r in cands:
         path = grid.path(pred, grid.index(r))[::-1]  # from the main vein to the margin
@@ -366,9 +378,35 @@ def _scored_paths(image, inner, near_main, band, cands, d_main, L, k, least=LATE
             continue  # it runs along a main vein instead of leaving it
         v = R[path[:, 1].astype(int), path[:, 0].astype(int)]
         score = float(np.median(v)) / med
-        if score > least:
+        if score > least and _ridge_share(path, g, L, k) >= MIN_RIDGE_SHARE:
             scored.append((score, mi, path))
     return scored, short, grid, R, med
+
+
+def _flanks(image: np.ndarray, inner: np.ndarray, L: float) -> np.ndarray:
+    """``image`` blurred at the laterals' scale (the blade's median outside it), for
+    :func:`_ridge_share`."""
+    fill = float(np.median(image[inner]))
+    return cv2.GaussianBlur(np.where(inner, image, fill).astype(np.float32), (0, 0), LATERAL_SIGMA * L)
+
+
+def _ridge_share(path: np.ndarray, g: np.ndarray, L: float, k: int) -> float:
+    """The share of ``path``'s points where the blurred channel ``g`` is lighter (``k`` 0) or
+    darker (1) than at both flanks, 2.5 lateral scales to either side: about all of them on a
+    vein, few beside an edge (the ridge measure also answers on the light side of a step, so
+    a path can run along a lesion's or blotch's edge, with one flank darker and one as light)."""
+    p = _smooth(path, 0.01 * L)
+    t = np.gradient(p, axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True) + 1e-12
+    off = 2.5 * LATERAL_SIGMA * L * np.column_stack([-t[:, 1], t[:, 0]])
+    h, w = g.shape
+
+    def at(q):
+        return g[np.clip(np.round(q[:, 1]).astype(int), 0, h - 1), np.clip(np.round(q[:, 0]).astype(int), 0, w - 1)]
+
+    c = at(p)
+    sign = 1.0 if k == 0 else -1.0
+    return float(np.mean((sign * (c - at(p + off)) > 0) & (sign * (c - at(p - off)) > 0)))
 
 
 def _distinct(scored, shape, mains, L) -> tuple[list, list]:

@@ -298,8 +298,8 @@ def test_vein_leaving_a_main_vein_at_a_sharp_angle_by_the_base_is_traced():
 
 
 
-@pytest.mark.parametrize("noise", [6.0, 12.0])
-def test_a_noisy_blade_without_laterals_gets_none_traced(noise):
+@pytest.mark.parametrize("noise,lesion", [(6.0, False), (12.0, False), (8.0, True)])
+def test_a_noisy_blade_without_laterals_gets_none_traced(noise, lesion):
     """A photo whose blade shows pixel noise and a midrib but no laterals: the cheapest paths
     through the noise score no better than in the same blade shuffled, so no lateral is taken
     from it (they are grown); the same noise over drawn laterals keeps them."""
@@ -309,6 +309,9 @@ def test_a_noisy_blade_without_laterals_gets_none_traced(noise):
     noisy = img.astype(float)
     noisy[leaf] += rng.normal(0.0, noise, (int(leaf.sum()), 3))
     noisy = np.clip(noisy, 0, 255).astype(np.uint8)
+    if lesion:  # a brown lesion beside the midrib: the ridge measure answers along its edge
+        centre = tuple(np.round(base + 0.55 * (apex - base) + np.array([0.07, 0.0]) * len(img)).astype(int))
+        cv2.circle(noisy, centre, round(0.05 * len(img)), (30, 60, 110), -1)
     pv = trace_venation(noisy, mask, base, apex)
     assert pv.strength > 3.0  # the midrib is traced
     assert pv.laterals == [] and pv.lateral_test["shown"] is False
@@ -318,3 +321,21 @@ def test_a_noisy_blade_without_laterals_gets_none_traced(noise):
     noisy[leaf] += rng.normal(0.0, noise, (int(leaf.sum()), 3))
     pv = trace_venation(np.clip(noisy, 0, 255).astype(np.uint8), mask, base, apex)
     assert pv.lateral_test["shown"] is True and len(pv.laterals) >= 0.75 * len(drawn)
+
+
+def test_ridge_share_tells_a_vein_from_an_edge():
+    """A light line is lighter than both flanks along all of it; a path beside a step edge (on
+    its light side, where the ridge measure also answers) is not."""
+    from leafsim.outline.venation import LATERAL_SIGMA, _flanks, _ridge_share
+
+    L = 500.0
+    img = np.full((300, 300), 50.0, np.float32)
+    img[148:152, :] = 90.0  # a light vein along y = 150
+    inner = np.ones(img.shape, bool)
+    path = np.column_stack([np.arange(40, 260), np.full(220, 150)]).astype(float)
+    assert _ridge_share(path, _flanks(img, inner, L), L, 0) > 0.95
+    step = np.where(np.arange(300)[:, None] < 150, 30.0, 90.0).astype(np.float32) * np.ones((1, 300), np.float32)
+    off = round(LATERAL_SIGMA * L)  # the light side's ridge response peaks about a scale from the step
+    edge_path = path + np.array([0.0, off])
+    assert _ridge_share(edge_path, _flanks(step, inner, L), L, 0) < 0.05
+    assert _ridge_share(path, _flanks(img, inner, L), L, 1) < 0.05  # a light vein is no dark one
