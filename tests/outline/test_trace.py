@@ -433,3 +433,23 @@ def test_traced_margin_runs_on_the_pixel_edges_and_keeps_tooth_tips(tmp_path):
     d = distance_to_polygon(tips, c)
     # a binary mask loses part of a pixel at a tip anyway: 0.63 px median (1.00 px on the centres)
     assert len(tips) == 75 and np.median(d) < 0.8 and d.max() < 1.25, (np.median(d), d.max())
+
+
+def test_a_leaf_too_few_pixels_long_is_refused_in_one_line(tmp_path):
+    """A 30 × 40 px copy of a leaf was traced upside down with a zigzag midrib: under 100 px
+    of leaf the build refuses it, naming the photo and its size; 160 px is fine."""
+    from leafsim.outline.checks import MIN_LEAF_PX, problems
+    from leafsim.outline.trace import refuse_non_leaf
+
+    img, _ = photo(800)
+    for side, ok in ((40, False), (200, True)):
+        small = cv2.resize(img, (side * 3 // 4, side), interpolation=cv2.INTER_AREA)
+        t = _trace_img(tmp_path, small, name=f"leaf{side}.png")
+        refusals = [text for level, text in problems(t.leafness) if level == "refuse"]
+        if ok:
+            assert t.leafness["size_px"] >= MIN_LEAF_PX and not refusals
+        else:
+            assert len(refusals) == 1 and "px long: expected at least 100 px" in refusals[0]
+            with pytest.raises(LeafsimError) as e:
+                refuse_non_leaf(t)
+            assert f"leaf{side}.png" in str(e.value) and "\n" not in str(e.value)
