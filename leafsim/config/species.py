@@ -22,7 +22,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import read_json
 from leafsim.base.geometry import outline_problem, targets_problem
 from leafsim.base.resources import default_config, display_path
-from leafsim.config.params import ParamSet, json_typed
+from leafsim.config.params import PARAMS, ParamSet, flatten, json_typed
 from leafsim.config.params import show as _show
 
 DEFAULT_SPECIES = "maple"
@@ -262,6 +262,12 @@ def _parse_entry(path: Path, key: str, e: Any) -> Species:
     if not isinstance(overrides, dict):
         raise _err(path, key, "params", "expected an object of parameter values")
     where = f"{path}: species '{key}'"
+    for name in flatten(overrides) if isinstance(overrides, dict) else ():
+        head, _, tail = name.partition(".")
+        if name not in PARAMS and ((head == "outline" and tail in _OUTLINE_KEYS) or name in _ENTRY_KEYS):
+            raise _err(path, key, f"params.{name}", f"not a parameter but a key of the species entry's "
+                       f"{repr(head) + ' object' if tail else 'own'} (write it there, not inside 'params'; "
+                       f"`leafsim params` lists the parameters)")
     params = ParamSet(json_typed(overrides, where), where=where)
     return Species(
         key=key,

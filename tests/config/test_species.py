@@ -63,6 +63,9 @@ def _entry(**kw):
     ({"species": {"x": _entry(colour="red")}}, "species 'x', key 'colour'"),
     ({"species": {"x": _entry(params={"veins.main.kappa": 99})}}, "species 'x': parameter 'veins.main.kappa'"),
     ({"species": {"x": _entry(params={"veins.nope": 1})}}, "species 'x': unknown parameter 'veins.nope'"),
+    # an entry key written inside params was answered with "did you mean outline.points" (a parameter)
+    ({"species": {"x": _entry(params={"outline.smooth": 2})}}, "key 'params.outline.smooth': not a parameter but a key of the species entry's 'outline' object"),
+    ({"species": {"x": _entry(params={"length_m": 0.2})}}, "key 'params.length_m': not a parameter but a key of the species entry's own"),
     # a quoted number or switch was read as one: refused, naming the key and the JSON type wanted
     ({"species": {"x": _entry(params={"shrink.alpha": "0.3"})}}, "parameter 'shrink.alpha' = '0.3' is a string"),
     ({"species": {"x": _entry(params={"veins": {"main": {"kappa": "4"}}})}}, "'veins.main.kappa' = '4' is a string"),
