@@ -28,8 +28,8 @@ def cmd_scene(args):
     scene = load_scene(args.scene)
     cpus = usable_cpus()
     workers = args.workers if args.workers is not None else cpus
-    if args.scheduler is None and workers > cpus:
-        warn(f"--workers {workers} is more than the {cpus} CPUs this process may use: the leaves will share "
+    if args.scheduler is None and min(workers, len(scene.jobs)) > cpus:
+        warn(f"--workers {workers} is more than the CPUs this process may use ({cpus}): the leaves will share "
              f"cores (each worker holds its own leaf in memory; the results are the same for any worker count)")
     out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem
     rep = run_scene(scene, out, workers=workers, scheduler=args.scheduler, before=ready_kernels)

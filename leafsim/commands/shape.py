@@ -37,8 +37,10 @@ def _photo_laterals(test) -> str:
     """The text line's note on a photo's laterals: traced, or grown because the photo shows none."""
     if not test:
         return ""
-    if test["shown"]:
+    if test["shown"] and test["traced"]:
         return f"; {test['traced']} laterals traced from the photo"
+    if test["shown"]:
+        return "; no lateral traced from the photo survived its checks: laterals grown"
     return (f"; the photo shows no laterals above its texture (strongest path {test['best']:.2f} against "
             f"{test['null']:.2f} in the shuffled blade): laterals grown")
 

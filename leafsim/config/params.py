@@ -103,6 +103,17 @@ class Param:
         return f"{'an integer' if self.kind == 'int' else 'a number'} in [{self.lo:g}, {self.hi:g}]{unit}"
 
 
+def show_json(value: Any, limit: int = 40) -> str:
+    """A value read from a JSON file as JSON writes it ("0.3", [false, true]), shortened."""
+    import json
+
+    try:
+        r = json.dumps(value, ensure_ascii=False)
+    except (TypeError, ValueError):
+        return show(value, limit)
+    return r if len(r) <= limit else r[: limit - 3] + "..."
+
+
 def show(value: Any, limit: int = 40) -> str:
     """repr of a user-given value, shortened so that a message stays one short line."""
     r = repr(value)
@@ -413,9 +424,9 @@ def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 def json_typed(tree: Mapping[str, Any], where: str = "") -> Mapping[str, Any]:
-    """``tree`` (parameter values read from a JSON file) when every number is a JSON number and
-    every switch a JSON true / false; a LeafsimError naming the first one written as a string
-    otherwise.  ``--set`` values are text by nature and are parsed by :meth:`Param.coerce`; in
+    """``tree`` (parameter values read from a JSON file) when no number or switch is written as
+    a string (a switch may be true / false or 0 / 1); a LeafsimError naming the first one that
+    is, otherwise.  ``--set`` values are text by nature and are parsed by :meth:`Param.coerce`; in
     a file a quoted "0.3" is most often a slip (a value meant for another key, a unit kept), so
     it is refused rather than read."""
     if not isinstance(tree, Mapping):
@@ -425,7 +436,7 @@ def json_typed(tree: Mapping[str, Any], where: str = "") -> Mapping[str, Any]:
         p = PARAMS.get(key)
         if p is not None and p.kind != "choice" and isinstance(value, str):
             kind = "JSON true or false" if p.kind == "bool" else "JSON number"
-            raise LeafsimError(f"{at}parameter '{key}' = {show(value)} is a string: expected {p.describe()}, "
+            raise LeafsimError(f"{at}parameter '{key}' = {show_json(value)} is a string: expected {p.describe()}, "
                                f"written as a {kind} without quotes")
     return tree
 

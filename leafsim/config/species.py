@@ -22,7 +22,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import read_json
 from leafsim.base.geometry import outline_problem, targets_problem
 from leafsim.base.resources import default_config, display_path
-from leafsim.config.params import PARAMS, ParamSet, flatten, json_typed
+from leafsim.config.params import PARAMS, ParamSet, flatten, json_typed, show_json
 from leafsim.config.params import show as _show
 
 DEFAULT_SPECIES = "maple"
@@ -126,7 +126,7 @@ def _points(path, sp, key, value, min_len=1) -> np.ndarray:
     if isinstance(value, list):  # "0.3" or true in a pair were read as numbers by numpy
         for i, pair in enumerate(value):
             if isinstance(pair, list) and any(isinstance(v, (str, bool)) for v in pair):
-                raise _err(path, sp, key, f"pair {i + 1} is {_show(pair)}: expected [x, y] as JSON numbers, not "
+                raise _err(path, sp, key, f"pair {i + 1} is {show_json(pair)}: expected [x, y] as JSON numbers, not "
                                           "strings or true/false")
     try:
         arr = np.asarray(value, dtype=float)

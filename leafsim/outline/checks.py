@@ -40,7 +40,7 @@ def leafness(traced, img: np.ndarray | None = None) -> dict:
     out = {"cut_by": sorted(s for s, f in traced.border_sides.items() if f > CUT_SIDE),
            "area_fraction": area / float(h * w),
            "rectangularity": poly_area / max(float(rw * rh), 1e-9),
-           "size_px": float(max(rw, rh))}
+           "size_px": float(max(rw, rh))}  # at the working size: the caller scales it to the photo's
     if img is not None and img.shape[:2] == mask.shape and area > 0:
         lab = cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_BGR2LAB)
         inner = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
@@ -59,8 +59,8 @@ def problems(m: dict) -> list[tuple[str, str]]:
                               f"{'s' if len(m['cut_by']) > 1 else ''}: the frame's straight edge would become leaf margin "
                               "(photograph the whole leaf with a margin of background)"))
     if m.get("size_px", MIN_LEAF_PX) < MIN_LEAF_PX:
-        out.append(("refuse", f"the leaf is only {m['size_px']:.0f} px long: expected at least {MIN_LEAF_PX} px to place "
-                              "its base and apex and trace its veins (use a larger photo)"))
+        out.append(("refuse", f"the leaf is only {m['size_px']:.0f} px long in the photo: expected at least {MIN_LEAF_PX} px "
+                              "to place its base and apex and trace its veins (use a larger photo)"))
     if m["rectangularity"] > MAX_RECTANGULARITY:
         out.append(("refuse", f"the traced shape is a rectangle (it fills {100 * m['rectangularity']:.0f} % of its "
                               "bounding box), not a leaf"))

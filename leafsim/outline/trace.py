@@ -206,6 +206,7 @@ def trace_outline(path: str | os.PathLike, params: Mapping[str, Any] | None = No
     to_work = lambda q: None if q is None else (np.asarray(q, float).reshape(2) + 0.5) * f - 0.5  # noqa: E731
     t = _trace(img, p, where, to_work(base_px), to_work(apex_px))
     t.leafness = leafness(t, img)
+    t.leafness["size_px"] /= f  # the leaf's length in the photo's own pixels
     if f != 1.0:
         back = lambda q: None if q is None else (np.asarray(q, float) + 0.5) / f - 0.5  # noqa: E731
         t.contour_px, t.lobes_px, t.petiole_px = back(t.contour_px), back(t.lobes_px), back(t.petiole_px)

@@ -332,18 +332,19 @@ def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list, d
     cands = _lateral_starts(mains, ring, L)
     d_main = cv2.distanceTransform(np.where(main_px > 0, 0, 255).astype(np.uint8), cv2.DIST_L2, 5)
     scored, short, grid, R, med = _scored_paths(image, inner, near_main, band, cands, d_main, L, k)
-    scored += _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L)
-    # the null: the same search in the blade with its pixels off the main veins shuffled
+    # the null: the same search in the blade with its pixels off the main veins shuffled; both
+    # judged by their clear ridges (a path that is a ridge on under half its length may owe its
+    # score to an edge it runs along for a while)
     shuffled = image.copy()
     pool = inner & ~near_main
     vals = shuffled[pool]
     shuffled[pool] = vals[np.random.default_rng(0).permutation(len(vals))]
-    null = max((sc for sc, _, _ in _scored_paths(shuffled, inner, near_main, band, cands, d_main, L, k, 0.0)[0]),
-               default=0.0)
-    # whether the photo shows laterals is judged by its clear ridges: a path that is a ridge on
-    # under half its length may owe its score to an edge it runs along for a while
-    g = _flanks(image, inner, L)
-    best = max((sc for sc, _, p in scored if _ridge_share(p, g, L, k) >= CLEAR_RIDGE_SHARE), default=0.0)
+    null = _clearest(_scored_paths(shuffled, inner, near_main, band, cands, d_main, L, k, 0.0)[0], shuffled, inner, L, k)
+    basal = _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L)
+    # a basal lateral counts as it is: its own search asks for a ridge over BASAL_SCORE (5) × the
+    # blade's along a ray that follows a vein, well above any null's best (2.8-3.5 measured)
+    best = max([_clearest(scored, image, inner, L, k), *(sc for sc, _, _ in basal)])
+    scored += basal
     test = {"best": round(best, 2), "null": round(null, 2), "shown": bool(best > LATERAL_NULL_MARGIN * null)}
     if not test["shown"]:
         return [], [], test
@@ -383,6 +384,13 @@ def _scored_paths(image, inner, near_main, band, cands, d_main, L, k, least=LATE
     return scored, short, grid, R, med
 
 
+def _clearest(scored, image, inner, L, k) -> float:
+    """The best score of ``scored`` among paths that are a ridge on at least
+    :data:`CLEAR_RIDGE_SHARE` of their points (0 when none is)."""
+    g = _flanks(image, inner, L)
+    return max((sc for sc, _, p in scored if _ridge_share(p, g, L, k) >= CLEAR_RIDGE_SHARE), default=0.0)
+
+
 def _flanks(image: np.ndarray, inner: np.ndarray, L: float) -> np.ndarray:
     """``image`` blurred at the laterals' scale (the blade's median outside it), for
     :func:`_ridge_share`."""
@@ -396,6 +404,8 @@ def _ridge_share(path: np.ndarray, g: np.ndarray, L: float, k: int) -> float:
     vein, few beside an edge (the ridge measure also answers on the light side of a step, so
     a path can run along a lesion's or blotch's edge, with one flank darker and one as light)."""
     p = _smooth(path, 0.01 * L)
+    if len(p) < 2:
+        return 0.0  # a point has no flanks
     t = np.gradient(p, axis=0)
     t /= np.linalg.norm(t, axis=1, keepdims=True) + 1e-12
     off = 2.5 * LATERAL_SIGMA * L * np.column_stack([-t[:, 1], t[:, 0]])

@@ -75,7 +75,7 @@ def grow_veins(
     graph.stats = vein_stats(graph, shape, reached, auto)
     graph.stats["collision_tests"] = g.tests
     graph.stats["gap_fills"] = fills
-    if given is not None and given.get("lateral_test"):
+    if p["veins.lateral.enabled"] and given is not None and given.get("lateral_test"):
         # the photo's laterals: traced, or grown when none stands above its shuffled blade's
         graph.stats["photo_laterals"] = {**given["lateral_test"], "traced": len(given.get("laterals") or ())}
     return graph

@@ -240,5 +240,5 @@ def test_a_preset_of_another_format_or_with_a_seed_beyond_2_63_is_refused(tmp_pa
     p.write_text(json.dumps({"species": "oak", "seed": 5, "params": {"mesh.spacing": 0.05}}))  # no format: ours
     assert read_param_set(p, "oak", 0)[:2] == ("oak", 5)
     p.write_text(json.dumps({"species": "oak", "seed": 5, "params": {"mesh.spacing": "0.05"}}))
-    with pytest.raises(LeafsimError, match=r"p\.json: parameter 'mesh\.spacing' = '0\.05' is a string"):
+    with pytest.raises(LeafsimError, match=r'p\.json: parameter .mesh\.spacing. = "0\.05" is a string'):
         read_param_set(p, "oak", 0)

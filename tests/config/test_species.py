@@ -67,8 +67,8 @@ def _entry(**kw):
     ({"species": {"x": _entry(params={"outline.smooth": 2})}}, "key 'params.outline.smooth': not a parameter but a key of the species entry's 'outline' object"),
     ({"species": {"x": _entry(params={"length_m": 0.2})}}, "key 'params.length_m': not a parameter but a key of the species entry's own"),
     # a quoted number or switch was read as one: refused, naming the key and the JSON type wanted
-    ({"species": {"x": _entry(params={"shrink.alpha": "0.3"})}}, "parameter 'shrink.alpha' = '0.3' is a string"),
-    ({"species": {"x": _entry(params={"veins": {"main": {"kappa": "4"}}})}}, "'veins.main.kappa' = '4' is a string"),
+    ({"species": {"x": _entry(params={"shrink.alpha": "0.3"})}}, "parameter 'shrink.alpha' = \"0.3\" is a string"),
+    ({"species": {"x": _entry(params={"veins": {"main": {"kappa": "4"}}})}}, "'veins.main.kappa' = \"4\" is a string"),
     ({"species": {"x": _entry(variants={"red": {"params": {"mesh.spacing": "0.03"}}})}}, "written as a JSON number"),
     ({"species": {"x": _entry(image="images/missing.png")}}, "species 'x', key 'image'"),
     ({"species": {"x": {"length_m": 0.1}}}, "needs either 'image'"),
@@ -76,8 +76,8 @@ def _entry(**kw):
     ({"species": {"x": _entry(lateral_profile=[[50, 1], [10, 1]])}}, "key 'lateral_profile'"),
     # strings and true/false in a coordinate list were read as numbers
     ({"species": {"x": _entry(outline={"points": [[0, 0], ["0.3", "0.5"], [0, 1], [-0.3, 0.5]]})}},
-     "key 'outline.points': pair 2 is ['0.3', '0.5']: expected [x, y] as JSON numbers"),
-    ({"species": {"x": _entry(targets=[[False, True]])}}, "key 'targets': pair 1 is [False, True]"),
+     "key 'outline.points': pair 2 is [\"0.3\", \"0.5\"]: expected [x, y] as JSON numbers"),
+    ({"species": {"x": _entry(targets=[[False, True]])}}, "key 'targets': pair 1 is [false, true]"),
     ({"species": {"x": _entry(lateral_profile=[["0", "1"], [100, 0.5]])}}, "key 'lateral_profile': pair 1"),
     # an unknown key inside teeth or senescent_photo is named
     ({"species": {"x": _entry(outline={"points": [[0, 0], [0.3, 0.5], [0, 1], [-0.3, 0.5]],

@@ -449,7 +449,7 @@ def test_a_leaf_too_few_pixels_long_is_refused_in_one_line(tmp_path):
         if ok:
             assert t.leafness["size_px"] >= MIN_LEAF_PX and not refusals
         else:
-            assert len(refusals) == 1 and "px long: expected at least 100 px" in refusals[0]
+            assert len(refusals) == 1 and "px long in the photo: expected at least 100 px" in refusals[0]
             with pytest.raises(LeafsimError) as e:
                 refuse_non_leaf(t)
             assert f"leaf{side}.png" in str(e.value) and "\n" not in str(e.value)

@@ -339,3 +339,61 @@ def test_ridge_share_tells_a_vein_from_an_edge():
     edge_path = path + np.array([0.0, off])
     assert _ridge_share(edge_path, _flanks(step, inner, L), L, 0) < 0.05
     assert _ridge_share(path, _flanks(img, inner, L), L, 1) < 0.05  # a light vein is no dark one
+
+
+def test_a_path_around_a_lesion_edge_is_no_lateral(monkeypatch):
+    """With the photo-level test switched off, the search on a noisy blade with a brown lesion
+    finds paths that run round the lesion's edge (the ridge measure answers beside a step):
+    one with flanks darker on both sides on under a quarter of its points is dropped, so no
+    kept lateral lies on the edge for nine tenths of its length (two did without the rule).
+    Paths that follow the edge for part of their way still pass it: on a blade without visible
+    laterals the photo-level test is what keeps them out."""
+    import leafsim.outline.venation as ven
+
+    monkeypatch.setattr(ven, "LATERAL_NULL_MARGIN", 0.0)
+    img, mask, base, apex, _ = _veined_photo(laterals=0)
+    rng = np.random.default_rng(8)
+    leaf = mask > 0
+    noisy = img.astype(float)
+    noisy[leaf] += rng.normal(0.0, 8.0, (int(leaf.sum()), 3))
+    img = np.clip(noisy, 0, 255).astype(np.uint8)
+    centre = np.round(base + 0.55 * (apex - base) + np.array([0.07, 0.0]) * len(img)).astype(int)
+    radius = round(0.05 * len(img))
+    cv2.circle(img, tuple(centre), radius, (30, 60, 110), -1)
+    L = float(np.linalg.norm(apex - base))
+
+    def on_edge(share):
+        monkeypatch.setattr(ven, "MIN_RIDGE_SHARE", share)
+        pv = trace_venation(img, mask, base, apex)
+        assert len(pv.laterals) > 5
+        return sum(np.mean(np.abs(np.linalg.norm(_dense(lat, 1.0) - centre, axis=1) - radius) < 0.02 * L) > 0.9
+                   for lat in pv.laterals)
+
+    assert on_edge(ven.MIN_RIDGE_SHARE) == 0
+    assert on_edge(0.0) >= 1
+
+
+def test_a_photo_without_visible_laterals_gets_grown_ones_and_veins_says_so(capsys, tmp_path):
+    """Through the pipeline: a noisy photo with a midrib and no laterals is traced, its laterals
+    are grown instead, and `leafsim veins` says so in its line and its --json."""
+    import json
+
+    from leafsim.cli import main
+
+    img, mask, base, apex, _ = _veined_photo(laterals=0)
+    rng = np.random.default_rng(6)
+    leaf = mask > 0
+    noisy = img.astype(float)
+    noisy[leaf] += rng.normal(0.0, 6.0, (int(leaf.sum()), 3))
+    cv2.imwrite(str(tmp_path / "noisy.png"), np.clip(noisy, 0, 255).astype(np.uint8))
+    cfg = tmp_path / "leaves.json"
+    cfg.write_text(json.dumps({"species": {"n": {"image": "noisy.png", "length_m": 0.08}}}))
+    assert main(["veins", "--config", str(cfg), "--species", "n", "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    test = rep["photo_laterals"]
+    assert test["shown"] is False and test["traced"] == 0 and rep["counts"]["lateral"] > 0
+    assert main(["veins", "--config", str(cfg), "--species", "n"]) == 0
+    assert "the photo shows no laterals above its texture" in capsys.readouterr().out
+    assert main(["veins", "--config", str(cfg), "--species", "n", "--set", "veins.lateral.enabled=false", "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert "photo_laterals" not in rep and rep["counts"]["lateral"] == 0

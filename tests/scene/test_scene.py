@@ -340,7 +340,7 @@ def test_cli_bad_input_exit_2_and_no_files(tmp_path):
     cases.append(([str(neg), "--out", str(tmp_path / "neg")], "key 'count'"))
     quoted = _scene(tmp_path, name="quoted", groups=[{"name": "a", "species": "oak", "count": 1, "params": {"mesh.spacing": "0.08"},
                                                        "stop": {"frames": 1}}])
-    cases.append(([str(quoted), "--out", str(tmp_path / "neg")], "parameter 'mesh.spacing' = '0.08' is a string"))
+    cases.append(([str(quoted), "--out", str(tmp_path / "neg")], "parameter 'mesh.spacing' = \"0.08\" is a string"))
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
     cases.append(([str(_scene(tmp_path)), "--out", str(blocker / "out")], "cannot create the output folder"))
@@ -402,17 +402,23 @@ def test_every_file_a_leaf_export_writes_is_one_the_scene_may_replace():
                 assert _LEAF_FILES.fullmatch(path.name), (fmt, texture, path.name)
 
 
-def test_more_workers_than_cpus_warns_in_one_line_and_runs(tmp_path):
-    """--workers beyond the CPUs this process may use: one warning line, the scene still runs
-    (on no more processes than it has leaves)."""
-    from leafsim.commands.scene import usable_cpus
+def test_more_worker_processes_than_cpus_warns_in_one_line_and_runs(tmp_path):
+    """More worker processes than the CPUs this process may use (here one, by affinity): one
+    warning line, the scene still runs; a pool never has more processes than leaves, so a
+    one-leaf scene with --workers 999 runs one process and says nothing."""
+    import os
 
-    path = _scene(tmp_path, name="one", groups=[{"name": "c", "species": "chestnut", "count": 1, "seed": 3,
-                                                 "params": dict(TINY), "stop": {"water_left": 0.99}}])
-    many = usable_cpus() + 997
-    r = subprocess.run([sys.executable, "-m", "leafsim", "scene", str(path), "--out", str(tmp_path / "out"),
-                        "--workers", str(many), "--json"], capture_output=True, text=True, timeout=HANG_S, cwd=tmp_path)
-    assert r.returncode == 0, r.stderr
-    warnings = [l for l in r.stderr.splitlines() if "warning" in l]
-    assert len(warnings) == 1 and f"--workers {many} is more than the {usable_cpus()} CPUs" in warnings[0], r.stderr
-    assert json.loads(r.stdout)["ran"] == 1
+    one_cpu = lambda: os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # noqa: E731
+    leaf = {"species": "chestnut", "seed": 3, "params": dict(TINY), "stop": {"water_left": 0.99}}
+    for count, workers, warned in ((2, 2, True), (1, 999, False)):
+        path = _scene(tmp_path, name=f"n{count}", groups=[{"name": "c", "count": count, **leaf}])
+        r = subprocess.run([sys.executable, "-m", "leafsim", "scene", str(path), "--out", str(tmp_path / f"out{count}"),
+                            "--workers", str(workers), "--json"], capture_output=True, text=True, timeout=HANG_S,
+                           cwd=tmp_path, preexec_fn=one_cpu)
+        assert r.returncode == 0, r.stderr
+        warnings = [line for line in r.stderr.splitlines() if "warning" in line]
+        if warned:
+            assert len(warnings) == 1 and "--workers 2 is more than the CPUs this process may use (1)" in warnings[0], r.stderr
+        else:
+            assert warnings == [], r.stderr
+        assert json.loads(r.stdout)["ran"] == count

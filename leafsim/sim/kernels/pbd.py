@@ -194,7 +194,7 @@ def uninvert(q, invm, vidx, hmin, vonly, ground, dint):
     moved = 0
     # a pair clearly above hmin is skipped without the square root and divisions: its height
     # times |n|, squared, against hmin² |n|² (1 + 1e-6).  The margin (5e-7 hmin) is far above
-    # the exact test's rounding (a few 1e-16 of the distance to the triangle), so the pairs
+    # the exact test's rounding (a few 1e-16 of the V particle's distance to the centroid), so the pairs
     # skipped here are exactly pairs that test skips, and the others take it unchanged.
     fast = hmin > 0.0
     hmin2 = hmin * hmin * (1.0 + 1e-6)
