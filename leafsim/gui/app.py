@@ -626,8 +626,9 @@ class LeafApp:
         path = user_path(self.preset_path, "preset JSON", "JSON file")
         sp = self.session.species
         not_an_input(path, (sp.config or default_config(), sp.image), "preset JSON")
+        existed = Path(path).is_file()
         p = self.session.save_params(path)
-        self.status.info("preset", f"saved parameters to {p}", path=p)
+        self.status.info("preset", f"{'replaced the parameters in' if existed else 'saved parameters to'} {p}", path=p)
 
     def load_preset(self) -> None:
         path = user_path(self.preset_path, "preset JSON", "JSON file")

@@ -240,6 +240,12 @@ def test_preset_save_and_load_refuse_bad_paths_and_files(tmp_path):
         ctx.item_click("**/Save params")
         ctx.yield_(2)
         seen["existing"] = errors(app)
+        seen["existing status"] = [m.text for m in app.status.messages() if m.topic == "preset"]
+        clear(app)
+        ctx.item_input_value("**/preset JSON", str(tmp_path / "fresh.json"))
+        ctx.item_click("**/Save params")
+        ctx.yield_(2)
+        seen["fresh status"] = [m.text for m in app.status.messages() if m.topic == "preset"]
         ctx.item_input_value("**/preset JSON", str(good))
         ctx.item_click("**/Load params")
         ctx.yield_(3)
@@ -261,6 +267,9 @@ def test_preset_save_and_load_refuse_bad_paths_and_files(tmp_path):
     assert target.read_text() == "keep me" and (tmp_path / "broken.json").is_symlink()
     assert not (tmp_path / "nowhere.json").exists() and not (tmp_path / "no").exists()
     assert seen["existing"] == [] and json.loads(existing.read_text())["species"] == "oak"
+    # replacing a preset is said, not silent (docs/gui.md)
+    assert len(seen["existing status"]) == 1 and seen["existing status"][0].startswith("replaced the parameters in")
+    assert len(seen["fresh status"]) == 1 and seen["fresh status"][0].startswith("saved parameters to")
     errs, seed, evap, drawn = seen["good"]
     assert errs == [] and seed == 2**40 and evap == pytest.approx(0.5) and drawn
     assert seen["usable"] == (True, True)

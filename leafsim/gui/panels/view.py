@@ -19,6 +19,17 @@ from leafsim.sim.environment import clock_text
 LEGEND_CARD = (0.97, 0.97, 0.95, 0.82)
 
 
+
+def tick_labels(values) -> list[str]:
+    """The colour bar's tick labels: 3 significant digits, more where that would print two
+    ticks alike (a field spanning 99.6-100 % read "100" at every tick)."""
+    labels = [f"{v:.3g}" for v in values]
+    for digits in range(4, 10):
+        if len(set(labels)) == len(labels):
+            break
+        labels = [f"{v:.{digits}g}" for v in values]
+    return labels
+
 class ViewOverlay:
     def __init__(self, app):
         self.app = app
@@ -59,11 +70,11 @@ class ViewOverlay:
             dl.add_rect_filled_multi_color((x, y_a), (x + 18, y_b), u0, u0, u1, u1)
         ink = imgui.get_color_u32((0.1, 0.1, 0.1, 1.0))
         dl.add_rect((x, y), (x + 18, y + height), ink)
-        for t in np.linspace(0.0, 1.0, 5):
-            v = (lo + (hi - lo) * t) * k
+        ts = np.linspace(0.0, 1.0, 5)
+        for t, text in zip(ts, tick_labels((lo + (hi - lo) * ts) * k)):
             ty = y + height * (1.0 - t)
             dl.add_line((x + 18, ty), (x + 23, ty), ink)
-            dl.add_text((x + 26, ty - 7), ink, f"{v:.3g}")
+            dl.add_text((x + 26, ty - 7), ink, text)
         dl.add_text((x + 60 - tw, y - 36), ink, label)
         dl.add_text((x, y - 20), ink, f"[{unit}]")
         if not opts.scalar_range:
