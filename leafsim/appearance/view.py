@@ -53,6 +53,7 @@ class LeafView:
         remap[V] = len(T) + np.arange(len(V))
         self.T, self.V, self.remap = T, V, remap
         self._young = None   # (photo colour per particle (n, 3) linear, luminance normaliser (nT,))
+        self._dead = None    # tissue the young photo shows dead already, 0..1 per layer-T particle
         self._fit = None     # (vein_pallor, fitted contents)
         self._pure_vein = None  # ones (n,): m̂ of pure vein tissue (vein_colours)
         self._crinkle = {}  # the lamina compression's per-mesh data and prolongations (leafsim.sim.crinkle)
@@ -66,6 +67,15 @@ class LeafView:
         if self._young is None:
             self._young = _photo_at_particles(self.model, self.photo_rgba)
         return self._young[0]
+
+    def dead_in_photo(self) -> np.ndarray:
+        """(nT,) how far each layer-T particle's tissue is dead already in the young photo, 0..1
+        (:func:`dead_in_photo`); zeros without a young photo."""
+        if self._dead is None:
+            T = self.T
+            self._dead = (dead_in_photo(self.young_photo_colour()[T]) if self.photo_colour
+                          else np.zeros(len(T), np.float32))
+        return self._dead
 
     def photo_contents(self, params) -> tuple:
         """Pigment contents fitted to the photo's young colour (cached per ``colour.vein_pallor``)."""
@@ -145,6 +155,12 @@ class LeafView:
         cast = np.maximum(young, 1e-4) / np.maximum(pigments_to_rgb(self.pigments0, params, contents)[T], 1e-4)
         live = np.clip(pig.chlorophyll[T], 0.0, 1.0)[:, None]
         change = now * np.power(cast, live) / np.maximum(young, 1e-4)
+        # tissue the photo shows dead already (a brown lesion) keeps its photo colour: it has
+        # no chlorophyll to lose, and it is already brown (the change above would turn it into
+        # the surrounding tissue's dried colour, its edge alone left darker by the detail)
+        dead = self.dead_in_photo()
+        if dead.any():
+            change = (1.0 - dead[:, None]) * change + dead[:, None]
         rgb = (young * self._young[1][:, None] * change).astype(np.float32)
         if not self.use_texture(params):
             return rgb, None
@@ -290,6 +306,30 @@ class LeafView:
         out["crinkle"] = crinkle if crinkle is not None else np.zeros((len(self.T), 3), np.float32)
         out["crinkle_size"] = crinkle_size
         return out
+
+
+#: tissue is dead in a young photo when it is redder (CIELAB a*) than the blade's median by more
+#: than the first and darker (L*) by more than the second, fully so by twice each: a brown lesion
+#: on a green blade (a* +20 to +30 above it), not a pale pink vein line (lighter), a shadow or a
+#: dark green spot (no redder), nor yellowing tissue (lighter)
+DEAD_REDDER, DEAD_DARKER = 6.0, 5.0
+
+
+def dead_in_photo(young: np.ndarray) -> np.ndarray:
+    """(n,) 0..1: how far the tissue at each particle is dead already in a young photo, from its
+    photo colour ``young`` (linear RGB) against the blade's median (:data:`DEAD_REDDER`,
+    :data:`DEAD_DARKER`).  The shipped young photos have none (oak: 8 particles of 971 at most
+    0.3); a synthetic blade with a brown lesion has it under the lesion."""
+    import cv2
+
+    srgb = np.clip(np.asarray(young, np.float32), 0.0, 1.0) ** (1.0 / 2.2)
+    lab = cv2.cvtColor(srgb[:, None, ::-1].copy(), cv2.COLOR_BGR2Lab).reshape(-1, 3)
+    if not len(lab):
+        return np.zeros(0, np.float32)
+    L, a = lab[:, 0], lab[:, 1]
+    redder = np.clip((a - np.median(a) - DEAD_REDDER) / DEAD_REDDER, 0.0, 1.0)
+    darker = np.clip((np.median(L) - L - DEAD_DARKER) / DEAD_DARKER, 0.0, 1.0)
+    return (redder * darker).astype(np.float32)
 
 
 def _photo_at_particles(model: Model, rgba: np.ndarray):

@@ -152,3 +152,41 @@ def test_drawn_veins_take_the_vein_tissues_own_colour():
     flat = p_oak.with_overrides({"colour.vein_pallor": 0.0, "colour.vein_browning": 0.0})
     np.testing.assert_allclose(v_oak.vein_colours(st_oak, flat), v_oak.colours(st_oak, flat)[0], rtol=1e-5)
     assert v_oak.vein_colours(dataclasses_replace_none(st_oak), p_oak) is None  # no pigments
+
+
+def test_a_lesion_dead_in_the_young_photo_keeps_its_colour_as_the_leaf_dries(tmp_path):
+    """A brown lesion on a green photo is tissue dead already: as the blade around it loses its
+    chlorophyll and browns, the lesion keeps its photo colour (it used to take the surrounding
+    tissue's dried colour and vanish, its edge alone left darker), in the vertex colours, the
+    texture's tint; the green tissue around it changes.  The detail albedo lays no photo hue on
+    it (its weight is the chlorophyll kept, 0 there as around it): the photo's pixels at the
+    lesion's edge are half green, and with the hue kept they drew a green ring round it."""
+    import json
+
+    import cv2
+
+    from helpers import leafimg
+    from leafsim.config.species import load_library
+
+    img, _ = leafimg.photo(600)
+    base, _, _ = leafimg.petiole_line(600)
+    centre = (int(base[0] + 40), int(0.45 * 600))
+    cv2.circle(img, centre, 28, (30, 60, 110), -1)  # BGR: a brown lesion
+    cv2.imwrite(str(tmp_path / "lesion.png"), img)
+    (tmp_path / "leaves.json").write_text(json.dumps({"species": {"l": {"image": "lesion.png", "length_m": 0.08}}}))
+    sp = load_library(tmp_path / "leaves.json")["l"]
+    params = sp.params.with_overrides({"mesh.spacing": 0.02})
+    _, _, model = build_leaf(sp, params, seed=0)
+    st = Simulator(model, params, effects=("colour",), seed=0).state()
+    view = LeafView(model, species_photo_rgba(sp, params), st.pigments.copy(), photo_colour=True)
+    dead = view.dead_in_photo()
+    lesion, green = dead > 0.99, dead == 0.0
+    assert lesion.sum() >= 5 and green.sum() > 20 * lesion.sum()
+    young, tint0 = view.colours(st, params)
+    aged = st.copy()
+    aged.pigments.chlorophyll[:] = 0.0
+    aged.pigments.browning[:] = 1.0
+    old, tint = view.colours(aged, params)
+    assert np.allclose(old[lesion], young[lesion], rtol=1e-5) and np.allclose(tint[lesion], 1.0)
+    assert np.abs(old[green] - young[green]).max(axis=1).min() > 0.01  # the rest changed
+    assert np.allclose(view.chroma(aged, params)[:, 3], 0.0)
