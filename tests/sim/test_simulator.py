@@ -237,3 +237,28 @@ def test_cli_run_does_not_use_the_gui_session(tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stderr.endswith("OK"), r.stderr
     assert json.loads(r.stdout)["frames"] == 3
+
+
+def test_the_stats_residual_is_the_mesh_that_carried_the_mechanics():
+    """While a drying path carries the mechanics the residual is its mesh's (the solver's); the
+    own mesh's springs only take the prolongation's positions. After the hand-over it is the
+    own mesh's."""
+    from leafsim.config.species import get_species
+    from leafsim.pipeline import build_leaf
+    from leafsim.sim.kernels.pbd import residual
+    from leafsim.sim.stats import frame_stats
+
+    sp = get_species("oak")
+    params = sp.params  # the default mesh, finer than its drying path's
+    m = build_leaf(sp, params, 0).model
+    sim = Simulator(m, params, seed=0)
+    st = sim.state()
+    for _ in range(3):
+        ms = sim.step(st)
+    assert sim.on_path and sim.mechanics_mesh == 1
+    row = frame_stats(m, st, ms, sim)
+    assert row["residual"] == residual(st.path.particle_q, m.path.spring_ij, st.path.spring_rest)
+    assert row["residual"] != residual(st.particle_q, m.spring_ij, st.spring_rest)
+    sim.set_params(params.with_overrides({"dynamics.handover": 1.0}))  # the own mesh takes over now
+    ms = sim.step(st)
+    assert not sim.on_path and frame_stats(m, st, ms, sim)["residual"] == residual(st.particle_q, m.spring_ij, st.spring_rest)
