@@ -272,11 +272,13 @@ def main(argv: list[str] | None = None) -> int:
     # SIGTERM ends a command like Ctrl-C does (one line, no traceback), not silently
     old_term = signal.signal(signal.SIGTERM, raise_interrupted) if main_thread() else None
     args = None
-    from leafsim.commands.common import EMITTED
+    from leafsim.commands.common import EMITTED, RESOLVED
 
     EMITTED[0] = False  # this command's object not printed yet (main may run many times in one process)
+    RESOLVED.clear()  # nor its species (main may run many times in one process)
     try:
         args = build_parser().parse_args(argv)
+        args.command_line = " ".join(argv)
         return command(args.cmd)(args) or 0
     except LeafsimError as e:
         _error_json(args, one_line(str(e)), 2, argv)

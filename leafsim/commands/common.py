@@ -26,9 +26,19 @@ def warn(text: str) -> None:
 EMITTED = [False]
 
 
+#: what :func:`species_params` resolved for this command (its ``provenance``)
+RESOLVED: dict = {}
+
+
 def emit(args, obj: dict, text: str) -> None:
-    """``--json``: the one JSON object; otherwise the text."""
+    """``--json``: the one JSON object, with its ``provenance`` (:mod:`leafsim.base.provenance`:
+    version, commit, libraries, and the species, config and every parameter that differs from
+    leafsim's declared defaults); otherwise the text."""
     if getattr(args, "json", False):
+        if isinstance(obj, dict) and "provenance" not in obj:
+            from leafsim.base.provenance import provenance
+
+            obj = {**obj, "provenance": provenance(command=getattr(args, "command_line", None), **RESOLVED)}
         print(json.dumps(obj, sort_keys=True))
         EMITTED[0] = True
     else:
@@ -78,7 +88,12 @@ def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
     if both:  # --effects sets every effect: a --set of one would be dropped without a word
         raise LeafsimError(f"--set {both[0]} with --effects {args.effects}: --effects switches every effect on or off; "
                            f"list the effects you want in --effects, or use --set effects.* without it")
-    return sp, sp.params.with_overrides({**given, **extra}, where="--set")
+    params = sp.params.with_overrides({**given, **extra}, where="--set")
+    RESOLVED.clear()
+    RESOLVED.update(species=sp.key, config=str(sp.config) if sp.config is not None else "(shipped configs/leaves.json)",
+                    seed=getattr(args, "seed", None), quality=getattr(args, "quality", None),
+                    params=params.changed())  # every value that differs from the declared defaults
+    return sp, params
 
 
 def species_inputs(sp) -> tuple:

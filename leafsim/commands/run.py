@@ -28,6 +28,16 @@ from leafsim.sim.shape import save_npz, shape_metrics
 from leafsim.sim.stats import StatsStream
 
 
+
+def _npz_meta(args) -> str:
+    """final.npz's ``meta``: the run's provenance (the --json object's) as JSON text."""
+    import json
+
+    from leafsim.base.provenance import provenance
+    from leafsim.commands.common import RESOLVED
+
+    return json.dumps(provenance(command=getattr(args, "command_line", None), **RESOLVED), sort_keys=True)
+
 def check_run_args(args) -> Path | None:
     """Validate ``leafsim run``'s options before any work; returns the --out folder (or None)."""
     stop_of(args)  # --frames / --until: checked before any work
@@ -193,7 +203,7 @@ def cmd_run(args):
     if ck is not None and args.checkpoint_every and not broken:
         save_checkpoint(ck, model, run.state, meta, run.sim.carry())  # the final state: --resume --frames M continues it
     if out is not None and not broken:
-        save_npz(out / "final.npz", model, run.state)
+        save_npz(out / "final.npz", model, run.state, meta=_npz_meta(args))
     if outputs.frames is not None and run.state.frame % args.every:
         outputs.frames.write(run.state.frame, run.state)  # the last frame too (where --until stopped)
     rep = run_report(sp, params, args, run, stats, start, build_s, sim_s, outputs.frames)
@@ -283,7 +293,7 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
         "until": args.until,
         "nan": bool(any(s.get("nan") for s in stats)),
         "png_frames": 0 if frames is None else frames.written,
-        **{f"shape_{k}": v for k, v in shape_metrics(model, state).items()},
+        **{f"shape_{k}": v for k, v in shape_metrics(model, state, own_frame=params["dynamics.scene"] != "ground").items()},
         **({f"shape_{k}": v for k, v in dried_shape(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
         **({f"shape_{k}": v for k, v in crinkle_stats(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
         **model.to_report(),

@@ -271,6 +271,17 @@ def _c_flush() -> None:
         pass
 
 
+
+def _cpu_name() -> str | None:
+    """The processor's model name (Linux), for the record of a benchmark."""
+    try:
+        for line in open("/proc/cpuinfo", encoding="utf-8", errors="replace"):
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return None
+
 def main(json_out: bool = False, quick: bool = False) -> int:
     """CLI entry (``leafsim bench``): ``quick`` = maple size only, few rounds, no peers and no
     parallel contenders (under a minute); otherwise maple and 100k with the peers that are installed (several
@@ -297,6 +308,11 @@ def main(json_out: bool = False, quick: bool = False) -> int:
             os.close(saved)
     else:
         res = bench()
+    if json_out:
+        from leafsim.base.provenance import provenance
+
+        res = {**res, "provenance": provenance(command="bench" + (" --quick" if quick else ""), cpus=os.cpu_count(),
+                                               cpu=_cpu_name())}
     print(json.dumps(res, indent=1, sort_keys=True) if json_out else format_bench(res))
     return 0
 

@@ -12,9 +12,12 @@ from leafsim.base.fileio import atomic_write_bytes
 from leafsim.sim.model import Model, State
 
 
-def save_npz(path, model: Model, state: State) -> None:
-    """Write model topology and state arrays to ``path`` (.npz) atomically (temp + os.replace)."""
+def save_npz(path, model: Model, state: State, meta: str | None = None) -> None:
+    """Write model topology and state arrays to ``path`` (.npz) atomically (temp + os.replace);
+    ``meta``: a JSON text stored as the array ``meta`` (what made it: ``leafsim run`` stores its
+    provenance there).  ``scalars`` = (simulated time [s], frame, weather time [s])."""
     buf = io.BytesIO()
+    extra = {} if meta is None else {"meta": np.array(meta)}
     np.savez_compressed(
         buf, particle_rest=model.particle_rest, particle_layer=model.particle_layer, tri_T=model.tri_T,
         particle_petiole=~model.blade_particles,
@@ -23,7 +26,7 @@ def save_npz(path, model: Model, state: State) -> None:
         particle_texcoord=model.particle_texcoord, particle_q=state.particle_q,
         particle_qd=state.particle_qd, particle_water=state.particle_water,
         particle_water0=model.particle_water0, spring_rest=state.spring_rest,
-        scalars=state.scalars)
+        scalars=state.scalars, **extra)
     atomic_write_bytes(path, buf.getvalue(), "positions")
 
 
@@ -52,8 +55,10 @@ def shape_metrics(model: Model, state: State, own_frame: bool | None = None) -> 
     margin_lift : (max z of contour particles − min z of layer T) / leaf length.
     max_height : (max z − min z of layer T) / length.
     inverted : number of triangles whose V particle is below the triangle (layer inversion).
-    max_displacement : largest |q − rest| / length.
-    own_frame : measure z in the leaf's best-fit rigid frame (default: True unless on the ground).
+    max_displacement : largest |q − rest| / length (in the same frame as the heights).
+    own_frame : measure in the leaf's best-fit rigid frame (:func:`leaf_frame`) instead of the
+        world's, as for a leaf that falls or hangs (``leafsim run`` does so unless the scene is
+        the ground); default False.  Every length is a fraction of the leaf's length L.
     """
     q = state.particle_q
     if own_frame:
@@ -73,6 +78,6 @@ def shape_metrics(model: Model, state: State, own_frame: bool | None = None) -> 
         "margin_lift_mean": float((np.median(zc) - zmin) / L),
         "max_height": float((q[T, 2].max() - zmin) / L),
         "inverted": int((hv <= 0).sum()),
-        "max_displacement": float(np.linalg.norm(state.particle_q - model.particle_rest, axis=1).max() / L),
+        "max_displacement": float(np.linalg.norm(q - model.particle_rest, axis=1).max() / L),
         "water_fraction_left": model.water_fraction(state.particle_water),
     }

@@ -221,3 +221,25 @@ def test_every_option_has_help():
     missing = [f"{name} {'/'.join(a.option_strings) or a.dest}" for name, p in subs.choices.items() for a in p._actions
                if not isinstance(a, argparse._HelpAction) and not a.help]
     assert not missing, missing
+
+
+def test_json_outputs_and_final_npz_say_what_made_them(capsys, tmp_path):
+    """A number taken from --json says how to make it again: leafsim's version and commit, the
+    libraries, the command, the species, config, seed, quality and every parameter that differs
+    from the declared defaults (the species' own, --quality's and --set's); final.npz carries
+    the same as ``meta``. No clock in it: the same command gives the same bytes."""
+    argv = ["run", "--species", "oak", "--quality", "draft", "--frames", "2", "--set", "colour.age_rate=0.3",
+            "--effects", "osmosis,colour", "--out", str(tmp_path / "o"), "--json"]
+    code, out, _ = run(capsys, *argv)
+    assert code == 0
+    p = json.loads(out)["provenance"]
+    assert p["species"] == "oak" and p["seed"] == 0 and p["quality"] == "draft" and p["command"] == " ".join(argv)
+    assert p["params"]["colour.age_rate"] == 0.3 and p["params"]["effects.pbd"] is False
+    assert p["params"]["dynamics.finish"] == "static"  # oak's own default, not leafsim's
+    assert "mesh.spacing" in p["params"] and p["leafsim"] and p["numba"] and "commit" in p
+    meta = json.loads(str(np.load(tmp_path / "o" / "final.npz")["meta"]))
+    assert meta == p
+    code, out2, _ = run(capsys, *argv[:-3], "--out", str(tmp_path / "o2"), "--json")
+    assert json.loads(out2)["provenance"]["params"] == p["params"]
+    code, out3, _ = run(capsys, "veins", "--species", "maple", "--json")
+    assert json.loads(out3)["provenance"]["species"] == "maple" and "quality" in json.loads(out3)["provenance"]
