@@ -41,6 +41,10 @@ def test_accuracy_quick_report(tmp_path, capsys):
         assert 0 <= fl[m]["median"] <= fl[m]["max"] < 10
     assert fl["position"]["max"] > 0  # the perturbation acts: the runs are not the same run
     assert "Sensitivity floor" in (out / "accuracy.md").read_text()
+    # the table marks the rows whose mechanics the drying path carried (none at --quick's meshes)
+    md = (out / "accuracy.md").read_text()
+    for r in rep["rows"]:
+        assert r["path_frames"] >= 0 and (f"| {r['name']} †" in md or f"| {r['name']} ★ †" in md) == (r["path_frames"] > 0)
     for f in ("accuracy.json", "accuracy.md", "accuracy_pareto.png"):
         assert (out / f).stat().st_size > 100
     assert (out / "accuracy_pareto.png").read_bytes()[:4] == b"\x89PNG"
@@ -104,3 +108,19 @@ def test_sun_integrator_sweep_runs_only_when_named():
     named = default_sweeps(ParamSet(), groups=("integrator",))
     assert [s.group for s in named] == ["default", "integrator", "integrator"]
     assert all(s.overrides["dynamics.integrator"] == "sun" for s in named[1:])
+
+
+def test_a_setting_counts_the_frames_its_drying_path_carried():
+    """oak's default mesh is finer than its draft path's: the path carries the first frames;
+    a mesh as coarse as the path's runs its own mesh (the accuracy table's † says which)."""
+    from leafsim.config.species import get_species
+    from leafsim.measure.accuracy import Setting, run_setting
+    from leafsim.pipeline import leaf_shape
+    from leafsim.sim.metrics import Probe
+
+    sp = get_species("oak")
+    probe = Probe(leaf_shape(sp, sp.params))
+    t5 = 5 * sp.params["dynamics.dt"]
+    fine = run_setting(sp, sp.params, Setting("default", "default", {}), t5, probe)
+    coarse = run_setting(sp, sp.params, Setting("coarse", "mesh", {"mesh.spacing": 0.04}), t5, probe)
+    assert fine.frames == 5 and fine.path_frames == 5 and coarse.path_frames == 0
