@@ -106,6 +106,9 @@ class _Outputs:
 
     def __init__(self, args, sp, params, run: Run, ck: Path | None, meta: dict, out: Path | None, start: int):
         self.args, self.run, self.ck, self.meta = args, run, ck, meta
+        #: simulation seconds of the invocations before this one (a resumed run's checkpoint says)
+        self.prior_s = float(meta.get("sim_s_total", 0.0) or 0.0)
+        self.t_start = time.perf_counter()
         self.stream = StatsStream(args.stats, keep_until=start if args.resume else None) if args.stats else None
         self.frames = None
         if args.every:
@@ -122,7 +125,11 @@ class _Outputs:
             self.frames.write(k, self.run.state)
         # a frame that produced NaN never replaces the last good checkpoint (--resume needs it)
         if self.ck is not None and a.checkpoint_every and (stopping or k % a.checkpoint_every == 0) and not st["nan"]:
-            save_checkpoint(self.ck, self.run.model, self.run.state, self.meta, self.run.sim.carry())
+            save_checkpoint(self.ck, self.run.model, self.run.state, self.timed_meta(), self.run.sim.carry())
+
+    def timed_meta(self) -> dict:
+        """The checkpoint's meta with the simulation seconds of every invocation so far."""
+        return {**self.meta, "sim_s_total": round(self.prior_s + time.perf_counter() - self.t_start, 3)}
 
     def finish(self) -> None:
         """The run ended by its stop (not a signal): a --stats file exists even with no frame."""
@@ -170,8 +177,9 @@ def cmd_run(args):
     meta = {"species": sp.key, "config": str(Path(args.config).resolve()) if args.config else None,
             "seed": args.seed, "params": params.to_dict()}
     ck = out / CHECKPOINT if out is not None else None
+    prior_s = 0.0
     if args.resume:
-        check_meta(ck, meta)  # before the build: a mismatch costs nothing
+        prior_s = float(check_meta(ck, meta).get("sim_s_total", 0.0) or 0.0)  # before the build: a mismatch costs nothing
     ready_kernels()
     t0 = time.perf_counter()  # build_s: the build, not a first run's compile
     model = build_leaf(sp, params, args.seed).model
@@ -186,27 +194,28 @@ def cmd_run(args):
     start = run.state.frame
     until = stop_of(args, start)
     _prepare_out(out, ck, args.stats)
-    outputs = _Outputs(args, sp, params, run, ck, meta, out, start)
-    t1 = time.perf_counter()
+    outputs = _Outputs(args, sp, params, run, ck, {**meta, "sim_s_total": prior_s}, out, start)
+    t1 = outputs.t_start = time.perf_counter()
     stats, signum = _simulate(run, until, outputs, Progress(args, run, until, sp.key))
     sim_s = time.perf_counter() - t1
     if signum is not None:
         where = (f"checkpoint {ck}: continue with the same command and --resume" if ck is not None and args.checkpoint_every
                  else "no checkpoint (give --out DIR and --checkpoint-every K to be able to resume)")
         if args.json:  # the one JSON object still comes, saying where the run stopped
-            rep = run_report(sp, params, args, run, stats, start, build_s, sim_s, outputs.frames, check_nan=False)
+            rep = run_report(sp, params, args, run, stats, start, build_s, sim_s, outputs.frames, check_nan=False,
+                             prior_s=outputs.prior_s)
             emit(args, {**rep, "interrupted": signal.Signals(signum).name}, "")
         goal = f" of {args.frames}" if args.until is None else f" (until {args.until})"
         raise Interrupted(signum, f"interrupted at frame {run.state.frame}{goal}"
                                   + (f", statistics in {args.stats}" if args.stats else "") + f"; {where}")
     broken = bool(stats) and stats[-1]["nan"]  # run_report below says so; keep the good files
     if ck is not None and args.checkpoint_every and not broken:
-        save_checkpoint(ck, model, run.state, meta, run.sim.carry())  # the final state: --resume --frames M continues it
+        save_checkpoint(ck, model, run.state, outputs.timed_meta(), run.sim.carry())  # the final state: --resume --frames M continues it
     if out is not None and not broken:
         save_npz(out / "final.npz", model, run.state, meta=_npz_meta(args))
     if outputs.frames is not None and run.state.frame % args.every:
         outputs.frames.write(run.state.frame, run.state)  # the last frame too (where --until stopped)
-    rep = run_report(sp, params, args, run, stats, start, build_s, sim_s, outputs.frames)
+    rep = run_report(sp, params, args, run, stats, start, build_s, sim_s, outputs.frames, prior_s=outputs.prior_s)
     emit(args, rep, run_text(rep, out, ck if args.checkpoint_every else None))
 
 
@@ -275,8 +284,12 @@ def _phases(stats, depth: int = 1) -> dict:
     return out
 
 
-def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames, check_nan: bool = True) -> dict:
+def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames, check_nan: bool = True,
+               prior_s: float = 0.0) -> dict:
     """The ``leafsim run`` report (LeafsimError when the run produced NaN and ``check_nan``).
+    ``frames``, ``sim_s`` and the per-frame figures are this invocation's (from ``resumed_from``
+    on); ``sim_s_total`` adds the simulation seconds of the invocations before it (``prior_s``,
+    kept in the checkpoint).
     ``water_kg`` is the water left now, ``fresh_water_kg`` the fresh leaf's (blade and petiole);
     ``water_fraction`` is the blade's (:meth:`Model.water_fraction`: the petiole dries last)."""
     model, state = run.model, run.state
@@ -284,7 +297,7 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
     water = model.water_fraction(state.particle_water)
     rep = {
         "species": sp.key, "seed": args.seed, "frames": len(stats), "frame": state.frame, "resumed_from": start,
-        "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
+        "build_s": round(build_s, 3), "sim_s": round(sim_s, 3), "sim_s_total": round(prior_s + sim_s, 3),
         "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
         "ms_per_frame_mean": round(float(np.mean(ms)), 4) if ms else 0.0,
         "phases": _phases(stats, _path_depth(model)),

@@ -66,6 +66,8 @@ def _resume_to_n(out, stats, capsys):
     assert main(BASE + ["--frames", str(N), "--out", str(out), "--stats", str(stats), "--resume", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["frame"] == N and 0 < rep["resumed_from"] < N
+    # this invocation's seconds, and with the interrupted one's before it (kept in the checkpoint)
+    assert rep["sim_s_total"] > rep["sim_s"] > 0
     return np.load(out / "final.npz"), _stats(stats)
 
 
