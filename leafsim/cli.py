@@ -13,6 +13,7 @@ import importlib
 import json
 import os
 import re
+import shlex
 import signal
 import sys
 
@@ -278,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     RESOLVED.clear()  # nor its species (main may run many times in one process)
     try:
         args = build_parser().parse_args(argv)
-        args.command_line = " ".join(argv)
+        args.command_line = shlex.join(argv)
         return command(args.cmd)(args) or 0
     except LeafsimError as e:
         _error_json(args, one_line(str(e)), 2, argv)

@@ -22,12 +22,12 @@ def source_commit() -> str | None:
         value = None
         if (root / ".git").exists():
             try:
-                head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                      timeout=5)
+                git = ["git", "--no-optional-locks", "-C", str(root)]  # never takes the index lock
+                head = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True, timeout=2)
                 if head.returncode == 0:
                     value = head.stdout.strip()
-                    dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-                                           capture_output=True, text=True, timeout=5)
+                    dirty = subprocess.run([*git, "status", "--porcelain", "--untracked-files=no"],
+                                           capture_output=True, text=True, timeout=2)
                     if dirty.returncode == 0 and dirty.stdout.strip():
                         value += "+changes"
             except (OSError, subprocess.SubprocessError):
@@ -50,6 +50,8 @@ def provenance(**extra) -> dict:
 
 
 def command_line(argv=None) -> str:
-    """The command as typed after ``leafsim`` (for the record)."""
+    """The command as typed after ``leafsim``, quoted as a shell would need it (for the record)."""
+    import shlex
+
     args = sys.argv[1:] if argv is None else argv
-    return " ".join(str(a) for a in args)
+    return shlex.join(str(a) for a in args)

@@ -6,12 +6,15 @@ from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output, output_target
-from leafsim.commands.common import emit, ready_kernels
+from leafsim.commands.common import RESOLVED, emit, ready_kernels
 from leafsim.measure.accuracy import GROUPS, markdown, study, write_report
 from leafsim.measure.bench import main as bench_main
 
 
 def cmd_accuracy(args):
+    # the study sets its own parameters per row (its JSON lists each row's overrides)
+    RESOLVED.update(species=args.species, seed=args.seed, config=args.config or "(shipped configs/leaves.json)",
+                    quick=bool(args.quick))
     if args.out is not None and not args.out.strip():
         raise LeafsimError("--out '': expected a folder name for the report")
     out = Path(args.out) if args.out else None

@@ -5,6 +5,7 @@ a checkpoint and exit with one line."""
 from __future__ import annotations
 
 import json
+import math
 import signal
 import os
 import time
@@ -28,6 +29,15 @@ from leafsim.sim.shape import save_npz, shape_metrics
 from leafsim.sim.stats import StatsStream
 
 
+
+
+def _prior_seconds(meta: dict) -> float | None:
+    """The simulation seconds a checkpoint's earlier invocations took, or None when it does not
+    say (an older version's) or says something that is no number of seconds."""
+    v = meta.get("sim_s_total")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+        return None
+    return float(v)
 
 def _npz_meta(args) -> str:
     """final.npz's ``meta``: the run's provenance (the --json object's) as JSON text."""
@@ -106,8 +116,9 @@ class _Outputs:
 
     def __init__(self, args, sp, params, run: Run, ck: Path | None, meta: dict, out: Path | None, start: int):
         self.args, self.run, self.ck, self.meta = args, run, ck, meta
-        #: simulation seconds of the invocations before this one (a resumed run's checkpoint says)
-        self.prior_s = float(meta.get("sim_s_total", 0.0) or 0.0)
+        #: simulation seconds of the invocations before this one (a resumed run's checkpoint says;
+        #: None when it does not: a checkpoint of an older version)
+        self.prior_s = meta.get("sim_s_total")
         self.t_start = time.perf_counter()
         self.stream = StatsStream(args.stats, keep_until=start if args.resume else None) if args.stats else None
         self.frames = None
@@ -129,7 +140,8 @@ class _Outputs:
 
     def timed_meta(self) -> dict:
         """The checkpoint's meta with the simulation seconds of every invocation so far."""
-        return {**self.meta, "sim_s_total": round(self.prior_s + time.perf_counter() - self.t_start, 3)}
+        total = None if self.prior_s is None else round(self.prior_s + time.perf_counter() - self.t_start, 3)
+        return {**self.meta, "sim_s_total": total}
 
     def finish(self) -> None:
         """The run ended by its stop (not a signal): a --stats file exists even with no frame."""
@@ -179,7 +191,7 @@ def cmd_run(args):
     ck = out / CHECKPOINT if out is not None else None
     prior_s = 0.0
     if args.resume:
-        prior_s = float(check_meta(ck, meta).get("sim_s_total", 0.0) or 0.0)  # before the build: a mismatch costs nothing
+        prior_s = _prior_seconds(check_meta(ck, meta))  # before the build: a mismatch costs nothing
     ready_kernels()
     t0 = time.perf_counter()  # build_s: the build, not a first run's compile
     model = build_leaf(sp, params, args.seed).model
@@ -285,7 +297,7 @@ def _phases(stats, depth: int = 1) -> dict:
 
 
 def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames, check_nan: bool = True,
-               prior_s: float = 0.0) -> dict:
+               prior_s: float | None = 0.0) -> dict:
     """The ``leafsim run`` report (LeafsimError when the run produced NaN and ``check_nan``).
     ``frames``, ``sim_s`` and the per-frame figures are this invocation's (from ``resumed_from``
     on); ``sim_s_total`` adds the simulation seconds of the invocations before it (``prior_s``,
@@ -297,7 +309,8 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
     water = model.water_fraction(state.particle_water)
     rep = {
         "species": sp.key, "seed": args.seed, "frames": len(stats), "frame": state.frame, "resumed_from": start,
-        "build_s": round(build_s, 3), "sim_s": round(sim_s, 3), "sim_s_total": round(prior_s + sim_s, 3),
+        "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
+        "sim_s_total": None if prior_s is None else round(prior_s + sim_s, 3),
         "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
         "ms_per_frame_mean": round(float(np.mean(ms)), 4) if ms else 0.0,
         "phases": _phases(stats, _path_depth(model)),
@@ -306,7 +319,8 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
         "until": args.until,
         "nan": bool(any(s.get("nan") for s in stats)),
         "png_frames": 0 if frames is None else frames.written,
-        **{f"shape_{k}": v for k, v in shape_metrics(model, state, own_frame=params["dynamics.scene"] != "ground").items()},
+        **{f"shape_{k}": v for k, v in shape_metrics(
+            model, state, own_frame=params["dynamics.scene"] != "ground" and bool(np.isfinite(state.particle_q).all())).items()},
         **({f"shape_{k}": v for k, v in dried_shape(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
         **({f"shape_{k}": v for k, v in crinkle_stats(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
         **model.to_report(),

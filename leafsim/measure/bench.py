@@ -311,7 +311,9 @@ def main(json_out: bool = False, quick: bool = False) -> int:
     if json_out:
         from leafsim.base.provenance import provenance
 
-        res = {**res, "provenance": provenance(command="bench" + (" --quick" if quick else ""), cpus=os.cpu_count(),
+        from leafsim.base.provenance import command_line
+
+        res = {**res, "provenance": provenance(command=command_line(), cpus=os.cpu_count(),
                                                cpu=_cpu_name())}
     print(json.dumps(res, indent=1, sort_keys=True) if json_out else format_bench(res))
     return 0

@@ -308,3 +308,36 @@ def test_stats_at_the_out_folder_is_refused_before_the_folder_is_made(tmp_path, 
     err = capsys.readouterr().err
     assert "that is the --out folder" in err and err.count("\n") == 1
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("scene", ["ground", "free", "hanging"])
+def test_a_run_that_went_nan_is_reported_as_such_in_every_scene(scene):
+    """A falling or hanging leaf is measured in its own frame (a rigid fit): with NaN positions
+    that fit failed with an internal error before the report's NaN check could say what
+    happened (a review's finding)."""
+    import types
+
+    from leafsim.base.errors import LeafsimError
+    from leafsim.commands.run import run_report
+    from leafsim.config.species import get_species
+    from leafsim.pipeline import build_leaf
+    from leafsim.sim.run import Run
+
+    sp = get_species("maple")
+    p = sp.params.with_overrides({"mesh.spacing": 0.08, "dynamics.scene": scene})
+    run = Run(build_leaf(sp, p, 0).model, p, seed=0)
+    run.state.particle_q[3] = np.nan
+    args = types.SimpleNamespace(seed=0, until=None)
+    with pytest.raises(LeafsimError, match="produced NaN"):
+        run_report(sp, p, args, run, [{"nan": True, "ms": {"a": 1.0}}], 0, 0.0, 0.0, None)
+    rep = run_report(sp, p, args, run, [{"nan": True, "ms": {"a": 1.0}}], 0, 0.0, 0.0, None, check_nan=False)
+    assert rep["nan"] is True  # the interrupted path's report, NaN and all
+
+
+def test_a_checkpoints_earlier_seconds_are_read_only_when_they_are_seconds():
+    from leafsim.commands.run import _prior_seconds
+
+    assert _prior_seconds({"sim_s_total": 12.5}) == 12.5 and _prior_seconds({"sim_s_total": 0}) == 0.0
+    for bad in ({}, {"sim_s_total": None}, {"sim_s_total": "x"}, {"sim_s_total": float("nan")},
+                {"sim_s_total": -1.0}, {"sim_s_total": True}):
+        assert _prior_seconds(bad) is None  # an older version's checkpoint, or a damaged one: unknown

@@ -43,7 +43,7 @@ def test_accuracy_quick_report(tmp_path, capsys):
     assert "Sensitivity floor" in (out / "accuracy.md").read_text()
     # the table marks the rows whose mechanics the drying path carried (none at --quick's meshes)
     md = (out / "accuracy.md").read_text()
-    for r in rep["rows"]:
+    for r in (r for r in rep["rows"] if "failed" not in r):
         assert r["path_frames"] >= 0 and (f"| {r['name']} †" in md or f"| {r['name']} ★ †" in md) == (r["path_frames"] > 0)
     for f in ("accuracy.json", "accuracy.md", "accuracy_pareto.png"):
         assert (out / f).stat().st_size > 100

@@ -113,5 +113,6 @@ def test_json_output_stays_pure_when_contenders_print(monkeypatch, capfd):
     assert bench.main(json_out=True, quick=True) == 0
     out, err = capfd.readouterr()
     got = json.loads(out)
-    assert got.pop("provenance")["command"] == "bench --quick" and got == {"tiny": {"particles": 1}}
+    prov = got.pop("provenance")
+    assert isinstance(prov["command"], str) and prov["cpus"] >= 1 and got == {"tiny": {"particles": 1}}
     assert "Warp" in err and "Taichi" in err and "C stdio banner" in err
