@@ -78,7 +78,7 @@ BASAL_SCORE = 5.0
 LATERAL_SCORE = 2.5
 #: a photo shows laterals when its strongest scores over this × the strongest that the same
 #: search finds in the blade with its pixels (off the main veins) shuffled: a texture of the
-#: same values with no lines.  That null's best is 2.8–3.1 on the shipped photos (500–1700
+#: same values with no lines.  That null's best is 2.9–3.2 on the shipped photos (500–1700
 #: candidates each), where their strongest laterals score 3.9–20; on a photo whose blade
 #: shows pixel noise but no laterals the real search's best (2.9–3.0) is the null's own
 LATERAL_NULL_MARGIN = 1.25
@@ -342,7 +342,7 @@ def _laterals(image, m, inner, mains, L, pol, under=None) -> tuple[list, list, d
     null = _clearest(_scored_paths(shuffled, inner, near_main, band, cands, d_main, L, k, 0.0)[0], shuffled, inner, L, k)
     basal = _basal_laterals(grid, short, mains, band, blade, R, med, d_main, L)
     # a basal lateral counts as it is: its own search asks for a ridge over BASAL_SCORE (5) × the
-    # blade's along a ray that follows a vein, well above any null's best (2.8-3.5 measured)
+    # blade's along a ray that follows a vein, well above any null's best (2.5-3.5 measured)
     best = max([_clearest(scored, image, inner, L, k), *(sc for sc, _, _ in basal)])
     scored += basal
     test = {"best": round(best, 2), "null": round(null, 2), "shown": bool(best > LATERAL_NULL_MARGIN * null)}
