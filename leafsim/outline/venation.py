@@ -79,7 +79,7 @@ LATERAL_SCORE = 2.5
 #: a photo shows laterals when its strongest scores over this × the strongest that the same
 #: search finds in the blade with its pixels (off the main veins) shuffled: a texture of the
 #: same values with no lines.  That null's best is 2.9–3.2 on the shipped photos (500–1700
-#: candidates each), where their strongest laterals score 3.9–20; on a photo whose blade
+#: candidates each), where their strongest laterals score 4.7–20; on a photo whose blade
 #: shows pixel noise but no laterals the real search's best (2.9–3.0) is the null's own
 LATERAL_NULL_MARGIN = 1.25
 #: a lateral is lighter (darker) than both its flanks on at least this share of its points
