@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import struct
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -72,10 +73,13 @@ class GltfBuilder:
         return len(self.doc["materials"]) - 1
 
     def texture(self, png: bytes, name: str = "photo") -> int:
-        """A texture of the PNG ``png`` (clamped at the edges, mipmapped); returns its index."""
+        """A texture of the PNG ``png`` (mipmapped; returns its index).  Its sampler repeats it
+        mirrored: within [0, 1], where every upper face's coordinate lies, that reads as clamping
+        at the edges (the mirror's first texel is the edge's), and a shell's lower face under a
+        normal map reads the same texels at the negated coordinates (:meth:`mesh`)."""
         d = self.doc
         d.setdefault("images", []).append({"bufferView": self.view(png), "mimeType": "image/png", "name": name})
-        d["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}]
+        d["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33648, "wrapT": 33648}]
         d.setdefault("textures", []).append({"sampler": 0, "source": len(d["images"]) - 1})
         return len(d["textures"]) - 1
 
@@ -84,13 +88,16 @@ class GltfBuilder:
         base, the earlier ones morph targets against it: module docstring).  A material with a
         normal map gets the surface's tangents (:func:`tangents`) with it."""
         s0 = frames[-1]
+        mapped = s0.uv is not None and "normalTexture" in self.doc["materials"][material]
+        if mapped and len(frames) > 1:
+            raise ValueError("glTF: a normal map on an animated mesh would need its tangents morphed too")
+        if mapped and s0.lower is not None:
+            s0 = _lower_face_turned(s0)
         attrs = {"POSITION": self.accessor(s0.positions, bounds=True), "NORMAL": self.accessor(s0.normals)}
         if s0.uv is not None:
             attrs["TEXCOORD_0"] = self.accessor(s0.uv)
-            if "normalTexture" in self.doc["materials"][material]:
-                if len(frames) > 1:
-                    raise ValueError("glTF: a normal map on an animated mesh would need its tangents morphed too")
-                attrs["TANGENT"] = self.accessor(tangents(s0.positions, s0.normals, s0.uv, s0.triangles, s0.lower))
+            if mapped:
+                attrs["TANGENT"] = self.accessor(tangents(s0.positions, s0.normals, s0.uv, s0.triangles))
         if s0.colours is not None:
             attrs["COLOR_0"] = self.accessor(s0.colours)
         if s0.thickness is not None:
@@ -153,14 +160,41 @@ class GltfBuilder:
         return self._json(bin_name), bytes(self.bin)
 
 
-def tangents(positions: np.ndarray, normals: np.ndarray, uv: np.ndarray, triangles: np.ndarray,
-             lower: np.ndarray | None = None) -> np.ndarray:
+def _lower_face_turned(s):
+    """The shell ``s`` (a :class:`~leafsim.export.mesh.Surface` with ``lower`` set) for a normal
+    map: its lower face (normal −n) reads the map in a frame turned by 180° about its normal, so
+    the map tilts each lower normal against its upper twin's, the same relief seen from below.
+    Its texture coordinates are the upper face's negated, which the mirrored-repeat sampler
+    (:meth:`GltfBuilder.texture`) reads at the same texels, so a client that makes its own
+    tangents from the coordinates (Blender: MikkTSpace) gets that frame too, not a mirror of the
+    relief.  The rim's triangles, which join the two faces, get their own copies of their
+    vertices with the upper face's coordinates: on the shared vertices they would span the
+    texture from (u, v) to (−u, −v), draw a smear of it on the rim and turn the tangents a client
+    averages over the margin's vertices."""
+    low = np.asarray(s.lower, bool)
+    tri = np.asarray(s.triangles, np.int64)
+    k = low[tri].sum(axis=1)
+    rim = (k > 0) & (k < 3)
+    used = np.unique(tri[rim])
+    new = np.full(len(low), -1, np.int64)
+    new[used] = len(low) + np.arange(len(used))
+    tri = tri.copy()
+    tri[rim] = new[tri[rim]]
+    more = lambda a: None if a is None else np.concatenate([a, np.asarray(a)[used]])  # noqa: E731
+    uv = more(s.uv).astype(np.float32)
+    uv[:len(low)][low] = -uv[:len(low)][low]
+    return replace(s, positions=more(s.positions), normals=more(s.normals), triangles=tri.astype(np.uint32),
+                   uv=uv, colours=more(s.colours), thickness=more(s.thickness), ageing=more(s.ageing),
+                   lower=np.concatenate([low, np.zeros(len(used), bool)]))
+
+
+def tangents(positions: np.ndarray, normals: np.ndarray, uv: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """(n, 4) float32 glTF TANGENT of a surface: xyz the direction of increasing u (the sum over
     each vertex's triangles of ∂P/∂u, made orthogonal to the vertex normal, unit), w the sign
     that makes cross(normal, tangent) · w point up the image (decreasing v, v = 0 the top row),
-    the normal map's +y (the bake's frame, :func:`leafsim.export.bake.bake_normals`), turned
-    by 180° about the normal on the vertices ``lower`` flags (a shell's lower face).  A
-    vertex of no usable triangle gets any unit vector across its normal and w = 1."""
+    the normal map's +y (the bake's frame, :func:`leafsim.export.bake.bake_normals`): the frame
+    a client derives from the texture coordinates itself.  A vertex of no usable triangle gets
+    any unit vector across its normal and w = 1."""
     P = np.asarray(positions, np.float64)
     N = np.asarray(normals, np.float64)
     U = np.asarray(uv, np.float64)
@@ -185,14 +219,6 @@ def tangents(positions: np.ndarray, normals: np.ndarray, uv: np.ndarray, triangl
         norm[bad] = np.linalg.norm(t[bad], axis=1)
     t /= norm[:, None]
     w = np.where(np.sum(np.cross(N, t) * -b, axis=1) < 0.0, -1.0, 1.0)
-    if lower is not None:
-        # a shell's lower face (normal −n, the upper face's texture coordinates): the frame turned
-        # by 180° about the normal (x along decreasing u, y down the image), so the map tilts its
-        # normal against the upper face's, as the same relief seen from below (the upper face's
-        # frame, which a client that makes its own tangents from the texture coordinates uses,
-        # shows it mirrored)
-        low = np.asarray(lower, bool)
-        t[low] = -t[low]
     return np.concatenate([t, w[:, None]], 1).astype(np.float32)
 
 

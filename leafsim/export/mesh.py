@@ -54,8 +54,8 @@ class Surface:
     ageing : (n, 3) float32 or None: with the photo as texture, the factor rgb(now) / rgb(young)
         the ageing multiplies it by (above 1 where green turns red or yellow);
     triangles : (m, 3) uint32, counter-clockwise seen from outside;
-    lower : (n,) bool or None: the vertices of a shell's lower face (their normal-map frame is
-        turned, :func:`leafsim.export.gltf.tangents`).
+    lower : (n,) bool or None: the vertices of a shell's lower face (the glTF writer turns their
+        normal-map frame by 180° about the normal, :meth:`leafsim.export.gltf.GltfBuilder.mesh`).
     """
 
     positions: np.ndarray

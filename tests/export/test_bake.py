@@ -380,11 +380,13 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
     got = cv2.cvtColor(cv2.imdecode(np.frombuffer(blob[bv["byteOffset"]:bv["byteOffset"] + bv["byteLength"]], np.uint8),
                                     cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
     assert np.array_equal(got, nmap)
-    # the tangents in the file: on the upper face x along increasing u, cross(normal, tangent) × w
-    # up the image, as the client frames of the file's own positions and texture coordinates; on
-    # the lower face (normal −n, the same texture coordinates) the frame turned by 180° about the
-    # normal, so each lower vertex's whole frame (x, y, normal) is its upper twin's negated and the
-    # map tilts it against the upper face's, as the same relief seen from below
+    # the tangents in the file: x along increasing u, cross(normal, tangent) × w up the image, as
+    # the client frames of the file's own positions and texture coordinates, on both faces: a
+    # client that makes its tangents from the coordinates (Blender) reads the map as the file's
+    # tangents say.  The lower face (normal −n) has the upper face's coordinates negated (the
+    # mirrored-repeat sampler reads the same texels there), so its frame is turned by 180° about
+    # the normal: each lower vertex's whole frame (x, y, normal) is its upper twin's negated and
+    # the map tilts it against the upper face's, as the same relief seen from below
     attrs = prims["blade"]["attributes"]
     Pf, Nf, Uf, Tf = (_accessor(doc, blob, attrs[a]).astype(np.float64) for a in ("POSITION", "NORMAL", "TEXCOORD_0", "TANGENT"))
     trif = _accessor(doc, blob, prims["blade"]["indices"]).reshape(-1, 3).astype(np.int64)
@@ -397,16 +399,20 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
     v = np.flatnonzero(first >= 0)
     assert np.all(np.abs(np.linalg.norm(Tf[:, :3], axis=1) - 1) < 1e-5) and set(np.unique(Tf[:, 3])) <= {-1.0, 1.0}
     up = np.cross(Nf[v], Tf[v, :3]) * Tf[v, 3:4]
-    nT = len(Pf) // 2  # the shell: the lower face's vertices, then the upper face's twins
+    nT = len(view.T)  # the shell: the lower face's vertices, the upper face's twins, the rim's own copies
+    assert len(Pf) > 2 * nT and np.all(Uf[2 * nT:] >= 0.0)  # the rim reads the texture at the upper face's coordinates
+    assert np.all(trif[~face] >= 2 * nT) and np.all(trif[face] < 2 * nT)  # no rim triangle shares a face's vertex
+    v = v[v < 2 * nT]
     top = v >= nT
     assert 0.4 < top.mean() < 0.6 and np.all(Nf[v[top], 1] > 0.99)  # the flat leaf's upper face faces up (+y)
     along = np.sum(Tf[v, :3] * tx[first[v]], axis=1)
     upward = np.sum(up * by[first[v]], axis=1)
     assert np.median(along[top]) > 0.99 and np.median(upward[top]) > 0.99
-    assert np.median(along[~top]) < -0.99 and np.median(upward[~top]) < -0.99
+    assert np.median(along[~top]) > 0.99 and np.median(upward[~top]) > 0.99
     frame = lambda i: np.stack([Tf[i, :3], np.cross(Nf[i], Tf[i, :3]) * Tf[i, 3:4], Nf[i]], 1)  # noqa: E731
     low = np.arange(nT)
-    assert np.allclose(Uf[low], Uf[low + nT]) and np.median(np.abs(frame(low) + frame(low + nT)).max(axis=(1, 2))) < 1e-3
+    assert np.allclose(Uf[low], -Uf[low + nT]) and np.median(np.abs(frame(low) + frame(low + nT)).max(axis=(1, 2))) < 1e-3
+    assert all(smp["wrapS"] == smp["wrapT"] == 33648 for smp in doc["samplers"])  # MIRRORED_REPEAT
     # OBJ: the same map beside it, on the blade's material as map_Bump (Blender's normal map),
     # and the frame a reader derives from the file's vt (x along increasing u, y along increasing
     # vt, i.e. up the image) is the glTF's
@@ -420,8 +426,9 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
     lines = obj.read_text().splitlines()
     blade_end = lines.index("o veins")
     vt = np.array([[float(a) for a in ln.split()[1:3]] for ln in lines[:blade_end] if ln.startswith("vt ")])
-    assert np.allclose(vt, np.c_[Uf[:, 0], 1.0 - Uf[:, 1]], atol=1e-6)
-    tx_o, vt_dir = _client_frames(Pf, vt, trif, flip_v=True)  # y along +∂P/∂vt: OBJ's vt grows up the image
+    assert np.allclose(vt, np.c_[np.abs(Uf[:2 * nT, 0]), 1.0 - np.abs(Uf[:2 * nT, 1])], atol=1e-6)  # the upper face's on both
+    rim_vt = np.c_[Uf[2 * nT:, 0], 1.0 - Uf[2 * nT:, 1]]  # (the glb's rim copies: its rim triangles' frames go unused)
+    tx_o, vt_dir = _client_frames(Pf, np.concatenate([vt, rim_vt]), trif, flip_v=True)  # y along +∂P/∂vt: OBJ's vt grows up the image
     assert np.median(np.sum(Tf[v, :3] * tx_o[first[v]], axis=1)[top]) > 0.99
     assert np.median(np.sum(up * vt_dir[first[v]], axis=1)[top]) > 0.99
     for quiet in (Simulator(model, params, seed=0).state(), None):
