@@ -35,8 +35,8 @@ from leafsim.base.resources import default_config
 from leafsim.export.mesh import export_mesh
 from leafsim.gui.exports import BackgroundJobs, ensure_folder, free_path, new_take, user_path
 from leafsim.gui.fonts import load_ui_font
-from leafsim.gui.layout import (BACKGROUND, LEFT_W, MIN_WINDOW, OWN_RANGE, PANEL_BG, RIGHT_W, STATUS_H, fixed_flags,
-                                 window_rects)
+from leafsim.gui.layout import (BACKGROUND, DRY_UI_HZ, LEFT_W, MIN_WINDOW, OWN_RANGE, PANEL_BG, RIGHT_W, STATUS_H,
+                                 fixed_flags, window_rects)
 from leafsim.gui.panels.controls import ControlsPanel
 from leafsim.gui.panels.stats import StatsPanel
 from leafsim.gui.panels.status_bar import StatusBar
@@ -68,10 +68,6 @@ def without_test_time_limit(runner_params) -> None:
         io.config_watchdog_warning = io.config_watchdog_kill_test = sys.float_info.max
 
     runner_params.callbacks.register_tests = register
-
-
-#: frames per second the window draws while "Dry to end" runs (a progress bar and the leaf)
-DRY_UI_HZ = 3.0
 
 
 def _configure_threads() -> None:
@@ -139,6 +135,7 @@ class LeafApp:
         self.t_first_frame: float | None = None
         self.t_first_leaf: float | None = None
         self.frame_ms: list[float] = []
+        self._paced_before = False
         self._t_last = None
         self.leaf_rect_px = (LEFT_W, 0, max(self.window_size[0] - LEFT_W - RIGHT_W, 64), self.window_size[1] - STATUS_H)
         self.dirty = True
@@ -271,16 +268,25 @@ class LeafApp:
         if self._t_last is not None:
             self.frame_ms.append((now - self._t_last) * 1e3)
             del self.frame_ms[:-600]
+        if self.paced != self._paced_before:  # the frame rate of one pace only (after "Dry to end": the window's own)
+            self.frame_ms.clear()
+            self._paced_before = self.paced
         self._t_last = now
         if self.t_first_frame is None:
             self.t_first_frame = now
         self.gui_frames += 1
         self.guard(self._frame)
 
+    @property
+    def paced(self) -> bool:
+        """The window draws at most ``DRY_UI_HZ`` frames per second ("Dry to end" runs; a take
+        draws every frame)."""
+        return self.session.playback.drying and self.take is None
+
     def _pace(self) -> None:
         """While "Dry to end" runs, draw at most ``DRY_UI_HZ`` frames per second: with a CPU
         rasteriser (llvmpipe) every frame drawn is CPU time the drying does not get."""
-        if self._t_last is not None and self.session.playback.drying and self.take is None:  # a take draws every frame
+        if self._t_last is not None and self.paced:
             wait = 1.0 / DRY_UI_HZ - (time.perf_counter() - self._t_last)
             if wait > 0.0:
                 time.sleep(wait)

@@ -54,3 +54,7 @@ def window_rects():
     W, H = io.display_size.x, io.display_size.y
     top = H - STATUS_H
     return W, H, (0, 0, LEFT_W, top), (W - RIGHT_W, 0, RIGHT_W, top), (0, top, W, STATUS_H)
+
+
+#: frames per second the window draws while "Dry to end" runs (a progress bar and the leaf)
+DRY_UI_HZ = 3.0

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from imgui_bundle import imgui, implot
 
+from leafsim.gui.layout import DRY_UI_HZ
 from leafsim.gui.photo import UV_CORNERS, leaf_axes, panel_quad, screen_rotation
 from leafsim.sim.environment import clock_text
 
@@ -34,7 +35,12 @@ class StatsPanel:
         ft = np.asarray(app.frame_ms[-120:])
         fps = 1000.0 / ft.mean() if ft.size else 0.0
         p90 = float(np.percentile(ft, 90)) if ft.size else 0.0
-        imgui.text(f"{fps:5.1f} fps   frame p90 {p90:5.1f} ms")
+        if app.paced:  # drawn slowly on purpose: the CPU goes to the drying
+            imgui.text(f"{fps:5.1f} fps   (at most {DRY_UI_HZ:g} while drying to the end)")
+        elif ft.size < 2:  # the pace just changed ("Dry to end" ended): no frame rate of its own yet
+            imgui.text("    - fps   (measuring)")
+        else:
+            imgui.text(f"{fps:5.1f} fps   frame p90 {p90:5.1f} ms")
         imgui.text(f"simulation {pb.sim_rate:6.3g} sim s / wall s")
         if s.params["environment.drive"] == "weather":  # the weather clock runs time_warp × faster
             imgui.text(f"weather    {pb.sim_rate * s.params['environment.time_warp'] / 3600:6.3g} h / wall s")
