@@ -89,8 +89,10 @@ def cmd_export(args):
                       layers=args.layers, veins=args.veins, texture=args.texture)
     water = model.water_fraction(run.state.particle_water)
     rep.update(species=sp.key, seed=args.seed, frames=run.state.frame, water_fraction=round(water, 6), texture=args.texture)
-    if fmt in ("glb", "gltf") and len(keys) > 1:
-        from leafsim.export import blender_import  # the add-on that brings the colour morphs into Blender
+    if fmt in ("glb", "gltf", "obj"):
+        # the add-on that brings into Blender what its importers drop: a glTF's colour morphs and
+        # photo ageing, an OBJ's vertex colours and the normal map's colour space
+        from leafsim.export import blender_import
 
         rep["blender_addon"] = str(Path(blender_import.__file__).resolve())
     counts = ", ".join(f"{k} {v['vertices']} vertices / {v['triangles']} triangles" for k, v in rep["meshes"].items())

@@ -309,6 +309,7 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
     water = model.water_fraction(state.particle_water)
     rep = {
         "species": sp.key, "seed": args.seed, "frames": len(stats), "frame": state.frame, "resumed_from": start,
+        "time_s": round(float(state.time), 9),  # simulated seconds (the compressed drying clock), as a scene's done.json
         "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
         "sim_s_total": None if prior_s is None else round(prior_s + sim_s, 3),
         "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,

@@ -9,14 +9,15 @@ running it again, gets the compile here instead, announced: the CLI prints a lin
 one after it (how many kernels, how long), and the GUI's status bar shows it as the first stage
 of the first build with a count of the kernels compiled so far.
 
-A marker file in the cache folder (named after the digest of the kernel sources, so a new
-version is cold again) records that the default drying's kernels have been compiled.  Kernels
-outside that path (the static and Sun integrators, float32 dynamics) still compile on first use,
+A marker file in the cache folder (named after the digest of the kernel sources and their
+folder, so a new version, or the same one checked out elsewhere, is cold again) records that
+the default drying's kernels have been compiled.  Kernels outside that path (the static and Sun integrators, float32 dynamics) still compile on first use,
 in seconds.
 """
 
 from __future__ import annotations
 
+import hashlib
 import sys
 import threading
 import time
@@ -38,8 +39,8 @@ _marker_path: list = []  # computed once per process: [Path | None]
 
 def _marker() -> Path | None:
     """The marker file: in the kernel cache folder, named after what numba's cache depends on
-    (the kernel sources' digest, numba, Python, the CPU), so any of them changing is cold
-    again.  None when there is no writable cache folder."""
+    (the kernel sources' digest and folder, numba, Python, the CPU), so any of them changing is
+    cold again.  None when there is no writable cache folder."""
     if not _marker_path:
         folder = configure_numba_cache()
         path = None
@@ -54,7 +55,10 @@ def _marker() -> Path | None:
                 cpu = binding.get_host_cpu_name()
             except Exception:  # an llvmlite without it: the machine's name for the processor
                 cpu = platform.machine()
-            key = f"{kernel_sources_digest()}-{numba.__version__}-py{sys.version_info[0]}{sys.version_info[1]}-{cpu}"
+            # numba files its cache under the kernel sources' own folder (a checkout at another
+            # path, or a moved one, compiles anew), so the marker is that folder's too
+            where = hashlib.sha256(str(Path(__file__).resolve().parents[1]).encode()).hexdigest()[:12]
+            key = f"{kernel_sources_digest()}-{numba.__version__}-py{sys.version_info[0]}{sys.version_info[1]}-{cpu}-{where}"
             path = Path(folder) / ("leafsim-warm-" + "".join(c if c.isalnum() or c in "-._" else "_" for c in key))
         _marker_path.append(path)
     return _marker_path[0]

@@ -252,6 +252,7 @@ def test_weather_clock_survives_resume(tmp_path, capsys):
     assert main(BASE + weather + ["--frames", str(N), "--out", str(out), "--resume", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["weather_hours"] == pytest.approx(N * 0.002 * 50000 / 3600, abs=1e-4)  # reported to 4 decimals
+    assert rep["time_s"] == pytest.approx(N * 0.002, rel=1e-9)  # the simulated clock, through the resume too
 
 
 def test_resume_from_a_checkpoint_older_than_a_parameter(tmp_path, reference, capsys):

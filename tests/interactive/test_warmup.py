@@ -41,6 +41,20 @@ def _compile_two():
     assert outer(np.arange(3.0)) == 6.0
 
 
+def test_the_marker_names_the_kernels_folder(monkeypatch, tmp_path):
+    """numba files its cache under the kernel sources' own folder, so a checkout at another path
+    compiles anew: its marker must differ too (a second clone was told nothing while it compiled
+    for 13 s, the first clone's marker saying warm)."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(warmup, "configure_numba_cache", lambda: str(tmp_path))
+    marks = []
+    for where in (warmup.__file__, str(tmp_path / "elsewhere" / "leafsim" / "interactive" / "warmup.py")):
+        monkeypatch.setattr(warmup, "__file__", where)
+        monkeypatch.setattr(warmup, "_marker_path", [])
+        marks.append(warmup._marker())
+    assert marks[0] is not None and marks[0].parent == tmp_path and marks[0] != marks[1]
+
+
 def test_warm_up_counts_compiles_and_marks_the_cache(cold):
     seen = []
     n, seconds, kept = warmup.warm_up(lambda k, s: seen.append((k, s)), exercise=_compile_two)
