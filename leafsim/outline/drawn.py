@@ -34,7 +34,8 @@ def add_teeth(pts: np.ndarray, count: int, depth: float, skip_base: float = 0.15
     """Serrate a closed leaf-normalised polygon: ``count`` teeth of ``depth`` along the margin.
 
     Teeth are saw-shaped (pointing toward the apex); the margin within ``skip_base`` of the
-    base and the tip (within 0.06 of the apex) stay entire.
+    base and the tip (within 0.06 of the apex) stay entire, and in the blade's upper half the
+    teeth shrink with its half-width once it is under 4 depths (an acuminate apex).
     """
     from leafsim.base.geometry import polygon_area, resample_closed
 
@@ -55,6 +56,11 @@ def add_teeth(pts: np.ndarray, count: int, depth: float, skip_base: float = 0.15
     fade = np.clip((np.linalg.norm(p, axis=1) - skip_base) / 0.1, 0, 1) * keep
     # the tip stays entire too: inward offsets at a sharp apex would make the margin cross itself
     fade *= np.clip(np.linalg.norm(p - (0.0, 1.0), axis=1) / 0.06, 0, 1)
+    # and the teeth shrink where the blade narrows towards its apex (an acuminate tip keeps small
+    # teeth; full-depth notches below an entire tip left a knob there): full depth from a
+    # half-width of 4 depths, a smooth ramp below it
+    w = np.clip(np.abs(p[:, 0]) / (4.0 * depth), 0.0, 1.0)
+    fade *= np.where(p[:, 1] > 0.5, w * w * (3.0 - 2.0 * w), 1.0)
     return p - nrm * (depth * (1 - saw) * fade)[:, None]
 
 
