@@ -28,7 +28,7 @@ from typing import Callable
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import atomic_write_bytes, not_an_input, output_target, read_json
+from leafsim.base.fileio import atomic_write_bytes, no_folder, not_an_input, output_target, read_json
 from leafsim.config.params import SEED_MAX, json_typed
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
@@ -343,8 +343,13 @@ def check_out_dir(out) -> Path:
     import os
 
     out = Path(out)
+    if out.is_symlink() and not out.exists():
+        raise LeafsimError(f"--out {out}: it is a broken symbolic link (to {os.readlink(out)}); remove it or choose "
+                           "another folder")
     if out.exists() and not out.is_dir():
         raise LeafsimError(f"--out {out}: exists and is not a folder")
+    if not out.exists() and not out.parent.is_dir():  # as run and export: only the last folder is made
+        raise LeafsimError(f"--out {out}: {no_folder(out.parent)}")
     try:
         (out / "leaves").mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -355,12 +360,15 @@ def check_out_dir(out) -> Path:
 
 
 def die_with_parent() -> None:
-    """Make the calling process die (SIGKILL) when its parent does (Linux ``prctl``), so a
-    scene's workers never outlive a killed ``leafsim scene``; a no-op elsewhere."""
+    """A scene worker's set-up: it dies (SIGKILL) when its parent does (Linux ``prctl``; a no-op
+    elsewhere), so it never outlives a killed ``leafsim scene``, and it ignores Ctrl-C, which
+    the terminal sends to the whole process group: the command stops its workers itself
+    (:func:`_stop_pool`), and a worker interrupted by it printed a traceback."""
     import ctypes
     import os
     import signal
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
@@ -376,13 +384,35 @@ def _local_results(jobs: list, out: Path, workers: int):
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent)
+    try:
         futs = {pool.submit(run_leaf, j, str(out)): j for j in jobs}
         for f in as_completed(futs):
             try:
                 yield f.result()
             except Exception as e:  # a worker process died: this leaf failed, the pool may go on
                 yield {"name": futs[f].name, "ok": False, "error": f"worker process failed: {type(e).__name__}: {e}"}
+    except BaseException:  # interrupted (a signal, or the caller stopped reading): stop now
+        _stop_pool(pool)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _stop_pool(pool) -> None:
+    """Stop ``pool`` at once: the leaves not started are dropped and the running ones end with
+    their workers (a leaf's files are written atomically, so none is left half-written, and a
+    rerun simulates it again).  Leaving the pool the usual way waited for every queued leaf (a
+    SIGTERM 10 s into an 8-leaf scene ran all 8), and a second Ctrl-C hung the process in
+    multiprocessing's exit handler."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())  # (no public handle on the workers)
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout=10.0)  # (a terminated worker exits at once; the bound only guards a stuck one)
+        if p.is_alive():
+            p.kill()
 
 
 def _dask_client(address: str):

@@ -110,6 +110,11 @@ def test_scene_size_guards_come_before_any_work(tmp_path):
     p.write_text('{"groups": [{"name": "a", "species": "oak", "count": 2, "count": 100000, "stop": {"frames": 1}}]}')
     one_line(*run_cli("scene", p, "--out", tmp_path / "o"), "duplicate key 'count'")
     assert not (tmp_path / "o" / "leaves").exists() or not any((tmp_path / "o" / "leaves").iterdir())
+    # the output folder: only its last level is made (as run and export), a broken link is named
+    one_line(*run_cli("scene", scene(), "--out", tmp_path / "no" / "such" / "out"), "folder", "does not exist")
+    assert not (tmp_path / "no").exists()
+    (tmp_path / "gone").symlink_to(tmp_path / "nowhere")
+    one_line(*run_cli("scene", scene(), "--out", tmp_path / "gone"), "broken symbolic link")
 
 
 def test_errors_name_their_real_cause(tmp_path):

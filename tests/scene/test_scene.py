@@ -343,7 +343,7 @@ def test_cli_bad_input_exit_2_and_no_files(tmp_path):
     cases.append(([str(quoted), "--out", str(tmp_path / "neg")], "parameter 'mesh.spacing' = \"0.08\" is a string"))
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
-    cases.append(([str(_scene(tmp_path)), "--out", str(blocker / "out")], "cannot create the output folder"))
+    cases.append(([str(_scene(tmp_path)), "--out", str(blocker / "out")], "a_file is a file, not a folder"))
     cases.append(([str(_scene(tmp_path)), "--out", str(blocker)], "exists and is not a folder"))
     cases.append(([str(_scene(tmp_path)), "--workers", "0", "--out", str(tmp_path / "w0")], "--workers 0"))
     cases.append(([str(_scene(tmp_path)), "--scheduler", "", "--out", str(tmp_path / "s0")], "--scheduler ''"))

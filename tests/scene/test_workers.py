@@ -80,6 +80,38 @@ def test_scene_workers_die_with_a_killed_parent(tmp_path):
             proc.kill()
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc is Linux's")
+@pytest.mark.parametrize("how", ["SIGTERM to the command", "Ctrl-C twice to its process group"])
+def test_an_interrupted_scene_stops_without_running_its_queued_leaves(tmp_path, how):
+    """A signal ends ``leafsim scene`` at once: the queued leaves are dropped and the running ones
+    end with their workers.  Before, leaving the pool waited for every queued leaf (these never
+    end), and a second Ctrl-C hung the command in multiprocessing's exit handler."""
+    scene = _scene(tmp_path, count=6, frames=1_000_000)  # far longer than the test
+    proc = subprocess.Popen([sys.executable, "-m", "leafsim", "scene", str(scene), "--out", str(tmp_path / "out"),
+                             "--workers", "2"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        _wait(lambda: len(_children(proc.pid)) >= 2, "the scene's worker processes did not start")
+        kids = _children(proc.pid)
+        if how.startswith("SIGTERM"):
+            os.kill(proc.pid, signal.SIGTERM)
+            want = 128 + signal.SIGTERM
+        else:
+            os.killpg(proc.pid, signal.SIGINT)
+            time.sleep(0.5)  # (the second press comes while the first is handled, or after it: either must end)
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGINT)
+            want = 128 + signal.SIGINT
+        err = proc.communicate(timeout=PATIENCE_S)[1]
+        assert proc.returncode == want, err
+        assert err.strip().splitlines()[-1].startswith("leafsim: interrupted") and "Traceback" not in err
+        _wait(lambda: not any(_alive(k) for k in kids), "scene workers outlived the interrupted command")
+        assert not list((tmp_path / "out" / "leaves").glob("*/done.json"))  # no leaf finished, none was started anew
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
 def test_a_dask_worker_killed_mid_scene_costs_no_leaf(tmp_path):
     from distributed import Client, LocalCluster
 
