@@ -201,6 +201,11 @@ class Run:
         at the frame just yielded."""
         if stop is not None and not isinstance(stop, Stop):
             raise LeafsimError(f"Run.frames: stop {show(stop)}: expected a Stop(...) or None")
+        from leafsim.sim.checkpoint import check_state
+
+        # the state as it stands now (run.state may have been replaced or edited since the Run was
+        # made): a NaN put there was reported as the simulation's, water × 5 was taken as found
+        check_state(self.state, self.model, f"{self._prefix}Run.frames: state")
         watch = None
         while True:
             if stop is not None:

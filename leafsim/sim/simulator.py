@@ -18,9 +18,10 @@ import time
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.config.params import ParamSet, check_seed
+from leafsim.config.params import ParamSet, as_params, check_seed
 from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
 from leafsim.sim.effects.dynamics import held
+from leafsim.sim.checkpoint import check_layout, state_layout
 from leafsim.sim.model import Model, State
 from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_allowed, path_params, work_done
 
@@ -46,7 +47,13 @@ class Simulator:
     """
 
     def __init__(self, model: Model, params: ParamSet, effects=None, seed: int = 0, watchdog: bool = True):
+        if not isinstance(model, Model):
+            hint = " (pass leaf.model, the model of build_leaf's result)" if hasattr(model, "model") else ""
+            raise LeafsimError(f"Simulator: model ({type(model).__name__}): expected a Model{hint}")
+        params = as_params(params, "Simulator")
         self.model = model
+        self._layout = state_layout(model)  # what step() checks every state against
+        self._path_layout = None
         self.seed = check_seed(seed, "Simulator")  # int() truncated 0.5 and took '7'; numpy refused -1 in a bare ValueError
         self.watchdog = None
         self._watch = watchdog
@@ -200,7 +207,14 @@ class Simulator:
         return self._dynamics.last_iterations if (self._dynamics and self.dynamic) else 0
 
     def step(self, state: State) -> dict:
-        """Advance one frame in place; returns milliseconds per executed stage."""
+        """Advance one frame in place; returns milliseconds per executed stage.  ``state`` must
+        be a state of this simulator's model (its arrays' shapes and dtypes are checked: the
+        kernels trust them)."""
+        check_layout(state, self._layout, "Simulator.step: state")
+        if state.path is not None and self.model.path is not None:
+            if self._path_layout is None:
+                self._path_layout = state_layout(self.model.path)
+            check_layout(state.path, self._path_layout, "Simulator.step: state (drying-path mesh)")
         ms = {}
         t0 = time.perf_counter()
         if self.effects["osmosis"] and state.frame % self.osmosis_every == 0:

@@ -186,6 +186,64 @@ def test_state_of_another_model_does_not_crash():
     assert out.stdout.count("refused: Run: state array") == 3, out.stdout
 
 
+def test_a_state_swapped_in_after_the_run_was_made_does_not_crash():
+    """run.state is a plain attribute (``leafsim run`` sets it after a resume) and Simulator.step
+    is public: a state of another model, or an array cut short, given either way reached the
+    kernels (exit 139, or a heap corruption abort; an audit's finding)."""
+    out = _crash_free("""
+        from leafsim.sim.simulator import Simulator
+        def swapped():
+            run = Run(M, P)
+            run.state = S2.copy()
+            for _ in run.frames(Stop(frames=3)):
+                pass
+        def stepped():
+            Simulator(M, P).step(S2.copy())
+        def cut():
+            st = dataclasses.replace(S.copy(), particle_q=S.particle_q[:31].copy())
+            Simulator(M, P, watchdog=False).step(st)
+        def cut_pigments():
+            st = Simulator(M, P).state()
+            pig = dataclasses.replace(st.pigments, chlorophyll=st.pigments.chlorophyll[:10].copy())
+            Simulator(M, P).step(dataclasses.replace(st, pigments=pig))
+        for name, f in [("swapped", swapped), ("stepped", stepped), ("cut", cut), ("cut pigments", cut_pigments)]:
+            try:
+                f()
+                print(name, "ran")
+            except LeafsimError as e:
+                print(name, "refused:", e)
+    """)
+    assert out.returncode == 0, out.stderr[-500:]
+    lines = out.stdout.strip().splitlines()
+    assert [ln.split(" refused: ")[0] for ln in lines] == ["swapped", "stepped", "cut", "cut pigments"], out.stdout
+    assert "Run.frames: state array particle_q" in lines[0] and "Simulator.step: state array particle_q" in lines[1]
+    assert "pigment array chlorophyll" in lines[3]
+
+
+def test_a_state_edited_between_runs_is_checked_again(oak):
+    """Run.frames checks run.state as it stands: water put in by hand, or a NaN, is refused
+    naming the array (the NaN was reported as the simulation's own divergence)."""
+    _, params, model, state = oak
+    run = Run(model, params, state=state.copy())
+    run.state.particle_water[:] *= 5
+    with pytest.raises(LeafsimError, match="Run.frames: state array particle_water holds more water") as e:
+        next(run.frames(Stop(frames=state.frame + 2)))
+    one_line(e)
+    run = Run(model, params, state=state.copy())
+    run.state.particle_q[0, 0] = np.nan
+    with pytest.raises(LeafsimError, match="Run.frames: state array particle_q holds NaN"):
+        next(run.frames(Stop(frames=state.frame + 2)))
+
+
+@pytest.mark.parametrize("params", [{"osmosis.diffusion": 1e-5}, None])
+def test_a_simulator_s_params_must_be_a_param_set(oak, params):
+    from leafsim.sim.simulator import Simulator
+
+    with pytest.raises(LeafsimError, match="Simulator: params .* expected a ParamSet") as e:
+        Simulator(oak[2], params)
+    one_line(e)
+
+
 @pytest.mark.parametrize("field, value", [
     ("particle_water", lambda s: np.full_like(s.particle_water, np.nan)),
     ("particle_water", lambda s: -s.particle_water),
