@@ -20,6 +20,8 @@ import re
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping
 
+import numpy as np
+
 from leafsim.base.errors import LeafsimError
 
 
@@ -63,8 +65,8 @@ class Param:
         at = f"{where}: " if where else ""
         expect = self.describe()
         if self.kind == "bool":
-            if isinstance(value, bool):
-                return value
+            if isinstance(value, (bool, np.bool_)):  # (numpy's bool too: a sweep over np.array([True, False]))
+                return bool(value)
             if isinstance(value, str) and value.lower() in ("true", "false", "1", "0", "on", "off", "yes", "no"):
                 return value.lower() in ("true", "1", "on", "yes")
             if isinstance(value, (int, float)) and value in (0, 1):
@@ -75,7 +77,7 @@ class Param:
                 return value
             raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
         # numbers
-        if isinstance(value, bool):
+        if isinstance(value, (bool, np.bool_)):
             raise LeafsimError(f"{at}parameter '{self.name}' = {show(value)}: expected {expect}")
         if isinstance(value, str) and not NUMBER.fullmatch(value.strip()):
             # float() also takes '1_0' and non-ASCII digits: a typo, not a number

@@ -75,12 +75,13 @@ pigment-free leaf tissue (white-ish, slightly yellow from cell walls).  Concentr
     c_chl = colour.chlorophyll · leaf_chl · (1 − vein_pallor·m̂) · C
     c_car = colour.carotenoid  · leaf_car · K
     c_ant = colour.anthocyanin · leaf_ant · A
-    c_brn = B
+    c_brn = colour.brown_level · (1 − colour.vein_browning·m̂) · B
     c_nec = colour.necrosis · colour.chlorophyll · leaf_chl · (1 − vein_pallor·m̂) · N
 
 with per-leaf factors ``leaf_*`` from the seed and ``m̂`` the min–max normalised rest mass
 (heavy vein tissue is paler).  Absorption coefficients ``k_p`` (natural-log absorbance per unit
-concentration, double pass, in linear R, G, B):
+concentration, double pass, in linear R, G, B; the table is
+:data:`leafsim.appearance.reflectance.ABSORPTION`):
 
 =============  =====  =====  =====  ============================================================
 pigment          R      G      B    reasoning
@@ -93,7 +94,7 @@ carotenoid     0.02   0.45   3.50   lutein/β-carotene absorb 400–500 nm only:
 anthocyanin    0.25   2.60   0.50   cyanidin (and pokeweed's betacyanins) absorb 500–560 nm:
                                     green is lost → red with carotenoids (maple scarlet),
                                     magenta/purple without them (pokeweed).
-browning       1.30   2.30   4.00   oxidised phenolics/melanoidins absorb broadly, rising
+browning       1.15   1.85   3.30   oxidised phenolics/melanoidins absorb broadly, rising
                                     toward the blue → brown (dry leaf ≈ sRGB (137, 90, 50)).
 necrosis       2.40   2.40   2.60   pheophytins and oxidised phenolics of tissue that died
                                     green absorb across the spectrum → olive-black spots.

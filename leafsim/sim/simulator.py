@@ -1,4 +1,5 @@
-"""The simulator: runs only the enabled effects, in SPEC order, and times each stage.
+"""The simulator: runs only the enabled effects, in the pipeline's order (osmosis, shrink,
+dynamics, colour; docs/method.md), and times each stage.
 
 One :class:`Simulator` serves every driver: the GUI's session, ``leafsim run``, the accuracy
 study and scenes.  A disabled effect is never constructed (costs nothing) and leaves its part
@@ -6,9 +7,11 @@ of the state untouched.
 
 Example
 -------
->>> sim = Simulator(model, ParamSet(), seed=0)   # doctest: +SKIP
->>> state = sim.state()                          # fresh leaf, pigments included
->>> ms = sim.step(state)                         # {'osmosis': 0.3, 'shrink': 0.05, 'dynamics': 0.9, 'colour': 0.01}
+>>> sp = get_species("oak")                                # doctest: +SKIP
+>>> model = build_leaf(sp, sp.params, seed=0).model
+>>> sim = Simulator(model, sp.params, seed=0)             # the seed the model was built with
+>>> state = sim.state()                                    # fresh leaf, pigments included
+>>> ms = sim.step(state)  # {'osmosis': 0.3, 'shrink': 0.05, 'dynamics': 0.9, 'watchdog': 0.02, 'colour': 0.01}
 """
 
 from __future__ import annotations

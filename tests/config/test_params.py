@@ -140,3 +140,18 @@ def test_json_values_must_be_json_numbers_and_switches_but_set_values_are_text()
         assert msg.startswith("f.json: parameter '" + key) and "is a string" in msg and "\n" not in msg
     assert "true or false" in str(pytest.raises(LeafsimError, json_typed, {"veins.lateral.enabled": "1"}).value)
     assert parse_set_args(["mesh.spacing=0.03"]) == {"mesh.spacing": 0.03}
+
+
+def test_numpy_scalars_are_taken_as_their_python_values():
+    """A sweep in code iterates numpy arrays: np.bool_ is a switch's value (it was refused as not
+    true or false while np.float64 and np.int64 were taken), and no switch value is a number."""
+    import numpy as np
+
+    from leafsim.config.species import get_species
+
+    p = get_species("oak").params
+    assert [p.with_overrides({"effects.colour": f})["effects.colour"] for f in np.array([True, False])] == [True, False]
+    assert p.with_overrides({"osmosis.every": np.int64(3)})["osmosis.every"] == 3
+    assert p.with_overrides({"mesh.spacing": np.float32(0.03)})["mesh.spacing"] == pytest.approx(0.03)
+    with pytest.raises(LeafsimError, match="'mesh.spacing' = np.True_"):
+        p.with_overrides({"mesh.spacing": np.True_})
