@@ -157,7 +157,12 @@ class GltfBuilder:
                 + struct.pack("<I4s", len(bn), b"BIN\0") + bn)
 
     def gltf(self, bin_name: str) -> tuple[bytes, bytes]:
-        return self._json(bin_name), bytes(self.bin)
+        """(the JSON, the binary buffer) of a .gltf whose buffer is the file ``bin_name`` beside
+        it; the name goes in as a URI, percent-encoded (a space or a '#' in it would be read as
+        the end of the URI or a fragment)."""
+        from urllib.parse import quote
+
+        return self._json(quote(bin_name)), bytes(self.bin)
 
 
 def _lower_face_turned(s):

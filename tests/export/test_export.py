@@ -373,3 +373,15 @@ def test_the_exported_photo_has_no_background_at_or_past_the_margin(leaf, tmp_pa
     # the background (the raw photo's pixels there) differs from the blade; the export does not
     assert np.abs(np.median(photo[outside, :3], axis=0) - blade).sum() > 60
     assert np.abs(np.median(png[outside], axis=0) - blade).sum() < 40
+
+
+def test_a_gltf_named_with_a_space_and_a_hash_points_at_its_buffer(leaf, tmp_path):
+    """The .bin's name is a URI in the .gltf: percent-encoded, so a space or '#' is not read as
+    the URI's end or a fragment (the validator warned NON_RELATIVE_URI; web loaders asked for
+    'my leaf' without '#1.bin')."""
+    model, params, view, states = leaf
+    path = tmp_path / "my leaf#1.gltf"
+    export_mesh(model, states[-1], path, params=params, view=view)
+    assert (tmp_path / "my leaf#1.bin").is_file()
+    assert json.loads(path.read_text())["buffers"][0]["uri"] == "my%20leaf%231.bin"
+    assert_clean(path)
