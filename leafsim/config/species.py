@@ -306,8 +306,16 @@ def _image(path: Path, key: str, name: str, value: Any) -> Path:
         raise _err(path, key, name, f"photo {image} is a folder, expected an image file")
     if image.exists() and not image.is_file():
         raise _err(path, key, name, f"photo {image} is not a regular file (a device or a pipe), expected an image file")
+    if not image.is_file() and not Path(value).is_absolute():
+        # a copy of the shipped library elsewhere still finds the shipped photos (an artist copies
+        # leaves.json to tweak one species, and every photo entry of the copy was refused)
+        from leafsim.base.resources import data_root
+
+        shipped = (data_root() / value).resolve()
+        if shipped.is_file():
+            return shipped
     if not image.is_file():
-        where = "" if Path(value).is_absolute() else f" (a relative path is read from {base_dir})"
+        where = "" if Path(value).is_absolute() else f" (a relative path is read from {base_dir}, then from leafsim's own data)"
         raise _err(path, key, name, f"photo {image} not found{where}")
     return image
 

@@ -167,6 +167,24 @@ def test_a_configs_folder_config_finds_its_photos_however_its_path_is_written(tm
         assert lib2["myoak"].image == (tmp_path / "images" / "oak.jpg").resolve(), written
 
 
+def test_a_copy_of_the_shipped_library_anywhere_finds_the_shipped_photos(tmp_path):
+    """Copying configs/leaves.json elsewhere to tweak one species is the obvious workflow: the
+    copy's photo entries (images/...) are not beside it, and every one was refused, so even a
+    drawn species of the copy could not be loaded.  A photo of the user's own beside the copy
+    still wins over a shipped one of the same name."""
+    import shutil
+
+    lib = tmp_path / "copy.json"
+    shutil.copy(data_dir("configs") / "leaves.json", lib)
+    got = load_library(lib)
+    assert got["oak"].image == (data_dir("images") / Path(got["oak"].image).name).resolve()
+    assert got["maple"].image is None
+    (tmp_path / "images").mkdir()
+    mine = tmp_path / "images" / got["oak"].image.name
+    shutil.copy(got["oak"].image, mine)
+    assert load_library(lib)["oak"].image == mine.resolve()
+
+
 def test_a_photo_without_a_leaf_names_the_config_species_and_key(tmp_path):
     """A blank photo (or one with no leaf) named by a config entry: the one line names the
     config, the species and its key 'image', not only the picture's path."""
