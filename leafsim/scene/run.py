@@ -144,6 +144,9 @@ def load_scene(path) -> Scene:
     if config is not None and not isinstance(config, str):
         raise w.err("config", "expected the path of a species config (relative to the scene file)")
     config_path = None if config is None else str((path.parent / config).resolve())
+    if config_path is not None and not Path(config_path).is_file():
+        what = "is not a file" if Path(config_path).exists() else "not found"
+        raise w.err("config", f"species config {config_path} {what} (a relative path is read from the scene file's folder)")
     lib = load_library(config_path)
     digest = hashlib.sha256(Path(config_path or _default_config()).read_bytes()).hexdigest()[:16]
     groups = data.get("groups")
@@ -190,6 +193,8 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
         raise w.err("name", f"expected a unique group name of letters, digits, '_' or '-' (used in file names), got {name!r}")
     names.add(name)
     sp = g.get("species")
+    if sp is None:
+        raise w.err("species", f"missing: every group names a species of the config (known: {', '.join(sorted(lib))})")
     if sp not in lib:
         raise w.err("species", f"unknown species {sp!r} (known: {', '.join(sorted(lib))})")
     count = g.get("count")
@@ -493,6 +498,16 @@ def _run_scene(scene: Scene, out, workers: int, scheduler: str | None, client, p
               "leaves_per_s": round(len(todo) / sim_s, 4) if todo and sim_s > 0 else None,
               "leaf_s": {r["name"]: round(r["seconds"], 3) for r in sorted(results, key=lambda r: r["name"])},
               "leaf_cpu_s": round(sum(r.get("cpu_s", 0.0) for r in results), 3)}
+    # leaf folders of an earlier version of the scene (a group's count lowered, a group renamed):
+    # left alone, but named, since a batch import of leaves/*/ would pick them up
+    ours = {j.name for j in scene.jobs}
+    stray = sorted(p.name for p in (out / "leaves").iterdir() if p.is_dir() and p.name not in ours)
+    report["stray_leaves"] = stray
+    if stray:
+        shown = ", ".join(stray[:5]) + (f" and {len(stray) - 5} more" if len(stray) > 5 else "")
+        print(f"leafsim: {len(stray)} folder{'s' if len(stray) > 1 else ''} in {out / 'leaves'} "
+              f"{'are' if len(stray) > 1 else 'is'} not a leaf of this scene ({shown}): left as "
+              f"{'they are' if len(stray) > 1 else 'it is'}, and not in summary.json or placement.json", file=sys.stderr)
     t1 = time.perf_counter()
     compose(scene, out, render=render)
     report["compose_s"] = round(time.perf_counter() - t1, 3)

@@ -93,7 +93,7 @@ def check_meta(path, expect: dict) -> dict:
             continue  # a parameter newer than the checkpoint, at the default that keeps the old behaviour
         if saved.get(k) != now.get(k):
             raise LeafsimError(f"--resume: {path} was made with parameter '{k}' = {saved.get(k)!r}, "
-                               f"this run has {now.get(k)!r} (resume with the same --set values)")
+                               f"this run has {now.get(k)!r} (resume with the --quality and --set values of the run that wrote it)")
     return meta
 
 

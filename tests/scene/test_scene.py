@@ -266,6 +266,8 @@ BAD = [
     ({"name": "tiny\ud800"}, "key 'name': expected text that UTF-8 can write"),
     ({"name": "tiny\nsecond"}, "key 'name': expected one line of printable text"),
     ({"groups": [{"name": "a", "species": "birch", "count": 1, "stop": {"frames": 1}}]}, "group 'a', key 'species': unknown species 'birch'"),
+    ({"groups": [{"name": "a", "count": 1, "stop": {"frames": 1}}]}, "group 'a', key 'species': missing: every group names a species"),
+    ({"config": "nope.json"}, "key 'config': species config "),
     ({"groups": [{"name": "a", "species": "oak", "count": -3, "stop": {"frames": 1}}]}, "group 'a', key 'count': expected an integer in [1, 10000], got -3"),
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "lod": {"simulate": 0.05, "show": 0.07}}]}, "key 'lod.show'"),
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1, "season": 1}}]}, "key 'stop': expected exactly one"),
@@ -422,3 +424,17 @@ def test_more_worker_processes_than_cpus_warns_in_one_line_and_runs(tmp_path):
         else:
             assert warnings == [], r.stderr
         assert json.loads(r.stdout)["ran"] == count
+
+
+def test_a_leaf_dropped_from_the_scene_is_named_not_removed(tmp_path, capsys):
+    """Lowering a group's count leaves the dropped leaf's folder on disk (only leafsim's files of
+    the scene's own leaves are ever replaced): the run names it, as ``stray_leaves`` and on
+    stderr, since a batch import of leaves/*/ would still pick it up."""
+    groups = [{"name": "c", "species": "chestnut", "count": 2, "seed": 3, "params": dict(TINY), "stop": {"frames": 2}}]
+    run_scene(load_scene(_scene(tmp_path, name="two", groups=groups)), tmp_path / "out", progress=False, render=False)
+    groups[0]["count"] = 1
+    rep = run_scene(load_scene(_scene(tmp_path, name="two", groups=groups)), tmp_path / "out", progress=False, render=False)
+    assert rep["stray_leaves"] == ["c-001"] and rep["skipped"] == 1
+    assert (tmp_path / "out" / "leaves" / "c-001" / "done.json").is_file()  # left as it was
+    assert "not a leaf of this scene (c-001)" in capsys.readouterr().err
+    assert [p["name"] for p in json.loads((tmp_path / "out" / "placement.json").read_text())["leaves"]] == ["c-000"]
