@@ -426,3 +426,14 @@ def holes_problem(holes, contour: np.ndarray) -> str | None:
                 continue  # the contour itself is checked by outline_problem
         return f"has hole {max(ring[i], ring[j]) - 1} touching {'the contour' if min(ring[i], ring[j]) == 0 else 'another hole or itself'}"
     return None
+
+
+def boundary_edges(tri: np.ndarray) -> np.ndarray:
+    """(b, 2) edges used by one triangle only, oriented as in that triangle."""
+    tri = np.asarray(tri)
+    if not len(tri):
+        return np.zeros((0, 2), tri.dtype if tri.dtype.kind in "iu" else np.int64)
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    key = np.sort(e, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return e[cnt[inv.ravel()] == 1]

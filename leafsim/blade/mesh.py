@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay
 
-from leafsim.base.geometry import distance_to_outline, points_in_region
+from leafsim.base.geometry import boundary_edges, distance_to_outline, points_in_region
 from leafsim.blade.sample import Points
 from leafsim.sim.model import (
     KIND_CONTOUR,
@@ -29,6 +29,7 @@ def triangulate(P: Points, contour, r: float, holes=()):
     sliver = keep & on_contour & (quality < 0.15)
     keep &= ~(sliver & _crosses_air(allp, tri, sliver, contour, holes, r))  # hull-fill slivers along the outline
     keep &= np.abs(ar) > 1e-6 * r * r  # degenerate (collinear) triangles
+    keep = _unpinch(tri, keep, on_contour & (quality < 0.3))
     tri = tri[keep]
     flip = ar[keep] < 0
     tri[flip] = tri[flip][:, [0, 2, 1]]
@@ -138,6 +139,26 @@ def morton_order(p2: np.ndarray) -> np.ndarray:
         return v
 
     return spread(g[:, 0]) | (spread(g[:, 1]) << np.uint64(1))
+
+
+def _unpinch(tri: np.ndarray, keep: np.ndarray, slivers: np.ndarray) -> np.ndarray:
+    """``keep`` without the outline slivers that meet the rest of the blade at a pinch: a vertex
+    where the blade's boundary passes twice (more than two boundary edges).  A kept sliver of
+    outline points along a nearly straight margin, beside a collinear triangle dropped as
+    degenerate, hung from one vertex (oak near its base at mesh.spacing 0.025, aspen at the
+    draft mesh 0.028, a triangle of quality 0.16): the thin shell built on the blade was then not
+    closed there (a side-wall edge used by four faces).  Dropping such a thin triangle (quality
+    under 0.3, every vertex on the outline) leaves the margin's own points on the boundary, each
+    once."""
+    keep = keep.copy()
+    for _ in range(8):  # (one pass has always sufficed; a few more for a chain of slivers)
+        be = boundary_edges(tri[keep])
+        pinch = np.bincount(be.ravel(), minlength=int(tri.max()) + 1) > 2 if len(be) else np.zeros(1, bool)
+        drop = keep & slivers & pinch[tri].any(axis=1)
+        if not drop.any():
+            break
+        keep &= ~drop
+    return keep
 
 
 def _crosses_air(allp: np.ndarray, tri: np.ndarray, which: np.ndarray, contour, holes, r: float) -> np.ndarray:

@@ -31,6 +31,7 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes
+from leafsim.base.geometry import boundary_edges
 from leafsim.sim.checkpoint import check_state, model_fingerprint
 from leafsim.sim.frame import _unit, blade_frame
 from leafsim.sim.model import Model, State
@@ -72,14 +73,6 @@ def to_y_up(p: np.ndarray) -> np.ndarray:
     """(n, 3) z-up → y-up: (x, y, z) → (x, z, −y)."""
     p = np.asarray(p, np.float64)
     return np.column_stack([p[:, 0], p[:, 2], -p[:, 1]])
-
-
-def boundary_edges(tri: np.ndarray) -> np.ndarray:
-    """(b, 2) edges used by one triangle only, oriented as in that triangle."""
-    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return e[cnt[inv.ravel()] == 1]
 
 
 def _surface(pos, nrm, tri, uv, col, thick=None) -> Surface:

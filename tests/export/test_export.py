@@ -17,7 +17,8 @@ from leafsim.appearance.photo import load_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.config.species import get_species
-from leafsim.export.mesh import MeshSource, boundary_edges, export_mesh
+from leafsim.base.geometry import boundary_edges
+from leafsim.export.mesh import MeshSource, export_mesh
 from leafsim.pipeline import build_leaf
 from leafsim.sim.model import LAYER_T
 from leafsim.sim.simulator import Simulator
