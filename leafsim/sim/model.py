@@ -175,6 +175,7 @@ class Model:
     particle_patch: np.ndarray | None = None
     path: "Model | None" = None
     particle_petiole: np.ndarray | None = None
+    seed: int | None = None  # the seed build_leaf built it with (a Simulator's default seed); None: unknown
 
     # ------------------------------------------------------------------ blade vs stalk
     @property

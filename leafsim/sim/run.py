@@ -126,7 +126,8 @@ class Run:
     model : Model
     params : ParamSet (used to make the simulator unless ``simulator`` is given).
     effects : effect names to enable (default: the ``effects.*`` parameters).
-    seed : seeds the fresh leaf's colour variation and its shrinkage field (``shrink.patchiness``).
+    seed : seeds the fresh leaf's colour variation and its shrinkage field (``shrink.patchiness``);
+        default: the seed the model was built with (``model.seed``), else 0.
     state : continue this state (a checkpoint) instead of a fresh leaf; checked against ``model`` as a
         loaded checkpoint is (:func:`leafsim.sim.checkpoint.check_state`).
     simulator : use this simulator (made for ``model``).
@@ -139,7 +140,7 @@ class Run:
     step).
     """
 
-    def __init__(self, model: Model, params: ParamSet | None = None, effects=None, seed: int = 0,
+    def __init__(self, model: Model, params: ParamSet | None = None, effects=None, seed: int | None = None,
                  state: State | None = None, simulator: Simulator | None = None, watchdog: bool = True,
                  name: str = ""):
         # checked here, before any kernel sees them: a state of another model, or with arrays of
@@ -148,7 +149,8 @@ class Run:
             hint = " (pass leaf.model, the model of build_leaf's result)" if hasattr(model, "model") else ""
             raise LeafsimError(f"Run: model {show(model)} ({type(model).__name__}): expected a Model{hint}")
         if simulator is None:
-            params, seed = as_params(params, "Run"), check_seed(seed, "Run")
+            params = as_params(params, "Run")
+            seed = None if seed is None else check_seed(seed, "Run")  # None: the model's own (Simulator)
             simulator = Simulator(model, params, effects, seed=seed, watchdog=watchdog)
         elif not isinstance(simulator, Simulator) or simulator.model is not model:
             raise LeafsimError("Run: simulator: expected a Simulator made for this model (Simulator(model, params))")
@@ -264,7 +266,7 @@ class _Stall:
 
 
 def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stats_path=None, on_frame=None,
-                 seed: int = 0, state: State | None = None, simulator: Simulator | None = None, stats_stream=None):
+                 seed: int | None = None, state: State | None = None, simulator: Simulator | None = None, stats_stream=None):
     """``frames`` frames of a :class:`Run` with every frame's statistics; returns (state, stats).
 
     ``stats_path``: stream the statistics there as JSON lines (or ``stats_stream``: an open

@@ -44,12 +44,14 @@ class Simulator:
     params : ParamSet — ``osmosis.*``, ``shrink.*``, ``dynamics.*``, ``colour.*`` and ``effects.*``.
     effects : optional iterable of effect names to enable (overrides ``effects.*``).
     seed : seeds the per-leaf colour variation of the states this simulator makes and the blade's
-        shrinkage field (``shrink.patchiness``).
+        shrinkage field (``shrink.patchiness``); default: the seed the model was built with
+        (``model.seed``, set by :func:`leafsim.pipeline.build_leaf`), else 0, so
+        ``Simulator(build_leaf(sp, p, 3).model, p)`` is ``leafsim run --seed 3``.
     watchdog : check energy and momentum every few frames and raise LeafsimError on a
         blow-up that produces no NaN (see :mod:`leafsim.sim.watchdog`).
     """
 
-    def __init__(self, model: Model, params: ParamSet, effects=None, seed: int = 0, watchdog: bool = True):
+    def __init__(self, model: Model, params: ParamSet, effects=None, seed: int | None = None, watchdog: bool = True):
         if not isinstance(model, Model):
             hint = " (pass leaf.model, the model of build_leaf's result)" if hasattr(model, "model") else ""
             raise LeafsimError(f"Simulator: model ({type(model).__name__}): expected a Model{hint}")
@@ -57,6 +59,8 @@ class Simulator:
         self.model = model
         self._layout = state_layout(model)  # what step() checks every state against
         self._path_layout = None
+        if seed is None:  # the seed the model was built with, as `leafsim run --seed S` uses it for both
+            seed = model.seed if model.seed is not None else 0
         self.seed = check_seed(seed, "Simulator")  # int() truncated 0.5 and took '7'; numpy refused -1 in a bare ValueError
         self.watchdog = None
         self._watch = watchdog

@@ -49,7 +49,7 @@ def one_line(e) -> str:
 
 # ------------------------------------------------------------------ seeds
 
-@pytest.mark.parametrize("seed", [0.5, 1.0, "0", -1, np.int32(-5), 2**63, True, None, float("nan")])
+@pytest.mark.parametrize("seed", [0.5, 1.0, "0", -1, np.int32(-5), 2**63, True, float("nan")])  # (None: the model's own)
 def test_bad_seed_is_one_line(oak, seed):
     sp, params, model, _ = oak
     with pytest.raises(LeafsimError, match="seed") as e:
@@ -432,3 +432,19 @@ def test_save_checkpoint_checks_the_drying_path_mesh_state_too(tmp_path):
         one_line(e)
         assert ck.read_bytes() == good
     assert load_checkpoint(ck, model, {"species": "oak"}).path is not None
+
+
+def test_a_run_takes_the_seed_its_model_was_built_with():
+    """``build_leaf(sp, p, 3)`` then ``Run(model, p)`` is ``leafsim run --seed 3``: the simulator's
+    seed (colour variation, shrinkage field) defaulted to 0 whatever seed built the model."""
+    sp = get_species("oak")
+    p = sp.params.with_overrides({"mesh.spacing": 0.06, "shrink.patchiness": 1.0})
+    model = build_leaf(sp, p, seed=3).model
+    assert model.seed == 3 and (model.path is None or model.path.seed == 3)
+    a, b, c = Run(model, p), Run(model, p, seed=3), Run(model, p, seed=0)
+    assert a.sim.seed == 3
+    for r in (a, b, c):
+        for _ in r.frames(Stop(frames=5)):
+            pass
+    assert np.array_equal(a.state.particle_q, b.state.particle_q)
+    assert not np.array_equal(a.state.particle_q, c.state.particle_q)  # the seeded shrinkage field
