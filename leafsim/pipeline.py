@@ -10,6 +10,7 @@ the GUI's session) builds a leaf with :func:`build_leaf` and simulates it with
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -47,6 +48,10 @@ def leaf_shape(sp: Species, params: ParamSet | None = None) -> LeafShape:
     """
     params = params if params is not None else sp.params
     n = params["outline.points"]
+    length = sp.length_m
+    if isinstance(length, bool) or not isinstance(length, (int, float, np.floating)) or not (math.isfinite(length) and length > 0):
+        # (a Species edited in code: the config's own check never saw it; NaN was reported as a bad outline)
+        raise sp.error("length_m", f"{length!r}: expected a positive number of metres")
     if sp.image is None:
         c = drawn_contour(sp) * sp.length_m
         c = resample_closed(c, n)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from leafsim.base.errors import LeafsimError
 from leafsim.sim.kernels.crinkle import lamina_compression as _kernel
 from leafsim.sim.model import LAYER_T, Model, State
 
@@ -175,7 +176,7 @@ def crinkle_stats(model: Model, state: State) -> dict:
     w = np.asarray(model.particle_area, np.float64)[lamina]
     x = d[lamina]
     if not len(x) or w.sum() <= 0.0:
-        raise ValueError("crinkle: the blade has no lamina off its veins to measure")
+        raise LeafsimError("crinkle: the blade has no lamina off its veins to measure")
     srt = np.argsort(x, kind="stable")
     cw = np.cumsum(w[srt]) / w.sum()
     pct = [float(x[srt][min(int(np.searchsorted(cw, q / 100.0)), len(x) - 1)]) for q in (10, 50, 90, 99)]

@@ -208,6 +208,10 @@ class Run:
         # the state as it stands now (run.state may have been replaced or edited since the Run was
         # made): a NaN put there was reported as the simulation's, water × 5 was taken as found
         check_state(self.state, self.model, f"{self._prefix}Run.frames: state")
+        if self.sim.effects["colour"] and self.state.pigments is None:
+            # (the colour effect then did nothing, and a season stop waited for ever)
+            raise LeafsimError(f"{self._prefix}Run.frames: the state has no pigments, yet effects.colour is on: make the "
+                               "state with run.sim.state() or Simulator.state() (Model.state() makes one without them)")
         watch = None
         while True:
             if stop is not None:

@@ -448,3 +448,24 @@ def test_a_run_takes_the_seed_its_model_was_built_with():
             pass
     assert np.array_equal(a.state.particle_q, b.state.particle_q)
     assert not np.array_equal(a.state.particle_q, c.state.particle_q)  # the seeded shrinkage field
+
+
+def test_a_state_without_pigments_is_refused_while_colour_is_on(oak):
+    """Model.state() makes a state without pigments: with effects.colour on, the leaf stayed
+    green without a word and a season stop ran 2000 frames before giving up."""
+    _, params, model, _ = oak
+    run = Run(model, params, state=model.state())
+    with pytest.raises(LeafsimError, match="no pigments, yet effects.colour is on") as e:
+        next(run.frames(Stop(frames=2)))
+    one_line(e)
+    run = Run(model, params.with_overrides({"effects.colour": False}), state=model.state())
+    for _ in run.frames(Stop(frames=2)):
+        pass
+
+
+def test_an_edited_species_length_is_named(oak):
+    sp = oak[0]
+    for bad in (float("nan"), 0.0):
+        with pytest.raises(LeafsimError, match="key 'length_m'") as e:
+            build_leaf(dataclasses.replace(sp, length_m=bad), oak[1], seed=0)
+        one_line(e)
