@@ -22,10 +22,9 @@ from leafsim.commands.common import Progress, emit, ready_kernels, species_input
 from leafsim.pipeline import build_leaf
 from leafsim.render.sequence import FrameWriter
 from leafsim.sim.checkpoint import check_meta, load_carry, load_checkpoint, save_checkpoint
-from leafsim.sim.crinkle import crinkle_stats
-from leafsim.sim.curl import dried_shape
+from leafsim.sim.measures import leaf_measures
 from leafsim.sim.run import Run, Stop
-from leafsim.sim.shape import save_npz, shape_metrics
+from leafsim.sim.shape import save_npz
 from leafsim.sim.stats import StatsStream
 
 
@@ -306,30 +305,19 @@ def run_report(sp, params, args, run: Run, stats, start, build_s, sim_s, frames,
     ``water_fraction`` is the blade's (:meth:`Model.water_fraction`: the petiole dries last)."""
     model, state = run.model, run.state
     ms = [sum(s["ms"].values()) for s in stats]
-    water = model.water_fraction(state.particle_water)
     rep = {
         "species": sp.key, "seed": args.seed, "frames": len(stats), "frame": state.frame, "resumed_from": start,
-        "time_s": round(float(state.time), 9),  # simulated seconds (the compressed drying clock), as a scene's done.json
         "build_s": round(build_s, 3), "sim_s": round(sim_s, 3),
         "sim_s_total": None if prior_s is None else round(prior_s + sim_s, 3),
         "ms_per_frame_median": round(float(np.median(ms)), 4) if ms else 0.0,
         "ms_per_frame_mean": round(float(np.mean(ms)), 4) if ms else 0.0,
         "phases": _phases(stats, _path_depth(model)),
-        "water_fraction": round(water, 6),
         "weather_hours": round(state.weather_time / 3600.0, 4) if params["environment.drive"] == "weather" else None,
         "until": args.until,
         "nan": bool(any(s.get("nan") for s in stats)),
         "png_frames": 0 if frames is None else frames.written,
-        **{f"shape_{k}": v for k, v in shape_metrics(
-            model, state, own_frame=params["dynamics.scene"] != "ground" and bool(np.isfinite(state.particle_q).all())).items()},
-        **({f"shape_{k}": v for k, v in dried_shape(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
-        **({f"shape_{k}": v for k, v in crinkle_stats(model, state).items()} if np.isfinite(state.particle_q).all() else {}),
+        **leaf_measures(model, state, params),  # (the library's call for the same numbers)
         **model.to_report(),
-        "water_kg": float(state.particle_water.sum()),
-        "blade_water_kg": float(state.particle_water[model.blade_particles].sum()),
-        "petiole_water_fraction": (round(float(state.particle_water[~model.blade_particles].sum()
-                                               / max(float(model.particle_water0[~model.blade_particles].sum()), 1e-300)), 6)
-                                   if model.particle_petiole is not None else None),
     }
     if rep["nan"] and check_nan:
         raise LeafsimError(f"{sp.key}: the simulation produced NaN at frame {state.frame} (parameters: {params.changed()})")

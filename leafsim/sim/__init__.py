@@ -8,6 +8,7 @@
 
 from leafsim.config.presets import PRESETS, THESIS_PRESET
 from leafsim.sim.effects import EFFECTS
+from leafsim.sim.measures import leaf_measures
 from leafsim.sim.model import Model, State
 from leafsim.sim.run import run_headless
 from leafsim.sim.shape import leaf_frame, save_npz, shape_metrics
@@ -15,4 +16,4 @@ from leafsim.sim.simulator import Simulator
 from leafsim.sim.stats import frame_stats
 
 __all__ = ["Model", "State", "Simulator", "EFFECTS", "run_headless", "save_npz", "shape_metrics", "frame_stats",
-           "leaf_frame", "THESIS_PRESET", "PRESETS"]
+           "leaf_frame", "leaf_measures", "THESIS_PRESET", "PRESETS"]
