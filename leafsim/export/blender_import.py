@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import struct
 from array import array
 from pathlib import Path
@@ -193,6 +194,18 @@ def _finish_obj(objects) -> None:
                 links.new(col.outputs["Color"], bsdf.inputs["Base Color"])
 
 
+def morph_of(morphs: dict, *names: str):
+    """The colour morphs (:func:`colour_morphs`) of the file's mesh an imported object stands
+    for, looked up by the object's mesh name, then its own: Blender names a second leaf's
+    meshes ``blade.001``, ``veins.001`` ... where the file says ``blade``, ``veins`` (the second
+    leaf imported into one scene stayed green); None for a mesh without morphs."""
+    for name in names:
+        for key in (name, re.sub(r"\.\d{3,}$", "", name)):
+            if key in morphs:
+                return morphs[key]
+    return None
+
+
 def import_leafsim(path) -> list:
     """Import a leafsim glTF into the current Blender scene with its drying colour, or a leafsim
     OBJ with its baked crinkle's normal map and vertex colours wired up (:func:`_finish_obj`); returns
@@ -209,9 +222,7 @@ def import_leafsim(path) -> list:
     objects = [o for o in bpy.data.objects if o not in before]
     morphs = colour_morphs(path)
     for obj in objects:
-        morph = morphs.get(obj.data.name) if obj.type == "MESH" else None
-        if morph is None and obj.type == "MESH":
-            morph = morphs.get(obj.name)
+        morph = morph_of(morphs, obj.data.name, obj.name) if obj.type == "MESH" else None
         if morph is None:
             continue
         mesh = obj.data

@@ -386,3 +386,15 @@ def test_a_gltf_named_with_a_space_and_a_hash_points_at_its_buffer(leaf, tmp_pat
     assert (tmp_path / "my leaf#1.bin").is_file()
     assert json.loads(path.read_text())["buffers"][0]["uri"] == "my%20leaf%231.bin"
     assert_clean(path)
+
+
+def test_the_blender_addon_finds_a_second_leaf_s_morphs():
+    """Blender names the meshes of a second leaf imported into one scene blade.001, veins.001:
+    the add-on looked them up by that name and left the second leaf green (checked in Blender
+    4.2 with two oaks); it strips the suffix Blender adds."""
+    from leafsim.export.blender_import import morph_of
+
+    morphs = {"blade": "B", "veins": "V"}
+    assert morph_of(morphs, "blade.001", "blade.001") == "B" and morph_of(morphs, "veins.012", "x") == "V"
+    assert morph_of(morphs, "blade", "blade") == "B" and morph_of(morphs, "stalk.001", "stalk") is None
+    assert morph_of({"leaf.2": "L"}, "leaf.2") == "L"  # a name of the file's own with a dot is taken as it is
