@@ -85,9 +85,11 @@ def cmd_export(args):
     keys = key_frames(run, until, args.every, Progress(args, run, until, sp.key))
     photo = species_photo_rgba(sp, params) if sp.image is not None else None
     view = LeafView(model, photo, run.sim.state().pigments, photo_colour=sp.photo_colour)
-    rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view,
-                      layers=args.layers, veins=args.veins, texture=args.texture)
     water = model.water_fraction(run.state.particle_water)
+    about = {"species": sp.key, "seed": args.seed, "frame": run.state.frame, "time_s": round(float(run.state.time), 9),
+             "water_fraction": round(water, 6)}
+    rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view, layers=args.layers,
+                      veins=args.veins, texture=args.texture, name=f"{sp.key}-seed{args.seed}", extras={"leafsim": about})
     rep.update(species=sp.key, seed=args.seed, frames=run.state.frame, water_fraction=round(water, 6), texture=args.texture)
     if fmt in ("glb", "gltf", "obj"):
         # the add-on that brings into Blender what its importers drop: a glTF's colour morphs and

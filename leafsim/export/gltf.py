@@ -228,11 +228,14 @@ def tangents(positions: np.ndarray, normals: np.ndarray, uv: np.ndarray, triangl
 
 
 def build_gltf(frames: list[dict], times: list[float], photo_png: bytes | None = None,
-               image_name: str = "photo", normal_png: bytes | None = None) -> GltfBuilder:
+               image_name: str = "photo", normal_png: bytes | None = None, name: str = "leaf",
+               extras: dict | None = None) -> GltfBuilder:
     """A :class:`GltfBuilder` holding every surface of ``frames`` (one dict name → Surface per
     key frame), animated over ``times`` when there is more than one frame; the texture
     ``photo_png`` goes on every surface with texture coordinates, the normal map ``normal_png``
-    (the blade's crinkle, in the same texture space) on the blade's."""
+    (the blade's crinkle, in the same texture space) on the blade's.  The surfaces' nodes are the
+    children of one node called ``name`` carrying ``extras`` (what leaf this is), so leaves
+    imported side by side stay apart by name (their surfaces all called blade and veins)."""
     g = GltfBuilder()
     tex = g.texture(photo_png, image_name) if photo_png is not None else None
     nrm = g.texture(normal_png, "crinkle") if normal_png is not None else None
@@ -242,16 +245,22 @@ def build_gltf(frames: list[dict], times: list[float], photo_png: bytes | None =
         uv = frames[0][name].uv is not None
         return g.material(name, tex if uv else None, nrm if uv and name == "blade" else None)
 
-    nodes = [g.mesh(name, [f[name] for f in frames], material(name), names) for name in frames[0]]
+    nodes = [g.mesh(s, [f[s] for f in frames], material(s), names) for s in frames[0]]
+    root = {"name": str(name), "children": nodes}
+    if extras:
+        root["extras"] = extras
+    g.doc["nodes"].append(root)
+    g.doc["scenes"][0]["nodes"] = [len(g.doc["nodes"]) - 1]
     if len(frames) > 1:
         g.animation(nodes, times)
     return g
 
 
 def write_gltf(path: Path, frames: list[dict], times: list[float], photo_png: bytes | None = None,
-               binary: bool = True, image_name: str = "photo", normal_png: bytes | None = None) -> list[Path]:
+               binary: bool = True, image_name: str = "photo", normal_png: bytes | None = None,
+               name: str = "leaf", extras: dict | None = None) -> list[Path]:
     """Write ``frames`` as ``path`` (.glb, or .gltf + a .bin beside it); returns the files."""
-    g = build_gltf(frames, times, photo_png, image_name, normal_png)
+    g = build_gltf(frames, times, photo_png, image_name, normal_png, name, extras)
     if binary:
         return [atomic_write_bytes(path, g.glb(), "glTF binary")]
     bin_path = path.with_suffix(".bin")

@@ -278,7 +278,7 @@ def format_of(path, fmt: str | None) -> str:
 
 def export_mesh(model: Model, states, path, format: str | None = None, params=None, view=None,
                 layers: str = "shell", veins: bool = False, texture: str = "colours", times=None,
-                albedo: str = "detail") -> dict:
+                albedo: str = "detail", name: str = "leaf", extras: dict | None = None) -> dict:
     """Write the leaf ``model`` in ``states`` (a State or a list; several = a glTF animation with
     one morph target per state after the first) to ``path``.
 
@@ -295,6 +295,9 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     albedo : with ``texture="baked"`` on a photo species, the window's albedo the texture holds:
         "detail" (the pigment colour with the photo's detail, the window's default), "texture"
         (the photo tinted by the pigment change) or "colours" (the pigment colour alone).
+    name, extras : a glTF's root node, whose children the surfaces are: its name (``leafsim
+        export`` gives the species and seed, a scene the leaf's name) and JSON-able facts about
+        the leaf (species, seed, frame, ...) as its ``extras``.
 
     Returns a summary: format, path, files written, vertex and triangle counts per mesh, targets.
     """
@@ -346,7 +349,8 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     if fmt in ("glb", "gltf"):
         from leafsim.export.gltf import write_gltf
 
-        files = write_gltf(Path(path), frames, times, png, binary=fmt == "glb", image_name=texture, normal_png=normal_png)
+        files = write_gltf(Path(path), frames, times, png, binary=fmt == "glb", image_name=texture, normal_png=normal_png,
+                           name=name, extras=extras)
     elif fmt == "obj":
         files = write_obj(Path(path), frames[0], png, texture_file(path, texture), normal_png, normal_file(path))
     else:

@@ -331,5 +331,8 @@ def _export(job: LeafJob, sp, model: Model, params, states: list, folder: Path) 
 
     o = job.output
     photo = species_photo_rgba(sp, params) if o["texture"] == "photo" and sp.image is not None else None
+    last = states[-1] if isinstance(states, list) else states
+    about = {"leaf": job.name, "species": sp.key, "seed": int(job.seed), "frame": last.frame,
+             "time_s": round(float(last.time), 9), "water_fraction": round(model.water_fraction(last.particle_water), 6)}
     export_mesh(model, states, folder / f"leaf.{o['mesh']}", params=params, view=LeafView(model, photo),
-                layers=o["layers"], veins=o["veins"], texture=o["texture"])
+                layers=o["layers"], veins=o["veins"], texture=o["texture"], name=job.name, extras={"leafsim": about})

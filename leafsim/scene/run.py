@@ -16,9 +16,11 @@ Example
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import re
+import signal
 import sys
 import time
 from dataclasses import dataclass
@@ -29,6 +31,7 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes, no_folder, not_an_input, output_target, read_json
+from leafsim.base.signals import main_thread
 from leafsim.config.params import SEED_MAX, json_typed
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
@@ -371,7 +374,6 @@ def die_with_parent() -> None:
     (:func:`_stop_pool`), and a worker interrupted by it printed a traceback."""
     import ctypes
     import os
-    import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
@@ -391,7 +393,8 @@ def _local_results(jobs: list, out: Path, workers: int):
 
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent)
     try:
-        futs = {pool.submit(run_leaf, j, str(out)): j for j in jobs}
+        with _sigint_ignored_by_new_processes():
+            futs = {pool.submit(run_leaf, j, str(out)): j for j in jobs}  # (the workers are started here)
         for f in as_completed(futs):
             try:
                 yield f.result()
@@ -401,6 +404,22 @@ def _local_results(jobs: list, out: Path, workers: int):
         _stop_pool(pool)
         raise
     pool.shutdown(wait=True)
+
+
+@contextlib.contextmanager
+def _sigint_ignored_by_new_processes():
+    """SIGINT blocked in this thread while the pool starts its workers: a process starts with
+    its parent thread's signal mask, so a Ctrl-C during a worker's start-up, before its
+    initializer ignores it, stays pending there instead of making it print a traceback.  In
+    this process a Ctrl-C of that moment is only deferred: it arrives when the block ends."""
+    if not main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _stop_pool(pool) -> None:
