@@ -1,7 +1,7 @@
 """A small glTF 2.0 writer for :mod:`leafsim.export.mesh` (binary .glb, or .gltf JSON + .bin).
 
-One node and one mesh per exported surface (blade, veins), a double-sided metallic-roughness
-material each (baked pigment colours as ``COLOR_0``, or the photo as ``baseColorTexture``).
+One node and one mesh per exported surface (blade, veins), the children of one root node named
+after the leaf (with what it is as ``extras``), a double-sided metallic-roughness material each (baked pigment colours as ``COLOR_0``, or the photo as ``baseColorTexture``).
 Several frames: the base mesh is the **last** key frame (the state the export was asked for, so
 a viewer that does not play morph animations, such as trimesh or a still in an engine, shows
 it), each earlier key frame a morph target with ``POSITION``, ``NORMAL`` and ``COLOR_0`` deltas
