@@ -26,6 +26,7 @@ import numpy as np
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes
 from leafsim.config.params import PARAMS
+from leafsim.sim.layout import PIGMENT_ARRAYS as _PIGMENT_ARRAYS
 from leafsim.sim.model import Model, State
 from leafsim.sim.pigments import PigmentState
 
@@ -36,7 +37,6 @@ MAX_REACH = 100.0
 MAX_SPEED = 1e3
 #: pigment contents and per-leaf factors are of order one; beyond this a file is damaged
 MAX_PIGMENT = 100.0
-_PIGMENT_ARRAYS = ("chlorophyll", "carotenoid", "anthocyanin", "browning", "necrosis", "vein", "leaf")
 
 
 def model_fingerprint(model: Model) -> str:
@@ -301,39 +301,6 @@ def check_state(state: State, model: Model, where: str, frame=None, physical: bo
     if physical:
         _check_physical(state, model, where, frame)
     _check_pigments(state, model, where)
-
-
-def state_layout(model: Model) -> tuple:
-    """What every array of a state of ``model`` must be, as (name, shape, dtype) triples, for
-    :func:`check_layout` (made once per simulator: a fresh state is made to read it)."""
-    fresh = model.state()
-    arrays = tuple((f.name, getattr(fresh, f.name).shape, getattr(fresh, f.name).dtype)
-                   for f in fields(State) if f.name not in ("pigments", "path"))
-    return arrays, model.particle_count
-
-
-def check_layout(state: State, layout: tuple, where: str) -> None:
-    """The cheap part of :func:`check_state`, for every frame a simulator steps: ``state`` is a
-    State whose arrays (and pigments') have the shapes and dtypes of ``layout``
-    (:func:`state_layout`).  A state of another model, or an array swapped for one of another
-    length, reached the kernels, which wrote past the arrays' ends (segfault, heap corruption)."""
-    if not isinstance(state, State):
-        raise _fail(where, f"is a {type(state).__name__}, expected a leafsim.sim.model.State (e.g. run.state)")
-    arrays, n = layout
-    for name, shape, dtype in arrays:
-        a = getattr(state, name)
-        if not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dtype:
-            got = f"{a.dtype} {a.shape}" if isinstance(a, np.ndarray) else type(a).__name__
-            raise _fail(where, f"array {name} is {got}, expected {dtype} {shape} for this model (a state of another "
-                               "model?)")
-    pig = state.pigments
-    if pig is not None:
-        for name in _PIGMENT_ARRAYS:
-            a = getattr(pig, name, None)
-            want = (6,) if name == "leaf" else (n,)
-            if not isinstance(a, np.ndarray) or a.shape != want:
-                got = f"{a.dtype} {a.shape}" if isinstance(a, np.ndarray) else type(a).__name__
-                raise _fail(where, f"pigment array {name} is {got}, expected shape {want} for this model")
 
 
 def _check_physical(state: State, model: Model, where: str, frame) -> None:

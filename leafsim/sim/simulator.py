@@ -24,7 +24,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.config.params import ParamSet, as_params, check_seed
 from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
 from leafsim.sim.effects.dynamics import held
-from leafsim.sim.checkpoint import check_layout, state_layout
+from leafsim.sim.layout import check_layout, state_layout
 from leafsim.sim.model import Model, State
 from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_allowed, path_params, work_done
 
