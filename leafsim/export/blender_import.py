@@ -206,10 +206,58 @@ def morph_of(morphs: dict, *names: str):
     return None
 
 
+def scene_leaves(placement) -> list:
+    """The leaves of a ``leafsim scene`` output as ``(name, mesh file, 4 × 4 matrix)``, read from
+    its ``placement.json`` (standard library only): each leaf's mesh (``leaves/NAME/leaf.glb``,
+    ``.gltf`` or ``.obj``; None when its group wrote none) and its placement p' = R p + t as a
+    row-major matrix.  The placement
+    is in leafsim's z-up frame, which is Blender's (the glTF and OBJ importers turn the files'
+    y-up into it), so the matrix applies to the imported leaf as it stands."""
+    placement = Path(placement)
+    if placement.is_dir():
+        placement = placement / "placement.json"
+    doc = json.loads(placement.read_text())
+    out = []
+    for leaf in doc.get("leaves", []):
+        folder = placement.parent / "leaves" / leaf["name"]
+        found = [folder / f"leaf.{ext}" for ext in ("glb", "gltf", "obj") if (folder / f"leaf.{ext}").is_file()]
+        (r0, r1, r2), t = leaf["rotation"], leaf["translation"]
+        m = [[r0[0], r0[1], r0[2], t[0]], [r1[0], r1[1], r1[2], t[1]], [r2[0], r2[1], r2[2], t[2]], [0.0, 0.0, 0.0, 1.0]]
+        out.append((leaf["name"], found[0] if found else None, m))  # None: its group wrote no mesh (output.mesh)
+    return out
+
+
 def import_leafsim(path) -> list:
-    """Import a leafsim glTF into the current Blender scene with its drying colour, or a leafsim
-    OBJ with its baked crinkle's normal map and vertex colours wired up (:func:`_finish_obj`); returns
-    the imported objects."""
+    """Import a leafsim glTF into the current Blender scene with its drying colour, a leafsim
+    OBJ with its baked crinkle's normal map and vertex colours wired up (:func:`_finish_obj`), or
+    a whole scene (its ``placement.json``, or its output folder): every leaf imported so and
+    placed as the scene placed it (:func:`scene_leaves`).  Returns the imported objects."""
+    if Path(path).is_dir() or Path(path).suffix.lower() == ".json":
+        return _import_scene(path)
+    objects = _import_one(path)
+    _frame_range(objects)
+    return objects
+
+
+def _import_scene(path) -> list:
+    from mathutils import Matrix
+
+    objects = []
+    for _name, mesh, m in scene_leaves(path):
+        if mesh is None:  # (a group without output.mesh: nothing to import)
+            continue
+        new = _import_one(mesh)
+        place = Matrix(m)
+        for obj in new:
+            if obj.parent is None:  # the leaf's root node (a glTF's), or each object of an OBJ
+                obj.matrix_world = place @ obj.matrix_world
+        objects += new
+    _frame_range(objects)
+    return objects
+
+
+def _import_one(path) -> list:
+    """One leafsim file imported (:func:`import_leafsim`), the frame range left alone."""
     import bpy
 
     before = set(bpy.data.objects)
@@ -233,6 +281,13 @@ def import_leafsim(path) -> list:
         for k, d in enumerate(morph["deltas"]):
             _colour_attribute(mesh, f"leafsim_d{k}", d)
         _wire_material(obj, morph)
+    return objects
+
+
+def _frame_range(objects) -> None:
+    """The scene's frame range set to the drying actions of ``objects``, when they have one."""
+    import bpy
+
     scene = bpy.context.scene
     ranges = [o.data.shape_keys.animation_data.action.frame_range for o in objects
               if o.type == "MESH" and o.data.shape_keys and o.data.shape_keys.animation_data
@@ -242,7 +297,6 @@ def import_leafsim(path) -> list:
         # (the dried leaf; the shape holds there), not the frame before it
         scene.frame_start = math.floor(min(r[0] for r in ranges))
         scene.frame_end = math.ceil(max(r[1] for r in ranges) - 1e-6)
-    return objects
 
 
 def _operator():
@@ -250,12 +304,13 @@ def _operator():
     from bpy_extras.io_utils import ImportHelper
 
     class ImportLeafsim(bpy.types.Operator, ImportHelper):
-        """Import a leafsim glTF with its drying colour (or a leafsim OBJ with its normal map)"""
+        """Import a leafsim glTF with its drying colour, a leafsim OBJ with its normal map, or a
+        whole leafsim scene (its placement.json)"""
 
         bl_idname = "import_scene.leafsim_gltf"
         bl_label = "Import leafsim glTF"
         filename_ext = ".glb"
-        filter_glob: bpy.props.StringProperty(default="*.glb;*.gltf;*.obj", options={"HIDDEN"})
+        filter_glob: bpy.props.StringProperty(default="*.glb;*.gltf;*.obj;placement.json", options={"HIDDEN"})
 
         def execute(self, context):
             try:

@@ -438,3 +438,21 @@ def test_a_leaf_dropped_from_the_scene_is_named_not_removed(tmp_path, capsys):
     assert (tmp_path / "out" / "leaves" / "c-001" / "done.json").is_file()  # left as it was
     assert "not a leaf of this scene (c-001)" in capsys.readouterr().err
     assert [p["name"] for p in json.loads((tmp_path / "out" / "placement.json").read_text())["leaves"]] == ["c-000"]
+
+
+def test_the_blender_addon_reads_a_scene_s_leaves_and_placement(one_worker):
+    """The add-on imports a whole scene from its placement.json (File → Import, or
+    import_leafsim(folder)): every leaf's mesh file and its placement as a 4 × 4 matrix, read
+    with the standard library (Blender itself is not here; checked in Blender 4.2: each leaf's
+    root lands at its translation with its rotation, to 4e-7)."""
+    from leafsim.export.blender_import import scene_leaves
+
+    scene, out, _ = one_worker
+    placed = {p["name"]: p for p in json.loads((out / "placement.json").read_text())["leaves"]}
+    leaves = scene_leaves(out)
+    assert [n for n, _, _ in leaves] == list(placed) and leaves == scene_leaves(out / "placement.json")
+    for name, mesh, m in leaves:
+        R, t = np.array(placed[name]["rotation"]), np.array(placed[name]["translation"])
+        assert np.allclose(np.array(m)[:3, :3], R) and np.allclose(np.array(m)[:3, 3], t) and m[3] == [0, 0, 0, 1]
+        group = next(j for j in scene.jobs if j.name == name).output["mesh"]
+        assert (mesh is None) == (group is None) and (mesh is None or mesh == out / "leaves" / name / f"leaf.{group}")
