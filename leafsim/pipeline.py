@@ -231,7 +231,7 @@ def build_leaf(sp: Species, params: ParamSet, seed: int, report=None) -> BuiltLe
     report(0.2, "veins: growing the venation")
     veins = species_veins(sp, shape, params, seed)
     report(0.5, "blade: particles, Delaunay/Voronoi layers, springs")
-    model = replace(build_blade(shape, veins, params, seed), seed=seed)
+    model = replace(build_blade(shape, veins, params, seed), seed=seed, built_with=params.build_values())
     coarse = path_params_for(params)
     if coarse is not None:
         report(0.85, "blade: the coarser mesh that carries the drying (dynamics.path)")

@@ -482,6 +482,11 @@ class ParamSet(Mapping[str, Any]):
         """Only the values that differ from the declared defaults."""
         return {k: v for k, v in self._values.items() if v != PARAMS[k].default}
 
+    def build_values(self) -> tuple:
+        """The values of every parameter a model is built from ((name, value) pairs in name order;
+        the size guards ``limits.*`` left out: they shape no model)."""
+        return tuple((k, self[k]) for k in sorted(PARAMS) if PARAMS[k].rebuild and not k.startswith("limits."))
+
     def rebuild_differs(self, other: "ParamSet") -> bool:
         """True when any rebuild-needing parameter differs between two sets."""
         return any(self._values[k] != other._values[k] for k, p in PARAMS.items() if p.rebuild)

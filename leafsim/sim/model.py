@@ -176,6 +176,7 @@ class Model:
     path: "Model | None" = None
     particle_petiole: np.ndarray | None = None
     seed: int | None = None  # the seed build_leaf built it with (a Simulator's default seed); None: unknown
+    built_with: tuple | None = None  # ParamSet.build_values() of the build (build_leaf); None: unknown
 
     # ------------------------------------------------------------------ blade vs stalk
     @property

@@ -150,6 +150,7 @@ class Run:
             raise LeafsimError(f"Run: model {show(model)} ({type(model).__name__}): expected a Model{hint}")
         if simulator is None:
             params = as_params(params, "Run")
+            _check_built_with(model, params)
             seed = None if seed is None else check_seed(seed, "Run")  # None: the model's own (Simulator)
             simulator = Simulator(model, params, effects, seed=seed, watchdog=watchdog)
         elif not isinstance(simulator, Simulator) or simulator.model is not model:
@@ -267,6 +268,20 @@ class _Stall:
         elif self.run.state.frame - self.since >= STALL_FRAMES and not self.patient:
             what = "the water left" if self.stop.water_left is not None else "the season clock"
             self._fail(f"{what} has not moved towards it in {STALL_FRAMES} frames (evaporation or aging switched off?)")
+
+
+def _check_built_with(model: Model, params: ParamSet) -> None:
+    """A parameter the model is built from (outline, veins, mesh, petiole, mass: *rebuild* in
+    docs/parameters.md) set otherwise for the run changes nothing the run does: refused, naming
+    it (a sweep of mass.lma over one model gave the same leaf three times, without a word)."""
+    if model.built_with is None:
+        return
+    now = dict(params.build_values())
+    diff = [(k, now[k], v) for k, v in model.built_with if k in now and now[k] != v]
+    if diff:
+        shown = ", ".join(f"{k} = {a!r} (built with {b!r})" for k, a, b in diff[:3]) + (" ..." if len(diff) > 3 else "")
+        raise LeafsimError(f"Run: params set {shown}, which the model is built from: build it again with these "
+                           "params (build_leaf) for them to take effect")
 
 
 def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stats_path=None, on_frame=None,

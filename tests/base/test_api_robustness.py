@@ -469,3 +469,14 @@ def test_an_edited_species_length_is_named(oak):
         with pytest.raises(LeafsimError, match="key 'length_m'") as e:
             build_leaf(dataclasses.replace(sp, length_m=bad), oak[1], seed=0)
         one_line(e)
+
+
+def test_a_parameter_the_model_is_built_from_is_refused_at_run_time(oak):
+    """A sweep of a rebuild parameter (mass, mesh, veins ...) over one model ran the same leaf
+    every time without a word: Run names the parameter and says to build again; live
+    parameters and the size guards (limits.*) still go."""
+    _, params, model, _ = oak
+    with pytest.raises(LeafsimError, match=r"mass.lma = 0.05 \(built with 0.08\).*build it again") as e:
+        Run(model, params.with_overrides({"mass.lma": 0.05}))
+    one_line(e)
+    Run(model, params.with_overrides({"osmosis.every": 2, "limits.max_particles": 10_000}))
