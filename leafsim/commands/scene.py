@@ -32,6 +32,11 @@ def cmd_scene(args):
         warn(f"--workers {workers} is more than the CPUs this process may use ({cpus}): the leaves will share "
              f"cores (each worker holds its own leaf in memory; the results are the same for any worker count)")
     out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem
+    if not args.out:  # the default out/NAME: its parent is leafsim's to make (--out's must exist)
+        try:
+            out.parent.mkdir(exist_ok=True)
+        except OSError as e:
+            raise LeafsimError(f"--out {out} (the default): cannot make the folder out ({e.strerror or e})") from None
     rep = run_scene(scene, out, workers=workers, scheduler=args.scheduler, before=ready_kernels)
     bad = rep["failed"]
     text = (f"{scene.name}: {rep['ran']} leaves simulated, {rep['skipped']} already done, {len(bad)} failed "

@@ -484,8 +484,10 @@ class ParamSet(Mapping[str, Any]):
 
     def build_values(self) -> tuple:
         """The values of every parameter a model is built from ((name, value) pairs in name order;
-        the size guards ``limits.*`` left out: they shape no model)."""
-        return tuple((k, self[k]) for k in sorted(PARAMS) if PARAMS[k].rebuild and not k.startswith("limits."))
+        the size guards ``limits.*`` left out, which shape no model, and ``dynamics.path``, which
+        builds the path mesh but which a simulator also obeys as it runs: ``own`` leaves it unused)."""
+        return tuple((k, self[k]) for k in sorted(PARAMS)
+                     if PARAMS[k].rebuild and not k.startswith("limits.") and k != "dynamics.path")
 
     def rebuild_differs(self, other: "ParamSet") -> bool:
         """True when any rebuild-needing parameter differs between two sets."""

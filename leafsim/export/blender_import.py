@@ -34,6 +34,7 @@ import json
 import math
 import re
 import struct
+import urllib.parse
 from array import array
 from pathlib import Path
 
@@ -60,7 +61,8 @@ def _load(path: Path) -> tuple[dict, bytes]:
         return doc, blob
     doc = json.loads(data)
     uri = doc["buffers"][0].get("uri")
-    return doc, (path.parent / uri).read_bytes() if uri else b""
+    # (a URI: "my leaf.gltf" has its buffer at "my%20leaf.bin")
+    return doc, (path.parent / urllib.parse.unquote(uri)).read_bytes() if uri else b""
 
 
 def _floats(doc: dict, blob: bytes, index: int) -> list[tuple[float, ...]]:

@@ -18,6 +18,7 @@ in seconds.
 from __future__ import annotations
 
 import hashlib
+import os
 import sys
 import threading
 import time
@@ -57,7 +58,8 @@ def _marker() -> Path | None:
                 cpu = platform.machine()
             # numba files its cache under the kernel sources' own folder (a checkout at another
             # path, or a moved one, compiles anew), so the marker is that folder's too
-            where = hashlib.sha256(str(Path(__file__).resolve().parents[1]).encode()).hexdigest()[:12]
+            # (as numba names it: the absolute path, links not resolved)
+            where = hashlib.sha256(os.path.dirname(os.path.dirname(os.path.abspath(__file__))).encode()).hexdigest()[:12]
             key = f"{kernel_sources_digest()}-{numba.__version__}-py{sys.version_info[0]}{sys.version_info[1]}-{cpu}-{where}"
             path = Path(folder) / ("leafsim-warm-" + "".join(c if c.isalnum() or c in "-._" else "_" for c in key))
         _marker_path.append(path)

@@ -60,7 +60,9 @@ def add_teeth(pts: np.ndarray, count: int, depth: float, skip_base: float = 0.15
     # teeth; full-depth notches below an entire tip left a knob there): full depth from a
     # half-width of 4 depths, a smooth ramp below it
     w = np.clip(np.abs(p[:, 0]) / (4.0 * depth), 0.0, 1.0)
-    fade *= np.where(p[:, 1] > 0.5, w * w * (3.0 - 2.0 * w), 1.0)
+    s = w * w * (3.0 - 2.0 * w)
+    upper = np.clip((p[:, 1] - 0.4) / 0.2, 0.0, 1.0)  # (eased in over 0.4–0.6 of the length, no step)
+    fade *= np.where(upper >= 1.0, s, np.where(upper <= 0.0, 1.0, 1.0 - upper * (1.0 - s)))
     return p - nrm * (depth * (1 - saw) * fade)[:, None]
 
 

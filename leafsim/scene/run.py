@@ -31,7 +31,6 @@ import numpy as np
 
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes, no_folder, not_an_input, output_target, read_json
-from leafsim.base.signals import main_thread
 from leafsim.config.params import SEED_MAX, json_typed
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
@@ -412,7 +411,7 @@ def _sigint_ignored_by_new_processes():
     its parent thread's signal mask, so a Ctrl-C during a worker's start-up, before its
     initializer ignores it, stays pending there instead of making it print a traceback.  In
     this process a Ctrl-C of that moment is only deferred: it arrives when the block ends."""
-    if not main_thread() or not hasattr(signal, "pthread_sigmask"):
+    if not hasattr(signal, "pthread_sigmask"):  # (any thread may block it for the processes it starts)
         yield
         return
     old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
@@ -503,7 +502,9 @@ def _run_scene(scene: Scene, out, workers: int, scheduler: str | None, client, p
         t0 = time.perf_counter()
     if todo:
         gen = _dask_results(todo, out, client) if client is not None else _local_results(todo, out, min(workers, len(todo)))
-        with tqdm(total=len(todo), desc=scene.name, unit="leaf", disable=None if progress else True) as bar:
+        # (closed here, not when its frame is freed: an interrupt in this loop, outside the
+        # generator, left a script's pool running every queued leaf)
+        with contextlib.closing(gen), tqdm(total=len(todo), desc=scene.name, unit="leaf", disable=None if progress else True) as bar:
             for r in gen:
                 results.append(r)
                 bar.update(1)

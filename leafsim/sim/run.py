@@ -164,6 +164,7 @@ class Run:
         self.state = simulator.state() if state is None else state
         self.last_ms: dict = {}
         self._prefix = f"{name}: " if name else ""
+        self._produced = None  # (id, frame) of the state this run last stepped to
 
     # ------------------------------------------------------------------ measures
     @property
@@ -208,7 +209,10 @@ class Run:
 
         # the state as it stands now (run.state may have been replaced or edited since the Run was
         # made): a NaN put there was reported as the simulation's, water × 5 was taken as found
-        check_state(self.state, self.model, f"{self._prefix}Run.frames: state")
+        if self._produced != (id(self.state), self.state.frame):
+            # (a state this run stepped to is its own: a free leaf that has fallen 100 leaf lengths
+            # is no damaged state, and checking it in full each call cost a fresh state's arrays)
+            check_state(self.state, self.model, f"{self._prefix}Run.frames: state")
         if self.sim.effects["colour"] and self.state.pigments is None:
             # (the colour effect then did nothing, and a season stop waited for ever)
             raise LeafsimError(f"{self._prefix}Run.frames: the state has no pigments, yet effects.colour is on: make the "
@@ -226,6 +230,7 @@ class Run:
                     watch.check()
             ms = self.step()
             finite = self.finite()
+            self._produced = (id(self.state), self.state.frame)
             yield ms
             if not finite:
                 raise Diverged(f"{self._prefix}the simulation produced NaN/Inf at frame {self.state.frame}")

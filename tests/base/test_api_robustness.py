@@ -480,3 +480,22 @@ def test_a_parameter_the_model_is_built_from_is_refused_at_run_time(oak):
         Run(model, params.with_overrides({"mass.lma": 0.05}))
     one_line(e)
     Run(model, params.with_overrides({"osmosis.every": 2, "limits.max_particles": 10_000}))
+
+
+def test_a_run_s_own_state_is_not_checked_again_between_calls():
+    """Run.frames checks in full only a state it did not step to itself: a free leaf that has
+    fallen farther than the loaded-state bound (100 leaf lengths) was refused on the next call
+    of a chunked run; dynamics.path = own at run time is obeyed, not refused as a build value."""
+    sp = get_species("oak")
+    p = sp.params.with_overrides({"mesh.spacing": 0.06, "dynamics.scene": "free"})
+    model = build_leaf(sp, p, seed=0).model
+    run = Run(model, p)
+    for _ in run.frames(Stop(frames=2)):
+        pass
+    run.state.particle_q[:, 2] -= 1000.0 * model.length  # (as if it had fallen that far)
+    for _ in run.frames(Stop(frames=4)):
+        pass
+    assert run.state.frame == 4
+    built = build_leaf(sp, sp.params, seed=0).model
+    assert built.path is not None
+    Run(built, sp.params.with_overrides({"dynamics.path": "own"}))

@@ -398,3 +398,12 @@ def test_the_blender_addon_finds_a_second_leaf_s_morphs():
     assert morph_of(morphs, "blade.001", "blade.001") == "B" and morph_of(morphs, "veins.012", "x") == "V"
     assert morph_of(morphs, "blade", "blade") == "B" and morph_of(morphs, "stalk.001", "stalk") is None
     assert morph_of({"leaf.2": "L"}, "leaf.2") == "L"  # a name of the file's own with a dot is taken as it is
+
+
+def test_the_blender_addon_reads_a_gltf_whose_buffer_name_is_percent_encoded(leaf, tmp_path):
+    from leafsim.export.blender_import import colour_morphs
+
+    model, params, view, states = leaf
+    path = tmp_path / "my leaf#1.gltf"
+    export_mesh(model, states, path, params=params, view=view)
+    assert set(colour_morphs(path)) == {"blade"}

@@ -456,3 +456,14 @@ def test_the_blender_addon_reads_a_scene_s_leaves_and_placement(one_worker):
         assert np.allclose(np.array(m)[:3, :3], R) and np.allclose(np.array(m)[:3, 3], t) and m[3] == [0, 0, 0, 1]
         group = next(j for j in scene.jobs if j.name == name).output["mesh"]
         assert (mesh is None) == (group is None) and (mesh is None or mesh == out / "leaves" / name / f"leaf.{group}")
+
+
+def test_the_default_output_folder_is_made(tmp_path):
+    """Without --out a scene writes to out/NAME, making out/ (the check that --out's parent
+    exists refused the documented `leafsim scene configs/scenes/close_up.json`)."""
+    path = _scene(tmp_path, name="dflt", groups=[{"name": "c", "species": "chestnut", "count": 1, "seed": 3,
+                                                   "params": dict(TINY), "stop": {"frames": 2}}])
+    r = subprocess.run([sys.executable, "-m", "leafsim", "scene", str(path), "--workers", "1"], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=HANG_S)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "out" / "dflt" / "placement.json").is_file()
