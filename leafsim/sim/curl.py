@@ -13,8 +13,16 @@ where the leaf lies or on the mesh:
   blade: a local quadratic fit, so a bowl's or a saddle's curvature leaves no residual): the RMS of the rest over L (amplitude) and its dominant wavelength over L (the peak of
   the radially averaged power spectrum).  Below ``FLAT`` × L RMS the blade counts as smooth and
   has no wavelength.
-* **midrib fold** — the angle between the best-fit planes of the two halves of the blade (left
-  and right of the base–apex axis at rest): 0° flat, 90° a right-angled V.
+* **midrib fold** — the V angle across the midrib: at ten stations over the middle 70 % of the
+  midrib's length, the angle between the mean normals of the blade strips on either side of it
+  (within ``FOLD_BAND`` × L of the midrib at rest), seen along the midrib (their components
+  along its deformed direction there left out), averaged with the strips' areas as weights;
+  0° flat, 90° a right-angled V, positive when the halves rise (a valley along the midrib, the
+  upper faces turned towards each other), negative for a ridge.  Local along the midrib, so a
+  blade bent end to end (a boat) or curled along its length has no fold unless it is also
+  V-shaped across the midrib.  (Until 7 December it was the angle between the best-fit planes
+  of the two whole halves: for a half curled along its length that plane is ill-defined, and
+  chestnut's boat read 67–115° where its V is 12°.)
 
 Guo et al. 2025 (arXiv:2507.01813) class dried shapes as C-curl, S-curl and fold with wavy edges;
 these three numbers tell them apart (roll without fold, fold with wavy margin, …).
@@ -35,6 +43,10 @@ SMOOTH = 0.06
 GRID = 160
 #: below this RMS (× L; 0.1 mm on a 10 cm leaf) the residual is no wrinkle
 FLAT = 1e-3
+#: the midrib fold's strips: the blade within this distance of the midrib (× L), either side
+FOLD_BAND = 0.1
+#: the midrib fold's stations: this many, over this share of the midrib's length (its middle)
+FOLD_STATIONS, FOLD_SPAN = 10, (0.15, 0.85)
 
 
 def _normals(q: np.ndarray, tri: np.ndarray) -> np.ndarray:
@@ -58,24 +70,88 @@ def margin_roll(model: Model, q: np.ndarray) -> dict:
     return {"margin_roll_deg": round(float(ang.mean()), 2), "margin_roll_p90_deg": round(float(np.percentile(ang, 90)), 2)}
 
 
+def _midrib_rest(model: Model) -> np.ndarray:
+    """(k, 2) the midrib at rest, base to apex: of the first-order veins that start at the base,
+    the one that reaches furthest towards the apex (+y); the base–apex axis if there is none."""
+    r = model.particle_rest
+    base = r[model.base_particle, :2]
+    L = _blade_length(model)
+    best, reach = None, -np.inf
+    for idx, _, order in model.vein_polylines():
+        p = r[idx, :2]
+        if order == 0 and len(p) >= 2 and np.linalg.norm(p[0] - base) <= 0.05 * L and p[-1, 1] > reach:
+            best, reach = p, p[-1, 1]
+    if best is None:
+        y = r[model.blade_T, 1]
+        best = np.array([[0.0, float(y.min())], [0.0, float(y.max())]])
+    return best
+
+
+def _blade_length(model: Model) -> float:
+    return float(np.ptp(model.particle_rest[model.blade_T, 1])) or 1.0  # the blade's, not the stalk's
+
+
+def _along_midrib(poly: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(s, d, length): the arc length of each point's nearest point on the polyline and its
+    signed distance from it (+ on the left, looking from the base to the apex)."""
+    from scipy.spatial import cKDTree
+
+    seg = np.diff(poly, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    keep = seg_len > 0
+    poly = np.vstack([poly[:1], poly[1:][keep]])
+    seg, seg_len = seg[keep], seg_len[keep]
+    total = float(seg_len.sum())
+    # resampled finely (4000 points over the midrib), the nearest sample is the foot within L/8000
+    n = 4000
+    s_samp = np.linspace(0.0, total, n)
+    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+    k = np.clip(np.searchsorted(cum, s_samp, side="right") - 1, 0, len(seg) - 1)
+    samp = poly[k] + ((s_samp - cum[k]) / seg_len[k])[:, None] * seg[k]
+    tang = seg[k] / seg_len[k][:, None]
+    dist, j = cKDTree(samp).query(pts)
+    rel = pts - samp[j]
+    side = np.sign(tang[j, 0] * rel[:, 1] - tang[j, 1] * rel[:, 0])
+    return s_samp[j], side * dist, total
+
+
 def midrib_fold(model: Model, q: np.ndarray) -> float:
-    """Angle between the best-fit planes of the two halves of the blade [deg]."""
-    T = np.flatnonzero(model.blade_T)
-    x = model.particle_rest[T, 0]
-    area = model.particle_area[T]
-    normals = []
-    for half in (x < 0, x > 0):
-        P, w = q[T[half]], area[half]
-        if len(P) < 3:
-            return 0.0
-        c = (P * w[:, None]).sum(0) / w.sum()
-        _, _, vt = np.linalg.svd((P - c) * np.sqrt(w)[:, None], full_matrices=False)
-        nrm = vt[2]
-        normals.append(nrm)
-    # orient both like the blade's mean normal (the plane normal's sign is arbitrary)
-    mean = _normals(q, model.blade_tri_T).sum(0)
-    a, b = (n if n @ mean >= 0 else -n for n in normals)
-    return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
+    """The V angle across the midrib [deg] (module docstring): + the halves rise, − a ridge."""
+    tri = model.blade_tri_T
+    if len(tri) == 0:
+        return 0.0
+    s, d, total = _along_midrib(_midrib_rest(model), model.particle_rest[tri].mean(1)[:, :2])
+    n = _normals(q, tri)
+    band = FOLD_BAND * _blade_length(model)
+    edges = np.linspace(FOLD_SPAN[0] * total, FOLD_SPAN[1] * total, FOLD_STATIONS + 1)
+    num = den = 0.0
+    for a, b in zip(edges[:-1], edges[1:]):
+        at = (s >= a) & (s < b) & (np.abs(d) <= band)
+        left, right = at & (d > 0), at & (d < 0)
+        if not (left.any() and right.any()):
+            continue
+        nl, nr = n[left].sum(0), n[right].sum(0)  # area-weighted (the normals' lengths are areas)
+        w = min(float(np.linalg.norm(nl)), float(np.linalg.norm(nr)))
+        # seen along the midrib: without the normals' turn along it (a curl along the length)
+        cen = q[tri[at]].mean(1)
+        ds = s[at] - s[at].mean()
+        t = (cen * ds[:, None]).sum(0)  # the deformed midrib's direction here (a regression on s)
+        tn = float(np.linalg.norm(t))
+        if w <= 0.0 or tn <= 0.0:
+            continue
+        t /= tn
+        nl, nr = nl - (nl @ t) * t, nr - (nr @ t) * t
+        al, ar = float(np.linalg.norm(nl)), float(np.linalg.norm(nr))
+        if min(al, ar) <= 0.0:
+            continue
+        nl, nr = nl / al, nr / ar
+        angle = math.degrees(math.acos(min(1.0, max(-1.0, float(nl @ nr)))))
+        # a valley (the halves rise): the left strip's normal leans towards the right strip
+        across = q[tri[right]].mean((0, 1)) - q[tri[left]].mean((0, 1))
+        sign = 1.0 if float((nl - nr) @ across) >= 0.0 else -1.0
+        num += sign * angle * w
+        den += w
+    return num / den if den > 0 else 0.0
 
 
 def height_field(model: Model, q: np.ndarray, grid: int = GRID) -> tuple[np.ndarray, np.ndarray, float]:
@@ -85,7 +161,7 @@ def height_field(model: Model, q: np.ndarray, grid: int = GRID) -> tuple[np.ndar
 
     T = model.blade_T
     rest = model.particle_rest[T, :2]
-    L = float(np.ptp(model.particle_rest[model.blade_T, 1])) or 1.0  # the blade's, not the stalk's
+    L = _blade_length(model)
     h = L / grid
     lo, hi = rest.min(0), rest.max(0)
     xs = np.arange(lo[0], hi[0] + h, h)
@@ -147,7 +223,7 @@ def wrinkles(model: Model, q: np.ndarray, grid: int = GRID) -> dict:
 
     Z, inside, h = height_field(model, q, grid)
     inside = inside & np.isfinite(Z)
-    L = float(np.ptp(model.particle_rest[model.blade_T, 1])) or 1.0  # the blade's, not the stalk's
+    L = _blade_length(model)
     z = np.where(inside, Z, 0.0).astype(np.float64)
     m = inside.astype(np.float64)
     s = SMOOTH * L / h

@@ -46,16 +46,37 @@ def test_sinusoidal_wrinkle_amplitude_and_wavelength(model):
     assert wrinkles(model, bowl)["wrinkle_rms_L"] < 0.1 * w["wrinkle_rms_L"]
 
 
-@pytest.mark.parametrize("angle", [30.0, 90.0])
+@pytest.mark.parametrize("angle", [30.0, 90.0, -40.0])
 def test_v_fold_along_the_midrib(model, angle):
-    t = np.tan(np.radians(0.5 * angle))
+    """The halves turned about the midrib by ±angle/2, lengths kept: + a valley (the halves
+    rise), − a ridge."""
     q = model.particle_rest.copy()
-    # fold the halves up about the y axis by ±angle/2 (lengths kept)
     c, s = np.cos(np.radians(0.5 * angle)), np.sin(np.radians(0.5 * angle))
     x = q[:, 0]
     q[:, 0], q[:, 2] = np.abs(x) * c * np.sign(x), np.abs(x) * s
-    assert t > 0
     assert midrib_fold(model, q) == pytest.approx(angle, abs=3.0)
+
+
+def test_a_boat_or_a_lengthwise_curl_is_no_fold(model):
+    """A blade bent end to end (a boat: each half curled along its length, as sweet chestnut
+    dries) is not V-shaped across its midrib. The angle between the two halves' best-fit planes,
+    the measure of before, read 90-180 degrees for such a curl: the plane of a half curled along
+    its length is ill-defined."""
+    L = float(np.ptp(model.particle_rest[:, 1]))
+    for k in (2.0, 5.0, 8.0):  # curvature × L: up to a half-turn over the length
+        R = L / k
+        q = model.particle_rest.copy()
+        y = q[:, 1] - 0.5 * L
+        q[:, 1], q[:, 2] = R * np.sin(y / R), R * (1.0 - np.cos(y / R))  # rolled up, lengths kept
+        assert abs(midrib_fold(model, q)) < 1.0, k
+    # a V across the same curl is still read
+    q = model.particle_rest.copy()
+    x, y = q[:, 0], q[:, 1] - 0.5 * L
+    c, s = np.cos(np.radians(20.0)), np.sin(np.radians(20.0))
+    R = L / 3.0
+    q[:, 0], h = x * c, np.abs(x) * s  # a 40° V ...
+    q[:, 1], q[:, 2] = (R - h) * np.sin(y / R), R - (R - h) * np.cos(y / R)  # ... rolled up along y
+    assert midrib_fold(model, q) == pytest.approx(40.0, abs=4.0)
 
 
 def test_rolled_margin(model):
