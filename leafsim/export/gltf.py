@@ -118,6 +118,13 @@ class GltfBuilder:
         self.doc["scenes"][0]["nodes"].append(node)
         return node
 
+    def counts(self) -> dict:
+        """{mesh name: {"vertices", "triangles"}} as the file holds them."""
+        acc = self.doc["accessors"]
+        return {m["name"]: {"vertices": int(acc[m["primitives"][0]["attributes"]["POSITION"]]["count"]),
+                            "triangles": int(acc[m["primitives"][0]["indices"]]["count"]) // 3}
+                for m in self.doc["meshes"]}
+
     def _target(self, s0, s) -> dict:
         t = {"POSITION": self.accessor(s.positions - s0.positions, bounds=True),
              "NORMAL": self.accessor(s.normals - s0.normals)}
@@ -258,9 +265,13 @@ def build_gltf(frames: list[dict], times: list[float], photo_png: bytes | None =
 
 def write_gltf(path: Path, frames: list[dict], times: list[float], photo_png: bytes | None = None,
                binary: bool = True, image_name: str = "photo", normal_png: bytes | None = None,
-               name: str = "leaf", extras: dict | None = None) -> list[Path]:
-    """Write ``frames`` as ``path`` (.glb, or .gltf + a .bin beside it); returns the files."""
+               name: str = "leaf", extras: dict | None = None, counts: dict | None = None) -> list[Path]:
+    """Write ``frames`` as ``path`` (.glb, or .gltf + a .bin beside it); returns the files.
+    ``counts``, when given, receives each mesh's vertices and triangles as written (the blade of
+    a normal-mapped glTF has its rim's vertices twice: :func:`_lower_face_turned`)."""
     g = build_gltf(frames, times, photo_png, image_name, normal_png, name, extras)
+    if counts is not None:
+        counts.update(g.counts())
     if binary:
         return [atomic_write_bytes(path, g.glb(), "glTF binary")]
     bin_path = path.with_suffix(".bin")

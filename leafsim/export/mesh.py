@@ -349,14 +349,17 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     if fmt in ("glb", "gltf"):
         from leafsim.export.gltf import write_gltf
 
+        counts = {}
         files = write_gltf(Path(path), frames, times, png, binary=fmt == "glb", image_name=texture, normal_png=normal_png,
-                           name=name, extras=extras)
+                           name=name, extras=extras, counts=counts)
     elif fmt == "obj":
         files = write_obj(Path(path), frames[0], png, texture_file(path, texture), normal_png, normal_file(path))
     else:
         files = write_ply(Path(path), frames[0])
+    if fmt not in ("glb", "gltf"):  # OBJ and PLY write the surfaces' vertices as they are
+        counts = {k: {"vertices": len(s.positions), "triangles": len(s.triangles)} for k, s in frames[0].items()}
     return {"format": fmt, "path": str(path), "files": [str(f) for f in files], "targets": len(states) - 1,
-            "meshes": {k: {"vertices": len(s.positions), "triangles": len(s.triangles)} for k, s in frames[0].items()}}
+            "meshes": counts}
 
 
 # ------------------------------------------------------------------ static formats

@@ -230,10 +230,14 @@ def test_a_baked_export_opens_as_a_textured_glb_and_obj(tmp_path, key):
     model, params, view, st = _turning(key)
     photo = key == "oak"
     path = tmp_path / f"{key}.glb"
-    export_mesh(model, st, path, params=params, view=view, veins=True, texture="baked")
+    rep = export_mesh(model, st, path, params=params, view=view, veins=True, texture="baked")
     assert_clean(path)
     doc, blob = _glb_json(path)
     prims = {m["name"]: m["primitives"][0] for m in doc["meshes"]}
+    # the report counts what the file holds: the normal-mapped blade's rim has its own vertices
+    acc = doc["accessors"]
+    assert rep["meshes"] == {k: {"vertices": acc[p["attributes"]["POSITION"]]["count"],
+                                 "triangles": acc[p["indices"]]["count"] // 3} for k, p in prims.items()}
     assert "COLOR_0" not in prims["blade"]["attributes"] and "TEXCOORD_0" in prims["blade"]["attributes"]
     assert ("COLOR_0" in prims["veins"]["attributes"]) != photo and ("TEXCOORD_0" in prims["veins"]["attributes"]) == photo
     mats = doc["materials"]
@@ -367,10 +371,14 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
         assert errors[wrong].mean() > 2.0 * right.mean() + margin, (wrong, errors[wrong].mean(), right.mean())
 
     path = tmp_path / f"{key}.glb"
-    export_mesh(model, st, path, params=params, view=view, veins=True, texture="baked", albedo="colours")
+    rep = export_mesh(model, st, path, params=params, view=view, veins=True, texture="baked", albedo="colours")
     assert_clean(path)
     doc, blob = _glb_json(path)
     prims = {m["name"]: m["primitives"][0] for m in doc["meshes"]}
+    # the report counts the rim's own vertices (the shell's without them, plus one per rim corner)
+    shell = src.surfaces(st)["blade"]
+    assert len(shell.positions) < rep["meshes"]["blade"]["vertices"] == _accessor(doc, blob, prims["blade"]["attributes"]["POSITION"]).shape[0]
+    assert rep["meshes"]["blade"]["triangles"] == len(shell.triangles)
     mats = doc["materials"]
     blade = mats[prims["blade"]["material"]]
     assert "normalTexture" not in mats[prims["veins"]["material"]]
