@@ -15,8 +15,9 @@ where the leaf lies or on the mesh:
   has no wavelength.
 * **midrib fold** — the V angle across the midrib: at ten stations over the middle 70 % of the
   midrib's length, the angle between the mean normals of the blade strips on either side of it
-  (within ``FOLD_BAND`` × L of the midrib at rest), seen along the midrib (their components
-  along its deformed direction there left out), averaged with the strips' areas as weights;
+  (within ``FOLD_BAND`` × L of the midrib at rest, L the leaf's length from base to apex), seen
+  along the midrib (their components along the deformed midrib's direction there left out: a
+  twist about the midrib is no fold), averaged with the strips' areas as weights;
   0° flat, 90° a right-angled V, positive when the halves rise (a valley along the midrib, the
   upper faces turned towards each other), negative for a ridge.  Local along the midrib, so a
   blade bent end to end (a boat) or curled along its length has no fold unless it is also
@@ -70,25 +71,33 @@ def margin_roll(model: Model, q: np.ndarray) -> dict:
     return {"margin_roll_deg": round(float(ang.mean()), 2), "margin_roll_p90_deg": round(float(np.percentile(ang, 90)), 2)}
 
 
-def _midrib_rest(model: Model) -> np.ndarray:
-    """(k, 2) the midrib at rest, base to apex: of the first-order veins that start at the base,
-    the one that reaches furthest towards the apex (+y); the base–apex axis if there is none."""
+def _midrib_rest(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 2) the midrib at rest, base to apex, and its (k,) particles: of the first-order
+    veins of the blade (not the stalk's) that start at the base, the one that reaches furthest
+    towards the apex (+y); the base–apex axis (no particles) if there is none."""
     r = model.particle_rest
     base = r[model.base_particle, :2]
-    L = _blade_length(model)
+    stalk = model.particle_petiole
     best, reach = None, -np.inf
     for idx, _, order in model.vein_polylines():
         p = r[idx, :2]
-        if order == 0 and len(p) >= 2 and np.linalg.norm(p[0] - base) <= 0.05 * L and p[-1, 1] > reach:
-            best, reach = p, p[-1, 1]
+        if order != 0 or len(p) < 2 or (stalk is not None and bool(np.asarray(stalk)[idx].any())):
+            continue
+        if np.linalg.norm(p[0] - base) <= 0.05 * model.length and p[-1, 1] > reach:
+            best, reach = idx, p[-1, 1]
     if best is None:
         y = r[model.blade_T, 1]
-        best = np.array([[0.0, float(y.min())], [0.0, float(y.max())]])
-    return best
+        return np.array([[0.0, float(y.min())], [0.0, float(y.max())]]), np.zeros(0, np.int64)
+    return r[best, :2], np.asarray(best, np.int64)
 
 
 def _blade_length(model: Model) -> float:
     return float(np.ptp(model.particle_rest[model.blade_T, 1])) or 1.0  # the blade's, not the stalk's
+
+
+def _arc_length(poly: np.ndarray) -> np.ndarray:
+    """(k,) the arc length of each point of the polyline from its first."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poly, axis=0), axis=1))])
 
 
 def _along_midrib(poly: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -96,18 +105,19 @@ def _along_midrib(poly: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.nda
     signed distance from it (+ on the left, looking from the base to the apex)."""
     from scipy.spatial import cKDTree
 
+    cum = _arc_length(poly)
+    total = float(cum[-1])
     seg = np.diff(poly, axis=0)
-    seg_len = np.linalg.norm(seg, axis=1)
+    seg_len = np.diff(cum)
     keep = seg_len > 0
-    poly = np.vstack([poly[:1], poly[1:][keep]])
-    seg, seg_len = seg[keep], seg_len[keep]
-    total = float(seg_len.sum())
+    if total <= 0.0:
+        return np.zeros(len(pts)), np.zeros(len(pts)), 0.0
+    start, seg, seg_len = cum[:-1][keep], seg[keep], seg_len[keep]
+    base = poly[:-1][keep]
     # resampled finely (4000 points over the midrib), the nearest sample is the foot within L/8000
-    n = 4000
-    s_samp = np.linspace(0.0, total, n)
-    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
-    k = np.clip(np.searchsorted(cum, s_samp, side="right") - 1, 0, len(seg) - 1)
-    samp = poly[k] + ((s_samp - cum[k]) / seg_len[k])[:, None] * seg[k]
+    s_samp = np.linspace(0.0, total, 4000)
+    k = np.clip(np.searchsorted(start, s_samp, side="right") - 1, 0, len(seg) - 1)
+    samp = base[k] + ((s_samp - start[k]) / seg_len[k])[:, None] * seg[k]
     tang = seg[k] / seg_len[k][:, None]
     dist, j = cKDTree(samp).query(pts)
     rel = pts - samp[j]
@@ -115,15 +125,25 @@ def _along_midrib(poly: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.nda
     return s_samp[j], side * dist, total
 
 
+def _direction(q: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """The direction (unnormalised) of the line fitted through the points ``q`` against their
+    parameter ``s`` (least squares)."""
+    ds = s - s.mean()
+    return ((q - q.mean(0)) * ds[:, None]).sum(0)
+
+
 def midrib_fold(model: Model, q: np.ndarray) -> float:
     """The V angle across the midrib [deg] (module docstring): + the halves rise, − a ridge."""
     tri = model.blade_tri_T
-    if len(tri) == 0:
+    poly, mid = _midrib_rest(model)
+    s, d, total = _along_midrib(poly, model.particle_rest[tri].mean(1)[:, :2])
+    if len(tri) == 0 or total <= 0.0:
         return 0.0
-    s, d, total = _along_midrib(_midrib_rest(model), model.particle_rest[tri].mean(1)[:, :2])
+    s_mid = _arc_length(poly)
     n = _normals(q, tri)
-    band = FOLD_BAND * _blade_length(model)
+    band = FOLD_BAND * model.length
     edges = np.linspace(FOLD_SPAN[0] * total, FOLD_SPAN[1] * total, FOLD_STATIONS + 1)
+    half = 0.5 * (edges[1] - edges[0])
     num = den = 0.0
     for a, b in zip(edges[:-1], edges[1:]):
         at = (s >= a) & (s < b) & (np.abs(d) <= band)
@@ -132,10 +152,13 @@ def midrib_fold(model: Model, q: np.ndarray) -> float:
             continue
         nl, nr = n[left].sum(0), n[right].sum(0)  # area-weighted (the normals' lengths are areas)
         w = min(float(np.linalg.norm(nl)), float(np.linalg.norm(nr)))
-        # seen along the midrib: without the normals' turn along it (a curl along the length)
-        cen = q[tri[at]].mean(1)
-        ds = s[at] - s[at].mean()
-        t = (cen * ds[:, None]).sum(0)  # the deformed midrib's direction here (a regression on s)
+        # seen along the midrib: the normals' components along the deformed midrib's direction
+        # here are left out (a twist of the blade about the midrib turns them that way)
+        on = (s_mid >= a - half) & (s_mid <= b + half)
+        if len(mid) and on.sum() >= 2:
+            t = _direction(q[mid[on]], s_mid[on])
+        else:  # no midrib particles (the fallback axis): the strips' centroids against s
+            t = _direction(q[tri[at]].mean(1), s[at])
         tn = float(np.linalg.norm(t))
         if w <= 0.0 or tn <= 0.0:
             continue
