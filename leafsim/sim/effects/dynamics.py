@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
+from leafsim.sim.bending import hinge_weights
 from leafsim.sim.kernels import blocked as kb
 from leafsim.sim.kernels import pbd as kp
 from leafsim.sim.kernels import rigid as kr
@@ -102,8 +103,10 @@ class Dynamics:
         self.hgt = np.zeros(model.vol_count)
         self.qa = np.zeros((n, 3))
         self.dint = np.zeros((n, 3))
-        # hinge stiffness geometry factor 3|e|²/(A1+A2) (discrete shells), projection order
-        self.hgeom = (3.0 * model.hinge_edge_len ** 2 / np.maximum(model.hinge_area, 1e-30))[self.hperm]
+        # hinge weights w (k = D w; leafsim.sim.bending, material.hinge_weights), projection
+        # order; set by configure, per choice computed once
+        self._weights: dict = {}
+        self.hgeom = np.zeros(model.hinge_count)
         self.halpha = np.zeros(model.hinge_count)
         self.hrod = np.zeros(model.hinge_count)  # vein bending stiffness of the hinges that bend a vein
         T = np.flatnonzero(model.particle_layer == LAYER_T)
@@ -135,6 +138,11 @@ class Dynamics:
 
     def configure(self, params, effects):
         m = self.model
+        mode = params["material.hinge_weights"]
+        if mode not in self._weights:
+            self._weights[mode] = hinge_weights(m, mode)
+        self.hgeom = self._weights[mode][self.hperm]
+        self.s_hgeom = self._weights[mode]
         dt = params["dynamics.dt"]
         self.dt = dt
         self.substeps = effective_substeps(params)
@@ -238,7 +246,6 @@ class Dynamics:
             self.s_ij = m.spring_ij.astype(np.uint32)
             self.s_hidx = m.hinge_idx.astype(np.uint32)
             self.s_vidx = m.vol_idx.astype(np.uint32)
-            self.s_hgeom = 3.0 * m.hinge_edge_len ** 2 / np.maximum(m.hinge_area, 1e-30)
             self.s_hk = np.zeros(m.hinge_count)
             self.s_vk = np.zeros(m.vol_count)
             self.s_tf = np.zeros(m.spring_count)

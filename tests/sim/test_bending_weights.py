@@ -1,0 +1,77 @@
+"""The hinges' weights (leafsim.sim.bending): Grinspun's discrete-shells weight stores several
+times the plate's bending energy in a cylinder; the plate weights store exactly ½ D κ² A, on
+any mesh, bent about either axis, and the elastic energy the solvers minimise takes them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers.synthetic import ellipse_shape, synthetic_veins
+from leafsim.blade.build import build_blade
+from leafsim.config.params import ParamSet
+from leafsim.sim.bending import _dihedral, cylinder_ratio, hinge_weights, shells_weights
+from leafsim.sim.kernels import static as kst
+from leafsim.sim.simulator import Simulator
+
+
+@pytest.fixture(scope="module", params=[0.03, 0.02])
+def model(request):
+    s = ellipse_shape()
+    return build_blade(s, synthetic_veins(s), ParamSet({"mesh.spacing": request.param}), seed=1)
+
+
+def _cylinder(model, kappa, axis):
+    r = model.particle_rest
+    q = r.copy()
+    R = 1.0 / kappa
+    u = r[:, axis] - r[model.blade_particles, axis].mean()
+    q[:, axis] = R * np.sin(u / R)
+    q[:, 2] = R - R * np.cos(u / R)
+    return q
+
+
+def _ratio(model, w, kappa, axis):
+    """Σ ½ w θ² / ½ κ² A for one bend, computed here from the triangles' normals."""
+    hidx = np.asarray(model.hinge_idx, np.int64)
+    on = model.blade_particles[hidx].all(1)
+    th = _dihedral(_cylinder(model, kappa, axis), hidx[on])
+    return float((w[on] * th ** 2).sum()) / (kappa ** 2 * float(model.particle_area[model.blade_T].sum()))
+
+
+def test_discrete_shells_weights_store_several_times_the_plate_energy(model):
+    w = shells_weights(model)
+    assert np.array_equal(w, hinge_weights(model, "discrete_shells"))
+    for axis in (0, 1):
+        assert 2.8 < _ratio(model, w, 2.0, axis) < 5.0  # 3 on a regular mesh, more on an irregular one
+
+
+@pytest.mark.parametrize("kappa", [0.5, 2.0, 8.0])
+def test_plate_weights_store_the_plate_energy_about_either_axis(model, kappa):
+    w = hinge_weights(model, "plate")
+    r = [_ratio(model, w, kappa, axis) for axis in (0, 1)]
+    assert np.mean(r) == pytest.approx(1.0, abs=0.01)
+    assert all(0.9 < x < 1.1 for x in r), r  # each axis near it (the mesh is nearly isotropic)
+    assert cylinder_ratio(model, w) == pytest.approx(1.0, rel=1e-9)
+    assert np.allclose(w / shells_weights(model), w[0] / shells_weights(model)[0])  # one factor for all
+
+
+def test_the_solvers_energy_takes_the_chosen_weights(model):
+    """The static and Sun integrators' hinge stiffness is D w with the parameter's weights: the
+    hinges' share of the elastic energy of a cylinder bend is ½ D κ² A × the ratio."""
+    kappa = 2.0
+    for mode, expect in (("discrete_shells", None), ("plate", 1.0)):
+        p = ParamSet({"mesh.spacing": 0.03, "material.hinge_weights": mode, "material.vein_modulus": 1e5,
+                      "dynamics.integrator": "static", "dynamics.scene": "ground"})
+        sim = Simulator(model, p, seed=1)
+        st = sim.state()
+        dyn = sim._dynamics
+        ij, sk, srest, _, hidx, hk, hrest, vidx, vk, vrest = dyn.sun_elastic(st)
+        on = model.blade_particles[hidx].all(1)
+        q = _cylinder(model, kappa, 0)
+        e = kst.elastic_energy(q, ij[:0], sk[:0], srest[:0], hidx[on], hk[on], hrest[on], vidx[:0], vk[:0], vrest[:0])
+        ratio = e / (0.5 * dyn.kbend * kappa ** 2 * float(model.particle_area[model.blade_T].sum()))
+        w = hinge_weights(model, mode)
+        assert ratio == pytest.approx(_ratio(model, w, kappa, 0), rel=2e-3)  # (the veins' 1e5 Pa rods: ~0)
+        if expect is not None:
+            assert ratio == pytest.approx(expect, abs=0.1)

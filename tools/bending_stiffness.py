@@ -1,0 +1,114 @@
+"""The blade's effective bending stiffness against the plate rigidity it is given.
+
+    .venv/bin/python tools/bending_stiffness.py [--species maple] [--set mesh.spacing=0.0141]
+        [--curvature 2.0] [--dry]
+
+Bends the fresh blade (or, with ``--dry``, the same blade with every particle's water gone, so
+the hinges carry their dry stiffening) into a cylinder of curvature κ [1/m] about the leaf's
+length axis and about its width axis: layer T is put on the cylinder (lengths kept), layer V is
+left free and relaxed to its least energy (L-BFGS on the elastic energy of the static
+integrator, :mod:`leafsim.sim.kernels.static`).  The veins' modulus is set to 10⁵ Pa so that
+the lamina alone is measured.  Prints, per bending axis, the elastic energy of each kind of
+constraint over ½ D κ² A (A the blade's area, D = E h³ / 12(1 − ν²) × the hinges' dry factor):
+the hinges, the springs (the two membrane layers a thickness apart: a sandwich's bending), the
+thickness volumes, and their sum, the blade's D_eff / D.  A blade that bends as the plate it
+stands for reads 1 (docs/method.md §5, "Bending stiffness, measured").
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+from scipy.optimize import minimize
+
+from leafsim.config.species import get_species
+from leafsim.pipeline import build_leaf
+from leafsim.sim.kernels import static as kst
+from leafsim.sim.model import LAYER_T
+from leafsim.sim.simulator import Simulator
+
+
+def _pairs(items):
+    out = {}
+    for kv in items:
+        k, _, v = kv.partition("=")
+        try:
+            out[k] = json.loads(v)
+        except ValueError:
+            out[k] = v
+    return out
+
+
+def measure(key: str, overrides: dict, kappa: float, dry: bool) -> dict:
+    sp = get_species(key)
+    p = sp.params.with_overrides({**overrides, "material.vein_modulus": 1e5, "dynamics.integrator": "static",
+                                  "dynamics.scene": "ground", "effects.osmosis": False, "effects.shrink": False})
+    _, _, model = build_leaf(sp, p, 0)
+    sim = Simulator(model, p, seed=0)
+    st = sim.state()
+    if dry:
+        st.particle_water[:] = 0.0
+    dyn = sim._dynamics  # the elastic records the static integrator minimises
+    ij, sk, srest, _, hidx, hk, hrest, vidx, vk, vrest = dyn.sun_elastic(st)
+    eq = dyn.equilibrium
+    rec = (ij, sk, srest, hidx, hk, hrest, vidx, vk, vrest)
+    rest = model.particle_rest
+    T = model.particle_layer == LAYER_T
+    blade = model.blade_particles
+    # the blade's own constraints only (the stalk is a rod of its own, bent here too)
+    sb, hb, vb = blade[ij].all(1), blade[hidx].all(1), blade[vidx].all(1)
+    area = float(model.particle_area[model.blade_T].sum())
+    D = dyn.kbend * (1.0 + (dyn.kdry if dry else 0.0))
+    free = np.flatnonzero(~T)
+    grad = np.zeros_like(rest)
+
+    def kinds(q):
+        none_s, none_h, none_v = (ij[:0], sk[:0], srest[:0]), (hidx[:0], hk[:0], hrest[:0]), (vidx[:0], vk[:0], vrest[:0])
+        return {"hinges": kst.elastic_energy(q, *none_s, hidx[hb], hk[hb], hrest[hb], *none_v),
+                "springs": kst.elastic_energy(q, ij[sb], sk[sb], srest[sb], *none_h, *none_v),
+                "volumes": kst.elastic_energy(q, *none_s, *none_h, vidx[vb], vk[vb], vrest[vb])}
+
+    base = kinds(rest)
+    out = {"species": key, "particles": model.particle_count, "blade_area_m2": area, "D_Nm": D, "dry": dry,
+           "kappa_per_m": kappa}
+    centre = rest[blade].mean(0)
+    for name, axis in (("across the width", 0), ("along the length", 1)):
+        R = 1.0 / kappa
+        u = rest[:, axis] - centre[axis]
+        z = rest[:, 2]
+        q0 = rest.copy()
+        q0[:, axis] = centre[axis] + (R - z) * np.sin(u / R)
+        q0[:, 2] = R - (R - z) * np.cos(u / R)
+
+        def f(v, q0=q0):
+            q = q0.copy()
+            q[free] = v.reshape(-1, 3)
+            e = kst.elastic(q, *rec, eq.smap, eq.hmap, eq.vmap, grad, eq.data, False)
+            return e, grad[free].ravel().copy()
+
+        r = minimize(f, q0[free].ravel(), jac=True, method="L-BFGS-B",
+                     options={"maxiter": 20000, "gtol": 1e-16, "ftol": 1e-16})
+        q = q0.copy()
+        q[free] = r.x.reshape(-1, 3)
+        e = kinds(q)
+        scale = 1.0 / (0.5 * D * kappa * kappa * area)
+        row = {k: round((e[k] - base[k]) * scale, 3) for k in e}
+        row["D_eff_over_D"] = round(sum(row.values()), 3)
+        out[name] = row
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--species", default="maple")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--curvature", type=float, default=2.0, help="κ [1/m] (2: a radius of 0.5 m)")
+    ap.add_argument("--dry", action="store_true", help="every particle's water gone: the hinges' dry stiffening")
+    a = ap.parse_args()
+    print(json.dumps(measure(a.species, _pairs(a.set), a.curvature, a.dry)))
+
+
+if __name__ == "__main__":
+    main()
