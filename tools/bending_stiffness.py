@@ -10,9 +10,14 @@ left free and relaxed to its least energy (L-BFGS on the elastic energy of the s
 integrator, :mod:`leafsim.sim.kernels.static`).  The veins' modulus is set to 10⁵ Pa so that
 the lamina alone is measured.  Prints, per bending axis, the elastic energy of each kind of
 constraint over ½ D κ² A (A the blade's area, D = E h³ / 12(1 − ν²) × the hinges' dry factor):
-the hinges, the springs (the two membrane layers a thickness apart: a sandwich's bending), the
-thickness volumes, and their sum, the blade's D_eff / D.  A blade that bends as the plate it
-stands for reads 1 (docs/method.md §5, "Bending stiffness, measured").
+the hinges, the springs (the two membrane layers a thickness apart, and the links between them:
+a sandwich's bending), the thickness volumes, and their sum, the blade's D_eff / D, with the
+relaxation's iterations and the force it left.  Layer T is held to the cylinder without
+stretching, so the neutral surface cannot move off it: the springs' share is an upper bound
+(half of it if the layers could share the strain equally).  Then the hinges alone in a
+cylinder, a cup and a saddle against the plate's energy in each (``hinges_by_mode``,
+:func:`leafsim.sim.bending.mode_ratios`).  A blade that bends as the plate it stands for reads
+1 throughout (docs/method.md §5, "Bending stiffness, measured").
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from scipy.optimize import minimize
 
 from leafsim.config.species import get_species
 from leafsim.pipeline import build_leaf
+from leafsim.sim.bending import hinge_weights, mode_ratios
 from leafsim.sim.kernels import static as kst
 from leafsim.sim.model import LAYER_T
 from leafsim.sim.simulator import Simulator
@@ -96,7 +102,14 @@ def measure(key: str, overrides: dict, kappa: float, dry: bool) -> dict:
         scale = 1.0 / (0.5 * D * kappa * kappa * area)
         row = {k: round((e[k] - base[k]) * scale, 3) for k in e}
         row["D_eff_over_D"] = round(sum(row.values()), 3)
+        # the relaxation: iterations, the largest force left on a free particle against the
+        # largest at the start (layer V placed along the normal)
+        _, g0 = f(q0[free].ravel())
+        row["relaxation"] = {"iterations": int(r.nit), "force_left": float(np.abs(r.jac).max() / max(np.abs(g0).max(), 1e-300))}
         out[name] = row
+    # the hinges alone in a cylinder, a cup and a saddle, against the plate (ν of the parameters)
+    w = hinge_weights(model, p["material.hinge_weights"])
+    out["hinges_by_mode"] = {k: round(v, 3) for k, v in mode_ratios(model, w, p["material.poisson"]).items()}
     return out
 
 

@@ -1,6 +1,8 @@
 """The hinges' weights (leafsim.sim.bending): Grinspun's discrete-shells weight stores several
-times the plate's bending energy in a cylinder; the plate weights store exactly ½ D κ² A, on
-any mesh, bent about either axis, and the elastic energy the solvers minimise takes them."""
+times the plate's bending energy in a cylinder; the cylinder-scaled weights store exactly
+½ D κ² A in a cylinder, on any mesh, bent about either axis (not in a cup or a saddle: no single
+scale can); the elastic energy the solvers minimise takes the parameter's weights, also when
+it changes live."""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ import pytest
 from helpers.synthetic import ellipse_shape, synthetic_veins
 from leafsim.blade.build import build_blade
 from leafsim.config.params import ParamSet
-from leafsim.sim.bending import _dihedral, cylinder_ratio, hinge_weights, shells_weights
+from leafsim.sim.bending import _dihedral, cylinder_ratio, hinge_weights, mode_ratios, shells_weights
 from leafsim.sim.kernels import static as kst
 from leafsim.sim.simulator import Simulator
 
@@ -47,8 +49,8 @@ def test_discrete_shells_weights_store_several_times_the_plate_energy(model):
 
 
 @pytest.mark.parametrize("kappa", [0.5, 2.0, 8.0])
-def test_plate_weights_store_the_plate_energy_about_either_axis(model, kappa):
-    w = hinge_weights(model, "plate")
+def test_cylinder_weights_store_the_plate_energy_about_either_axis(model, kappa):
+    w = hinge_weights(model, "cylinder")
     r = [_ratio(model, w, kappa, axis) for axis in (0, 1)]
     assert np.mean(r) == pytest.approx(1.0, abs=0.01)
     assert all(0.9 < x < 1.1 for x in r), r  # each axis near it (the mesh is nearly isotropic)
@@ -60,7 +62,7 @@ def test_the_solvers_energy_takes_the_chosen_weights(model):
     """The static and Sun integrators' hinge stiffness is D w with the parameter's weights: the
     hinges' share of the elastic energy of a cylinder bend is ½ D κ² A × the ratio."""
     kappa = 2.0
-    for mode, expect in (("discrete_shells", None), ("plate", 1.0)):
+    for mode, expect in (("discrete_shells", None), ("cylinder", 1.0)):
         p = ParamSet({"mesh.spacing": 0.03, "material.hinge_weights": mode, "material.vein_modulus": 1e5,
                       "dynamics.integrator": "static", "dynamics.scene": "ground"})
         sim = Simulator(model, p, seed=1)
@@ -75,3 +77,38 @@ def test_the_solvers_energy_takes_the_chosen_weights(model):
         assert ratio == pytest.approx(_ratio(model, w, kappa, 0), rel=2e-3)  # (the veins' 1e5 Pa rods: ~0)
         if expect is not None:
             assert ratio == pytest.approx(expect, abs=0.1)
+
+
+def test_the_dihedral_angle_of_two_triangles_folded_by_a_known_angle():
+    """(c, d, a, b): wings c, d, shared edge a-b; the wing d turned up by phi about the edge."""
+    for phi in (0.0, 0.1, 0.7, 1.5):
+        q = np.array([[0.0, -1.0, 0.0], [0.0, np.cos(phi), np.sin(phi)], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+        assert _dihedral(q, np.array([[0, 1, 2, 3]]))[0] == pytest.approx(phi, abs=1e-9)
+
+
+def test_no_single_scale_is_the_plate_in_every_mode(model):
+    """A cup and a saddle against a cylinder: the discrete-shells weights store 3-5 x the plate in
+    a cylinder and less in a cup, more in a saddle (their energy has no Poisson term); the
+    cylinder-scaled ones are the plate in a cylinder only."""
+    nu = 0.3
+    sh = mode_ratios(model, shells_weights(model), nu)
+    assert 2.8 < sh["cylinder"] < 5.0 and sh["cup"] < 0.7 * sh["cylinder"] and sh["saddle"] > 1.5 * sh["cylinder"]
+    cy = mode_ratios(model, hinge_weights(model, "cylinder"), nu)
+    assert cy["cylinder"] == pytest.approx(1.0, abs=0.03)
+    assert cy["cup"] < 0.7 and cy["saddle"] > 1.5
+
+
+def test_the_weights_follow_the_parameter_in_both_integrators_and_live(model):
+    """The default is the discrete-shells weight exactly (XPBD's in projection order, the static
+    and Sun integrators' in model order); a live change of material.hinge_weights takes effect
+    in both."""
+    p = ParamSet({"mesh.spacing": 0.03})
+    sim = Simulator(model, p, seed=1)
+    dyn = sim._dynamics
+    w = 3.0 * model.hinge_edge_len ** 2 / np.maximum(model.hinge_area, 1e-30)
+    assert np.array_equal(dyn.hgeom, w[dyn.hperm]) and np.array_equal(dyn.s_hgeom, w)
+    sim.set_params(p.with_overrides({"material.hinge_weights": "cylinder"}))
+    c = hinge_weights(model, "cylinder")
+    assert np.array_equal(dyn.hgeom, c[dyn.hperm]) and np.array_equal(dyn.s_hgeom, c)
+    sim.set_params(p)
+    assert np.array_equal(dyn.hgeom, w[dyn.hperm])
