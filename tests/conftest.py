@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
+import threading
 import time
 
 import pytest
@@ -28,6 +30,12 @@ settings.register_profile("quick", max_examples=40, deadline=None, derandomize=T
 settings.register_profile("nightly", max_examples=1200, deadline=None, database=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "quick"))
+
+# Ctrl-C as an interactive Python has it, however the suite was started: a suite launched in the
+# background of a script inherits SIGINT ignored (POSIX), its workers and their children too,
+# and the tests that interrupt a run or a scene with SIGINT then waited out their patience
+if threading.current_thread() is threading.main_thread():
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _free_display() -> int:
