@@ -8,11 +8,13 @@ an iteration falls below TOL × L.  Printed: particles, substeps per frame, mean
 substep, and the same with the substeps fixed at 40 (no (r₀/r)² scaling).
 
     .venv/bin/python tools/iterations_to_tolerance.py [--meshes 0.028,0.0199,0.0141] [--tol 1e-6]
+        [--set KEY=VALUE ...]   # parameters over the leaf's (both the drying and the probe)
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
 from leafsim.config.species import get_species
@@ -23,9 +25,9 @@ from leafsim.sim.run import Run
 WATER, FRAMES = 0.6, 3
 
 
-def measure(spacing: float, tol: float, scaling: bool) -> dict:
+def measure(spacing: float, tol: float, scaling: bool, extra: dict | None = None) -> dict:
     sp = get_species("oak")
-    base = {"mesh.spacing": spacing, "dynamics.path": "own", "dynamics.scene": "ground"}
+    base = {**(extra or {}), "mesh.spacing": spacing, "dynamics.path": "own", "dynamics.scene": "ground"}
     p = sp.params.with_overrides(base)
     _, _, model = build_leaf(sp, p, 0)
     run = Run(model, p, seed=0, name="oak")
@@ -46,13 +48,21 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--meshes", default="0.028,0.0199,0.0141")
     ap.add_argument("--tol", type=float, default=1e-6)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args()
+    extra = {}
+    for kv in a.set:
+        k, _, v = kv.partition("=")
+        try:
+            extra[k] = json.loads(v)
+        except ValueError:  # a bare word (a choice)
+            extra[k] = v
     print(f"| mesh (× L) | particles | substeps (scaled) | iterations / substep | substeps (fixed) | iterations / substep |")
     print("|---|---|---|---|---|---|")
     for s in (float(x) for x in a.meshes.split(",")):
         t0 = time.perf_counter()
-        r1 = measure(s, a.tol, True)
-        r2 = measure(s, a.tol, False)
+        r1 = measure(s, a.tol, True, extra)
+        r2 = measure(s, a.tol, False, extra)
         print(f"| {s:g} | {r1['particles']} | {r1['substeps']} | {r1['iterations']:.1f} | {r2['substeps']} | "
               f"{r2['iterations']:.1f} |  ({time.perf_counter() - t0:.0f} s)", flush=True)
 
