@@ -14,7 +14,9 @@ the hinges, the springs (the two membrane layers a thickness apart, and the link
 a sandwich's bending), the thickness volumes, and their sum, the blade's D_eff / D, with the
 relaxation's iterations and the force it left.  Layer T is held to the cylinder without
 stretching, so the neutral surface cannot move off it: the springs' share is an upper bound
-(half of it if the layers could share the strain equally).  Then the hinges alone in a
+(half of it if the layers could share the strain equally); ``T_sliding`` repeats the bend with
+layer T free to slide and stretch on the cylinder, which gives the blade's own share.  Then
+the hinges alone in a
 cylinder, a cup and a saddle against the plate's energy in each (``hinges_by_mode``,
 :func:`leafsim.sim.bending.mode_ratios`).  A blade that bends as the plate it stands for reads
 1 throughout (docs/method.md §5, "Bending stiffness, measured").
@@ -45,6 +47,42 @@ def _pairs(items):
         except ValueError:
             out[k] = v
     return out
+
+
+def _sliding(q_start, T, axis, R, c, rec, eq, kinds, base, scale) -> dict:
+    """The bend of :func:`measure` with layer T's particles free on the cylinder: each has an arc
+    coordinate s (position c + R sin(s/R), height R (1 − cos(s/R))) and a free coordinate along
+    the cylinder's axis; layer V free in 3D.  The energy by kind, over ½ D κ² A."""
+    other = 1 - axis
+    Ti, Vi = np.flatnonzero(T), np.flatnonzero(~T)
+    grad = np.zeros_like(q_start)
+    s0 = R * np.arcsin(np.clip((q_start[Ti, axis] - c) / R, -1.0, 1.0))
+    x0 = np.concatenate([s0, q_start[Ti, other], q_start[Vi].ravel()])
+    nT = len(Ti)
+
+    def place(x):
+        q = q_start.copy()
+        s, w = x[:nT], x[nT:2 * nT]
+        q[Ti, axis] = c + R * np.sin(s / R)
+        q[Ti, other] = w
+        q[Ti, 2] = R * (1.0 - np.cos(s / R))
+        q[Vi] = x[2 * nT:].reshape(-1, 3)
+        return q, s
+
+    def f(x):
+        q, s = place(x)
+        e = kst.elastic(q, *rec, eq.smap, eq.hmap, eq.vmap, grad, eq.data, False)
+        gT = grad[Ti]
+        ds = gT[:, axis] * np.cos(s / R) + gT[:, 2] * np.sin(s / R)
+        return e, np.concatenate([ds, gT[:, other], grad[Vi].ravel()])
+
+    r = minimize(f, x0, jac=True, method="L-BFGS-B", options={"maxiter": 40000, "gtol": 1e-16, "ftol": 1e-16})
+    q, _ = place(r.x)
+    e = kinds(q)
+    row = {k: round((e[k] - base[k]) * scale, 3) for k in e}
+    row["D_eff_over_D"] = round(sum(row.values()), 3)
+    row["iterations"] = int(r.nit)
+    return row
 
 
 def measure(key: str, overrides: dict, kappa: float, dry: bool) -> dict:
@@ -106,6 +144,9 @@ def measure(key: str, overrides: dict, kappa: float, dry: bool) -> dict:
         # largest at the start (layer V placed along the normal)
         _, g0 = f(q0[free].ravel())
         row["relaxation"] = {"iterations": int(r.nit), "force_left": float(np.abs(r.jac).max() / max(np.abs(g0).max(), 1e-300))}
+        # layer T free to slide and stretch on the cylinder (its arc position and its position
+        # along the axis free, the radius held): the neutral surface may move off layer T
+        row["T_sliding"] = _sliding(q, T, axis, R, centre[axis], rec, eq, kinds, base, scale)
         out[name] = row
     # the hinges alone in a cylinder, a cup and a saddle, against the plate (ν of the parameters)
     w = hinge_weights(model, p["material.hinge_weights"])
