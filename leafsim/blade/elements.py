@@ -158,7 +158,8 @@ class Hinges:
 
 def make_hinges(E: Edges, tri, rest, tri_area, S: Springs, vp, vw, vo) -> Hinges:
     """Bending hinges on interior T edges: (c, d, a, b) = wings and shared edge a–b, edge
-    length, the two triangles' area (discrete-shell weight 3|e|²/(A₁+A₂)).  A hinge whose wings
+    length, the two triangles' area (from which leafsim.sim.bending makes the hinge's weight, by
+    default the discrete-shell 3|e|²/(A₁+A₂)).  A hinge whose wings
     lie on the vein through a (the vein runs c–a–d) bends that vein lengthwise: it carries the
     vein's rod stiffness share, I = π w⁴/64 over the vein length ℓ̄ at a, split among a's hinges."""
     sl = np.array([(0, 1, 2), (1, 2, 0), (2, 0, 1)])  # edge (i, j), opposite k

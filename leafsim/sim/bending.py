@@ -8,9 +8,10 @@ and D the plate rigidity E h³ / 12(1 − ν²) (:mod:`leafsim.sim.effects.dynam
   3.0 × ½ D κ² A on a regular triangulation and about 4 × on our blade meshes (measured by
   :func:`cylinder_ratio`; ``tools/bending_stiffness.py``), so the hinges alone are about four
   times as stiff as the plate they stand for.
-* ``cylinder``: the same weights scaled, once per mesh, so that this mesh's hinges bent into a
+* ``cylinder``: the blade's weights scaled, once per mesh, so that this mesh's hinges bent into a
   cylinder (about the leaf's length axis and about its width axis, averaged) store exactly
   ½ D κ² A over the blade: the hinges then carry the plate rigidity D in cylindrical bending.
+  A stalk's strip hinges keep the discrete-shells weights (the stalk is not a plate).
 
 No single scale makes the hinges a plate in every mode: the plate stores ½ D ((κ₁ + κ₂)² −
 2 (1 − ν) κ₁ κ₂), while the hinges' energy on a regular mesh goes as 3 (κ₁ + κ₂)² − 8 κ₁ κ₂ (no
@@ -107,4 +108,10 @@ def hinge_weights(model: Model, mode: str = "discrete_shells") -> np.ndarray:
     if mode != "cylinder":
         raise ValueError(f"hinge weights {mode!r}: expected one of {WEIGHTS}")
     r = cylinder_ratio(model, w)
-    return w / r if r > 0.0 else w
+    if r <= 0.0:
+        return w
+    # the blade's hinges only: a stalk's strip hinges (any of their four particles the petiole's)
+    # keep their weights, so the stalk bends alike under either choice (its rods dominate it)
+    hidx = np.asarray(model.hinge_idx, np.int64)
+    on = model.blade_particles[hidx].all(1) if len(hidx) else np.zeros(0, bool)
+    return np.where(on, w / r, w)

@@ -58,6 +58,23 @@ def test_cylinder_weights_store_the_plate_energy_about_either_axis(model, kappa)
     assert np.allclose(w / shells_weights(model), w[0] / shells_weights(model)[0])  # one factor for all
 
 
+def test_cylinder_weights_scale_the_blade_and_leave_a_stalk_alone():
+    """With a stalk, only the blade's hinges (all four particles the blade's) take the factor;
+    the stalk's strip hinges keep the discrete-shells weights, and the blade's factor is the one
+    the blade alone would get."""
+    s = ellipse_shape()
+    m = build_blade(s, synthetic_veins(s), ParamSet({"mesh.spacing": 0.04, "petiole.length": 0.03}), seed=1)
+    hidx = np.asarray(m.hinge_idx, np.int64)
+    on = m.blade_particles[hidx].all(1)
+    assert on.any() and (~on).sum() >= 4  # the stalk has hinges
+    sh, cy = shells_weights(m), hinge_weights(m, "cylinder")
+    assert np.array_equal(cy[~on], sh[~on])
+    f = cy[on] / sh[on]
+    assert np.allclose(f, f[0]) and f[0] == pytest.approx(1.0 / cylinder_ratio(m, sh), rel=1e-12)
+    assert 0.15 < f[0] < 0.4  # the blade's hinges stored 2.5-7 x the plate
+    assert cylinder_ratio(m, cy) == pytest.approx(1.0, rel=1e-9)
+
+
 def test_the_solvers_energy_takes_the_chosen_weights(model):
     """The static and Sun integrators' hinge stiffness is D w with the parameter's weights: the
     hinges' share of the elastic energy of a cylinder bend is ½ D κ² A × the ratio."""

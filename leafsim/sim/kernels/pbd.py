@@ -248,7 +248,8 @@ def pair_dryness(water, w0, a, b):
 @njit(cache=True, fastmath=FASTMATH, nogil=True)
 def hinge_compliance(hidx, water, w0, kbend, kdry, hgeom, krod, inv_h2, halpha, turgor=0.0, tlp=0.85, power=1.0):
     """XPBD compliance / Δt² of every hinge: k = D s(dry) · geom + k_rod c(dry) [N·m/rad], D the
-    blade's bending stiffness [N·m], geom = 3|e|²/(A₁+A₂), k_rod the vein's E_v I/ℓ̄ share;
+    blade's bending stiffness [N·m], geom the hinge's weight (material.hinge_weights: 3|e|²/(A₁+A₂)
+    by default, leafsim.sim.bending), k_rod the vein's E_v I/ℓ̄ share;
     dry = 1 − (w_a + w_b) / (w0_a + w0_b) over the hinge's shared edge a–b, RWC = 1 − dry.
 
     Turgor (share T of the fresh stiffness, lost linearly down to the turgor-loss point RWC =
