@@ -29,7 +29,12 @@ def triangulate(P: Points, contour, r: float, holes=()):
     sliver = keep & on_contour & (quality < 0.15)
     keep &= ~(sliver & _crosses_air(allp, tri, sliver, contour, holes, r))  # hull-fill slivers along the outline
     keep &= np.abs(ar) > 1e-6 * r * r  # degenerate (collinear) triangles
-    keep = _unpinch(tri, keep, on_contour & (quality < 0.3))
+    thin = on_contour & (quality < 0.3)
+    # thin outline triangles left out only because their centroid lies a hair outside the traced
+    # contour (no edge crosses air, not degenerate): the ones _unpinch may put back
+    out = thin & ~keep & (np.abs(ar) > 1e-6 * r * r)
+    refill = out & ~_crosses_air(allp, tri, out, contour, holes, r)
+    keep = _unpinch(tri, keep, thin, refill)
     tri = tri[keep]
     flip = ar[keep] < 0
     tri[flip] = tri[flip][:, [0, 2, 1]]
@@ -141,7 +146,7 @@ def morton_order(p2: np.ndarray) -> np.ndarray:
     return spread(g[:, 0]) | (spread(g[:, 1]) << np.uint64(1))
 
 
-def _unpinch(tri: np.ndarray, keep: np.ndarray, slivers: np.ndarray) -> np.ndarray:
+def _unpinch(tri: np.ndarray, keep: np.ndarray, slivers: np.ndarray, refill: np.ndarray | None = None) -> np.ndarray:
     """``keep`` without the outline slivers that meet the rest of the blade at a pinch: a vertex
     where the blade's boundary passes twice (more than two boundary edges).  A kept sliver of
     outline points along a nearly straight margin, beside a collinear triangle dropped as
@@ -149,7 +154,14 @@ def _unpinch(tri: np.ndarray, keep: np.ndarray, slivers: np.ndarray) -> np.ndarr
     draft mesh 0.028, a triangle of quality 0.16): the thin shell built on the blade was then not
     closed there (a side-wall edge used by four faces).  Dropping such a thin triangle (quality
     under 0.3, every vertex on the outline) leaves the margin's own points on the boundary, each
-    once."""
+    once.
+
+    Where dropping does not help, a pinch can be closed the other way: a fan of thin triangles
+    over consecutive outline points (aspen at mesh.spacing 0.05: three of them from one vertex)
+    whose middle one was left out, its centroid a hair outside the traced contour while its
+    neighbours' lay inside.  Such a triangle (``refill``: thin, on the outline, not degenerate,
+    no edge crossing air) is put back where that lowers the pinch count: the chain of outline
+    points it spans then lies on the boundary once, as the blade's margin."""
     def pinches(k):
         be = boundary_edges(tri[k])
         return np.bincount(be.ravel(), minlength=int(tri.max()) + 1) > 2
@@ -165,6 +177,13 @@ def _unpinch(tri: np.ndarray, keep: np.ndarray, slivers: np.ndarray) -> np.ndarr
         if after.sum() >= pinch.sum():  # kept only where it helps: at aspen's 0.05 mesh the drop
             break                       # moved the pinch to the next vertex and bit into the blade
         keep, pinch = trial, after
+    if refill is not None and pinch.any():
+        for t in np.flatnonzero(refill & ~keep & pinch[tri].any(axis=1)):
+            trial = keep.copy()
+            trial[t] = True
+            after = pinches(trial)
+            if after.sum() < pinch.sum():
+                keep, pinch = trial, after
     return keep
 
 
