@@ -22,6 +22,7 @@ import json
 import re
 import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -379,8 +380,8 @@ def die_with_parent() -> None:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
-        return
-    if os.getppid() == 1:  # the parent died before the request took effect
+        libc = None
+    if libc is not None and os.getppid() == 1:  # the parent died before the request took effect
         os._exit(1)
 
 
@@ -392,7 +393,7 @@ def _local_results(jobs: list, out: Path, workers: int):
 
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent)
     try:
-        with _sigint_ignored_by_new_processes():
+        with _signals_deferred_while_workers_start():
             futs = {pool.submit(run_leaf, j, str(out)): j for j in jobs}  # (the workers are started here)
         for f in as_completed(futs):
             try:
@@ -406,19 +407,34 @@ def _local_results(jobs: list, out: Path, workers: int):
 
 
 @contextlib.contextmanager
-def _sigint_ignored_by_new_processes():
-    """SIGINT blocked in this thread while the pool starts its workers: a process starts with
-    its parent thread's signal mask, so a Ctrl-C during a worker's start-up, before its
-    initializer ignores it, stays pending there instead of making it print a traceback.  In
-    this process a Ctrl-C of that moment is only deferred: it arrives when the block ends."""
-    if not hasattr(signal, "pthread_sigmask"):  # (any thread may block it for the processes it starts)
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+def _signals_deferred_while_workers_start():
+    """Ctrl-C and SIGTERM wait while the pool starts its workers.
+
+    * In the workers: SIGINT is blocked in this thread meanwhile, and a process starts with its
+      parent thread's signal mask, so a Ctrl-C during a worker's start-up, before its
+      initializer ignores it, stays pending there instead of making it print a traceback.
+    * Here: the command's handlers are swapped for ones that only note the signal, which is
+      sent again when the workers are started.  A SIGTERM that came while a worker was being
+      launched (the child made, its start-up data not yet written to it) interrupted the
+      launch, and the child printed "EOFError: Ran out of input" after the command's
+      "interrupted" (2 of 30 commands sent SIGTERM as their first child appeared, 2 of 60 with
+      SIGTERM only blocked in this thread: the signal then reaches another thread, and Python
+      runs its handler in this one all the same)."""
+    noted = []
+    swapped = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            swapped[sig] = signal.signal(sig, lambda signum, frame: noted.append(signum))
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if hasattr(signal, "pthread_sigmask") else None
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        if old is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for sig, handler in swapped.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+        if noted:
+            signal.raise_signal(noted[0])  # the command's own handler now: "interrupted", its exit status
 
 
 def _stop_pool(pool) -> None:
