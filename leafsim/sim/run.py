@@ -21,10 +21,10 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from leafsim.base.errors import LeafsimError
+from leafsim.base.errors import Diverged, LeafsimError  # noqa: F401  (Diverged: also leafsim.sim.run.Diverged)
 from leafsim.config.params import ParamSet, as_params, check_seed, show
 from leafsim.sim.model import Model, State
-from leafsim.sim.simulator import Simulator
+from leafsim.sim.simulator import Simulator, check_built_with
 from leafsim.sim.stats import StatsStream, frame_stats
 
 #: "dry": the water left has fallen to this fraction of the fresh leaf's (GUI "Dry to end",
@@ -39,10 +39,6 @@ MAX_RUN_FRAMES = 10_000_000
 #: taken as unreachable (evaporation or aging switched off by a parameter) instead of running
 #: on to ``max_frames``
 STALL_FRAMES = 2000
-
-
-class Diverged(LeafsimError):
-    """The simulation produced NaN/Inf (or a kernel raised an arithmetic error)."""
 
 
 class NotReached(LeafsimError):
@@ -150,7 +146,7 @@ class Run:
             raise LeafsimError(f"Run: model {show(model)} ({type(model).__name__}): expected a Model{hint}")
         if simulator is None:
             params = as_params(params, "Run")
-            _check_built_with(model, params)
+            check_built_with(model, params, "Run")
             seed = None if seed is None else check_seed(seed, "Run")  # None: the model's own (Simulator)
             simulator = Simulator(model, params, effects, seed=seed, watchdog=watchdog)
         elif not isinstance(simulator, Simulator) or simulator.model is not model:
@@ -273,20 +269,6 @@ class _Stall:
         elif self.run.state.frame - self.since >= STALL_FRAMES and not self.patient:
             what = "the water left" if self.stop.water_left is not None else "the season clock"
             self._fail(f"{what} has not moved towards it in {STALL_FRAMES} frames (evaporation or aging switched off?)")
-
-
-def _check_built_with(model: Model, params: ParamSet) -> None:
-    """A parameter the model is built from (outline, veins, mesh, petiole, mass: *rebuild* in
-    docs/parameters.md) set otherwise for the run changes nothing the run does: refused, naming
-    it (a sweep of mass.lma over one model gave the same leaf three times, without a word)."""
-    if model.built_with is None:
-        return
-    now = dict(params.build_values())
-    diff = [(k, now[k], v) for k, v in model.built_with if k in now and now[k] != v]
-    if diff:
-        shown = ", ".join(f"{k} = {a!r} (built with {b!r})" for k, a, b in diff[:3]) + (" ..." if len(diff) > 3 else "")
-        raise LeafsimError(f"Run: params set {shown}, which the model is built from: build it again with these "
-                           "params (build_leaf) for them to take effect")
 
 
 def run_headless(model: Model, params: ParamSet, frames: int, effects=None, stats_path=None, on_frame=None,

@@ -56,6 +56,7 @@ class Simulator:
             hint = " (pass leaf.model, the model of build_leaf's result)" if hasattr(model, "model") else ""
             raise LeafsimError(f"Simulator: model ({type(model).__name__}): expected a Model{hint}")
         params = as_params(params, "Simulator")
+        check_built_with(model, params, "Simulator")
         self.model = model
         self._layout = state_layout(model)  # what step() checks every state against
         self._path_layout = None
@@ -80,7 +81,11 @@ class Simulator:
         self.set_params(params)
 
     def set_params(self, params: ParamSet) -> None:
-        """Apply (live) parameters; matrices are refactored only when Δt or λ change."""
+        """Apply (live) parameters; matrices are refactored only when Δt or λ change.  A
+        parameter the model is built from, set otherwise than the build did, is refused
+        (:func:`check_built_with`): it would change nothing."""
+        params = as_params(params, "Simulator.set_params")
+        check_built_with(self.model, params, "Simulator.set_params")
         self.params = params
         if self._override is None:
             self.effects = {e: bool(params[f"effects.{e}"]) for e in EFFECTS}
@@ -131,7 +136,7 @@ class Simulator:
             self.watchdog = None
 
     def state(self) -> State:
-        """A fresh leaf: rest positions, full water, summer pigments."""
+        """A fresh leaf: rest positions, full water, summer pigments (:func:`young_state`)."""
         self._colour = self._colour or Colour(self.model)
         self._colour.configure(self.params)
         return self._colour.init(self.model.state(), self.seed)
@@ -263,3 +268,29 @@ class Simulator:
             self._colour.apply(state, self.dt)
             ms["colour"] = (time.perf_counter() - t0) * 1e3
         return ms
+
+
+def young_state(model: Model, params, seed: int = 0) -> State:
+    """The fresh leaf a :class:`Simulator` of ``model``, ``params`` and ``seed`` starts from (its
+    :meth:`Simulator.state`: rest positions, full water, summer pigments), without building the
+    simulation's stages: what a view needs as the young pigments of an already simulated leaf."""
+    params = as_params(params, "young_state")
+    c = Colour(model)
+    c.configure(params)
+    return c.init(model.state(), check_seed(seed, "young_state"))
+
+
+def check_built_with(model: Model, params: ParamSet, who: str) -> None:
+    """A parameter the model is built from (outline, veins, mesh, petiole, mass: *rebuild* in
+    docs/parameters.md) set otherwise for the simulation changes nothing it does: refused,
+    naming it (a sweep of mass.lma over one model gave the same leaf three times, without a
+    word).  A model of unknown build (``built_with`` None: built by hand, a drying-path mesh)
+    is not checked."""
+    if model.built_with is None:
+        return
+    now = dict(params.build_values())
+    diff = [(k, now[k], v) for k, v in model.built_with if k in now and now[k] != v]
+    if diff:
+        shown = ", ".join(f"{k} = {a!r} (built with {b!r})" for k, a, b in diff[:3]) + (" ..." if len(diff) > 3 else "")
+        raise LeafsimError(f"{who}: params set {shown}, which the model is built from: build it again with these "
+                           "params (build_leaf) for them to take effect")

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from leafsim.base.errors import LeafsimError
+from leafsim.base.errors import Diverged
 from leafsim.config.params import PARAMS, ParamSet
 from leafsim.config.presets import QUALITY, quality_of
 from leafsim.sim.kernels.rigid import internal_motion, momenta_sums
@@ -115,7 +115,7 @@ class Watchdog:
         self._heights: list[tuple[float, float, float]] = []  # (time, centre of mass height, rigid speed)
 
     def check(self, state) -> dict | None:
-        """Measure ``state``; raise LeafsimError on a blow-up.  Returns the measures (or None
+        """Measure ``state``; raise Diverged (a LeafsimError) on a blow-up.  Returns the measures (or None
         on frames that are skipped)."""
         if state.frame % self.every:
             return None
@@ -192,7 +192,7 @@ class Watchdog:
         what_base = f"{level} quality" if level else "default"
         blame = (", ".join(f"{k} = {_show(self.params[k])} ({what_base} {_show(base[k])})" for k in changed[:3])
                  if changed else f"none of the dynamics parameters differ from the {what_base} settings")
-        raise LeafsimError(f"simulation unstable at frame {state.frame} (t = {state.time:.3f} s): {what}, "
+        raise Diverged(f"simulation unstable at frame {state.frame} (t = {state.time:.3f} s): {what}, "
                            f"fastest {where_fastest(self.model, state)}; likely cause: {blame}")
 
 

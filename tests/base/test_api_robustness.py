@@ -482,6 +482,25 @@ def test_a_parameter_the_model_is_built_from_is_refused_at_run_time(oak):
     Run(model, params.with_overrides({"osmosis.every": 2, "limits.max_particles": 10_000}))
 
 
+def test_a_simulator_refuses_a_parameter_the_model_is_built_from(oak):
+    """Simulator(...) and set_params(...) took a changed rebuild parameter (mass.lma,
+    veins.main.kappa, mesh.spacing) without a word and ignored it (30 frames bit-identical):
+    refused as Run refuses it; live parameters still go, live."""
+    from leafsim.sim.simulator import Simulator
+
+    _, params, model, _ = oak
+    with pytest.raises(LeafsimError, match=r"^Simulator: params set veins.main.kappa = 9.0 \(built with") as e:
+        Simulator(model, params.with_overrides({"veins.main.kappa": 9.0}))
+    one_line(e)
+    sim = Simulator(model, params)
+    with pytest.raises(LeafsimError, match=r"^Simulator.set_params: params set mesh.spacing = 0.05 \(built with 0.06\)") as e:
+        sim.set_params(params.with_overrides({"mesh.spacing": 0.05}))
+    one_line(e)
+    assert sim.params is params  # the refused set changed nothing
+    sim.set_params(params.with_overrides({"osmosis.every": 2}))
+    assert sim.osmosis_every == 2
+
+
 def test_a_run_s_own_state_is_not_checked_again_between_calls():
     """Run.frames checks in full only a state it did not step to itself: a free leaf that has
     fallen farther than the loaded-state bound (100 leaf lengths) was refused on the next call
@@ -499,3 +518,17 @@ def test_a_run_s_own_state_is_not_checked_again_between_calls():
     built = build_leaf(sp, sp.params, seed=0).model
     assert built.path is not None
     Run(built, sp.params.with_overrides({"dynamics.path": "own"}))
+
+
+def test_a_run_that_blows_up_raises_diverged(oak):
+    """A leaf kicked to 10³⁰ m/s mid-run: the watchdog's runaway-motion error is a ``Diverged``
+    (a LeafsimError), as docs/api.md promises, so ``except Diverged`` catches every blow-up."""
+    from leafsim.sim.run import Diverged
+
+    sp, params, model, _ = oak
+    run = Run(model, params, seed=0)
+    with pytest.raises(Diverged) as e:
+        for _ in run.frames(Stop(frames=400)):
+            if run.state.frame == 10:
+                run.state.particle_qd[100, 2] = 1e30
+    assert isinstance(e.value, LeafsimError) and "simulation unstable" in one_line(e)
