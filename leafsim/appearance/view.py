@@ -58,6 +58,21 @@ class LeafView:
         self._pure_vein = None  # ones (n,): m̂ of pure vein tissue (vein_colours)
         self._crinkle = {}  # the lamina compression's per-mesh data and prolongations (leafsim.sim.crinkle)
 
+    @classmethod
+    def of_species(cls, sp, model: Model, params, seed: int = 0, pigments0=None, **kw) -> "LeafView":
+        """The view every path draws and exports a species' leaf with (``leafsim export``, scenes,
+        the window): the species' photo if it has one, the young pigments (``pigments0``, or the
+        fresh leaf's of ``model``, ``params`` and ``seed``: :func:`leafsim.sim.simulator.young_state`)
+        and the photo as the young colour where the species says so (``photo_colour``).  Other
+        keywords go to the constructor (``photo_tint``, ``blade_only``)."""
+        from leafsim.appearance.photo import species_photo_rgba
+        from leafsim.sim.simulator import young_state
+
+        photo = species_photo_rgba(sp, params) if sp.image is not None else None
+        if pigments0 is None:
+            pigments0 = young_state(model, params, seed).pigments
+        return cls(model, photo, pigments0, photo_colour=sp.photo_colour, **kw)
+
     def use_texture(self, params) -> bool:
         return bool(params["render.texture"]) and self.photo_rgba is not None
 

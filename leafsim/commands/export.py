@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from leafsim.appearance.photo import species_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output, not_an_input, output_target
@@ -83,8 +82,7 @@ def cmd_export(args):
     run = Run(model, params, seed=args.seed)
     until = stop_of(args)
     keys = key_frames(run, until, args.every, Progress(args, run, until, sp.key))
-    photo = species_photo_rgba(sp, params) if sp.image is not None else None
-    view = LeafView(model, photo, run.sim.state().pigments, photo_colour=sp.photo_colour)
+    view = LeafView.of_species(sp, model, params, pigments0=run.sim.state().pigments)
     water = model.water_fraction(run.state.particle_water)
     about = {"species": sp.key, "seed": args.seed, "frame": run.state.frame, "time_s": round(float(run.state.time), 9),
              "water_fraction": round(water, 6)}

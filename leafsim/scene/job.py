@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from leafsim import __version__
-from leafsim.appearance.photo import species_photo_rgba
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes, npz_bytes, read_json
@@ -211,11 +210,12 @@ def state_arrays(model: Model, state: State) -> dict:
     return out
 
 
-def view_arrays(model: Model, state: State, params) -> dict:
+def view_arrays(model: Model, state: State, params, view: LeafView | None = None) -> dict:
     """What a scene composition draws of one leaf (``view.npz``): layer-T positions, triangles,
-    linear RGB colours from the pigments, the vein tissue's own (:meth:`LeafView.vein_colours`),
-    and the veins as flat index/width/order arrays."""
-    v = LeafView(model)
+    linear RGB colours (``view``'s: the species' own, :meth:`LeafView.of_species`, as ``leafsim
+    export`` and the window draw it; without one, the pigments' palette colour), the vein
+    tissue's own (:meth:`LeafView.vein_colours`), and the veins as flat index/width/order arrays."""
+    v = view if view is not None else LeafView(model)
     rgb, _ = v.colours(state, params)
     vein_rgb = v.vein_colours(state, params)
     lines = model.vein_polylines()
@@ -288,7 +288,8 @@ def _run(job: LeafJob, folder: Path) -> dict:
     shown_model = model if lod is None else lod.fine
     shown_params = params if lod is None else lod.fine_params
     shown = show(state)
-    files = {"view.npz": npz_bytes(view_arrays(shown_model, shown, shown_params))}
+    view = LeafView.of_species(sp, shown_model, shown_params, seed=job.seed)
+    files = {"view.npz": npz_bytes(view_arrays(shown_model, shown, shown_params, view))}
     if o["end_state"]:
         files["state.npz"] = npz_bytes(state_arrays(model, state))
     for s in snaps if o["every"] else ():
@@ -301,7 +302,7 @@ def _run(job: LeafJob, folder: Path) -> dict:
         files["lod.json"], timing["fine_sim_s"] = _lod_check(job, lod, shown)
     _write(folder, files)
     if o["mesh"]:
-        _export(job, sp, shown_model, shown_params, [show(s) for s in snaps] or [shown], folder)
+        _export(job, sp, shown_model, shown_params, [show(s) for s in snaps] or [shown], folder, view)
     summary["key"] = job.key
     atomic_write_bytes(folder / "done.json", (json.dumps(summary, indent=1, sort_keys=True) + "\n").encode(), "leaf summary")
     return {**summary, **timing}
@@ -327,12 +328,12 @@ def _write(folder: Path, files: dict) -> None:
         atomic_write_bytes(p, data, name)
 
 
-def _export(job: LeafJob, sp, model: Model, params, states: list, folder: Path) -> None:
-
+def _export(job: LeafJob, sp, model: Model, params, states: list, folder: Path, view: LeafView) -> None:
+    """The leaf through the exporter with the species' view (its photo and young colour), as
+    ``leafsim export`` writes it."""
     o = job.output
-    photo = species_photo_rgba(sp, params) if o["texture"] == "photo" and sp.image is not None else None
     last = states[-1] if isinstance(states, list) else states
     about = {"leaf": job.name, "species": sp.key, "seed": int(job.seed), "frame": last.frame,
              "time_s": round(float(last.time), 9), "water_fraction": round(model.water_fraction(last.particle_water), 6)}
-    export_mesh(model, states, folder / f"leaf.{o['mesh']}", params=params, view=LeafView(model, photo),
+    export_mesh(model, states, folder / f"leaf.{o['mesh']}", params=params, view=view,
                 layers=o["layers"], veins=o["veins"], texture=o["texture"], name=job.name, extras={"leafsim": about})

@@ -324,6 +324,57 @@ def test_a_scene_leaf_exported_with_a_baked_texture(tmp_path):
         (leaf / "done.json").unlink()
 
 
+def test_a_scene_leaf_is_exported_in_its_species_colour_and_its_photo_ages(tmp_path):
+    """A scene's photo species is exported as ``leafsim export`` writes it: the photo's own
+    young colour (not the palette's), and with ``texture: photo`` the factor the ageing
+    multiplies the photo by (``_AGEING``) moves with the drying (the shipped close-up's oak kept
+    the fresh photo throughout: every factor 1, every delta 0)."""
+    from helpers.gltf import assert_clean
+    from leafsim.export.blender_import import colour_morphs
+
+    params = {**TINY, "colour.age_rate": 10.0}
+    groups = [{"name": "oak", "species": "oak", "count": 1, "seed": 2, "params": params, "stop": {"frames": 60},
+               "output": {"mesh": "glb", "every": 20, "texture": tex}} for tex in ("colours", "photo")]
+    groups[1]["name"] = "oak_photo"
+    path = _scene(tmp_path, name="colour", groups=groups)
+    rep = run_scene(load_scene(path), tmp_path / "out", workers=1, progress=False)
+    assert rep["failed"] == []
+    leaves = tmp_path / "out" / "leaves"
+    photo = colour_morphs(leaves / "oak_photo-000" / "leaf.glb")["blade"]
+    assert photo["photo_factor"]
+    last = np.asarray(photo["colours"])  # the base mesh is the last key frame
+    first = last + np.asarray(photo["deltas"][0])
+    assert np.allclose(first, 1.0, atol=1e-5)  # the fresh leaf is the photo itself
+    assert np.abs(last - 1.0).max() > 0.05  # and the photo ages with the leaf
+    assert_clean(leaves / "oak_photo-000" / "leaf.glb")
+    # the fresh leaf's colours are the CLI's for the same leaf (its seed from the file's extras)
+    glb = leaves / "oak-000" / "leaf.glb"
+    data = glb.read_bytes()
+    nodes = json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])["nodes"]
+    seed = next(n["extras"]["leafsim"]["seed"] for n in nodes if "leafsim" in n.get("extras", {}))
+    cli = tmp_path / "cli.glb"
+    r = subprocess.run([sys.executable, "-m", "leafsim", "export", "--species", "oak", "--seed", str(seed),
+                        "--set", "mesh.spacing=0.08", "--set", "colour.age_rate=10", "--frames", "0", "--texture", "colours", "--out", str(cli)],
+                       capture_output=True, text=True, timeout=HANG_S)
+    assert r.returncode == 0, r.stderr
+    scene = colour_morphs(glb)["blade"]
+    fresh = np.asarray(scene["colours"]) + np.asarray(scene["deltas"][0])
+    doc, blob = _glb_doc(cli)
+    prim = next(m for m in doc["meshes"] if m["name"] == "blade")["primitives"][0]
+    acc = doc["accessors"][prim["attributes"]["COLOR_0"]]
+    bv = doc["bufferViews"][acc["bufferView"]]
+    c = np.frombuffer(blob, np.float32, acc["count"] * 4 if acc["type"] == "VEC4" else acc["count"] * 3,
+                      bv.get("byteOffset", 0) + acc.get("byteOffset", 0)).reshape(acc["count"], -1)[:, :3]
+    assert np.allclose(fresh, c, atol=1e-5)
+
+
+def _glb_doc(path):
+    data = Path(path).read_bytes()
+    n = int.from_bytes(data[12:16], "little")
+    doc = json.loads(data[20:20 + n])
+    return doc, data[28 + n:]
+
+
 @pytest.mark.parametrize("over,msg", BAD)
 def test_bad_scene_files_give_one_line_errors(tmp_path, over, msg):
     path = _scene(tmp_path, stem="bad", **over)
