@@ -18,7 +18,7 @@ def _check(args) -> str:
     if not str(args.out).strip():
         raise LeafsimError("--out '': expected a mesh file name (.glb, .gltf, .obj or .ply)")
     check_output(args.out, "mesh")  # a folder, a device or an unwritable place: now, not after the drying
-    fmt = format_of(args.out, args.format)
+    fmt = format_of(args.out, args.format, "--format")
     if args.every < 0:
         raise LeafsimError(f"--every {args.every}: expected a non-negative frame interval")
     if args.every and fmt in ("obj", "ply"):
@@ -35,6 +35,9 @@ def _check(args) -> str:
         if args.every:  # key frames of a run that does not run: an animation without a key
             raise LeafsimError(f"--every {args.every} needs --frames N or --until dry (how long the animated drying runs)")
         args.frames = 0  # the fresh leaf
+    if args.every and args.until is None and args.frames == 0:
+        raise LeafsimError(f"--every {args.every} with --frames 0: the fresh leaf alone has no drying to animate "
+                           "(give --frames N or --until dry, or leave --every out)")
     stop_of(args)
     folder = Path(args.out).parent
     if not folder.is_dir():

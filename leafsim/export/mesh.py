@@ -192,7 +192,8 @@ class MeshSource:
         self.model, self.params = model, params
         self.view = view if view is not None else LeafView(model)
         if texture == "photo" and self.view.photo_rgba is None:
-            raise LeafsimError("export: texture 'photo' needs a species with a photo (this one has a drawn outline)")
+            raise LeafsimError("export: texture 'photo' needs the leaf's photo in the view: view=LeafView.of_species(sp, "
+                               "model, params) of a species with a photo")
         self.layers, self.veins, self.texture = layers, bool(veins), texture
         self.uv = model.particle_texcoord[self.view.T].astype(np.float64)
 
@@ -264,12 +265,15 @@ class MeshSource:
         return buf.tobytes()
 
 
-def format_of(path, fmt: str | None) -> str:
-    """The export format: ``fmt`` when given, else the file's suffix; LeafsimError otherwise."""
+def format_of(path, fmt: str | None, flag: str = "format") -> str:
+    """The export format: ``fmt`` when given, else the file's suffix; LeafsimError otherwise
+    (naming ``flag``: the API's ``format``, the CLI's ``--format``)."""
     suffix = Path(path).suffix.lstrip(".").lower()
+    if fmt and fmt not in FORMATS:
+        raise LeafsimError(f"{path}: {flag} {fmt!r}: unknown mesh format (expected one of {', '.join(FORMATS)})")
     if fmt and suffix in FORMATS and suffix != fmt:
-        raise LeafsimError(f"{path}: the name says {suffix}, --format says {fmt} (a {fmt} file named .{suffix} "
-                           "would not open as one): name it .{fmt} or leave --format out".replace("{fmt}", fmt))
+        raise LeafsimError(f"{path}: the name says {suffix}, {flag} says {fmt} (a {fmt} file named .{suffix} "
+                           f"would not open as one): name it .{fmt} or leave {flag} out")
     fmt = fmt or suffix
     if fmt not in FORMATS:
         raise LeafsimError(f"{path}: unknown mesh format {fmt!r} (expected one of {', '.join(FORMATS)})")
@@ -334,10 +338,10 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     if fmt in ("obj", "ply") and len(states) > 1:
         raise LeafsimError(f"{path}: {fmt.upper()} holds one static shape; use glb or gltf for the drying animation")
     if fmt == "ply" and texture in ("photo", "baked"):
-        raise LeafsimError(f"{path}: PLY carries vertex colours, not a {texture} texture (use --texture colours)")
+        raise LeafsimError(f"{path}: PLY carries vertex colours, not a {texture} texture (use texture='colours')")
     if texture == "baked" and len(states) > 1:
         raise LeafsimError(f"{path}: texture 'baked' holds one state's colour, and a glTF texture cannot change with "
-                           f"the key frames: export one state (no --every), or use --texture colours for the animation")
+                           f"the key frames: export one state, or texture='colours' for the animation")
     from leafsim.base.fileio import output_target
 
     for side, what in side_files(path, fmt, texture):  # a folder or device in the way: now, not after the bake

@@ -218,6 +218,11 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
         effects = tuple(effects)
     stop = _stop(w, g.get("stop"))
     lod, check = _lod(w, g.get("lod"))
+    if lod is not None and "mesh.spacing" in params and group_params["mesh.spacing"] != lod["simulate"]:
+        # the level of detail sets both meshes: the group's other mesh.spacing was dropped without a word
+        raise w.err("lod", f"sets the meshes (simulate {lod['simulate']:g}, show {lod['show']:g}), and params sets "
+                           f"mesh.spacing = {group_params['mesh.spacing']:g}: leave params' mesh.spacing out (or "
+                           "make it lod.simulate)")
     _check_budget(w, lib[sp], group_params, lod)
     output = _output(w, g.get("output", {}))
     if output["mesh"] and output["texture"] == "photo" and lib[sp].image is None:
@@ -301,6 +306,10 @@ def _output(w: _Where, o) -> dict:
     every = w.int(o, "every", 0, 0, None, "output.")
     if every and mesh in ("obj", "ply"):
         raise w.err("output.mesh", f"{mesh} holds one static shape; frames every K need glb or gltf")
+    for k in ("layers", "veins", "texture"):
+        if k in o and mesh is None:  # an option of the exported mesh, without one: it did nothing
+            raise w.err(f"output.{k}", f"an option of the exported mesh, but output.mesh is null: set output.mesh "
+                                       f"({', '.join(FORMATS)}) or leave output.{k} out")
     out = {"end_state": w.bool(o, "end_state", True, "output."), "every": every, "mesh": mesh,
            "layers": w.choice(o, "layers", "shell", LAYERS, "output."), "veins": w.bool(o, "veins", False, "output."),
            "texture": w.choice(o, "texture", "colours", TEXTURES, "output."), "stats": w.bool(o, "stats", False, "output.")}

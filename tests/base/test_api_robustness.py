@@ -334,6 +334,11 @@ def test_export_bad_arguments(oak, other, tmp_path):
         (dict(states=[state, state.copy()], times="ab"), "times"),
         (dict(states=[{"a": 1}]), "State"),
         (dict(path=None), "path"),
+        # API words, not the CLI's flags (a format that does not exist was told to name the file .fbx)
+        (dict(format="fbx"), r"format 'fbx': unknown mesh format \(expected one of"),
+        (dict(format="obj"), r"the name says glb, format says obj"),
+        (dict(texture="photo"), r"needs the leaf's photo in the view: view=LeafView.of_species"),
+        (dict(texture="baked", states=[state, state.copy()]), r"export one state, or texture='colours'"),
     ]
     for kw, what in cases:
         kw = {"states": [state], "params": params, "path": out, **kw}

@@ -394,6 +394,8 @@ def test_options_that_would_be_ignored_or_silently_empty_are_refused(tmp_path):
     one_line(*run_cli("run", *OAK, "--frames", "2", "--effects", ""), "--effects", "expected a comma-separated list")
     one_line(*run_cli("run", *OAK, "--frames", "2", "--stats", ""), "--stats ''")
     one_line(*run_cli("export", *OAK, "--every", "2", "--out", tmp_path / "x.glb"), "--every 2 needs --frames N or --until dry")
+    # (--frames 0 with --every wrote a still without a word: no animation, the texture switched)
+    one_line(*run_cli("export", *OAK, "--frames", "0", "--every", "5", "--out", tmp_path / "x.glb"), "--every 5 with --frames 0")
     one_line(*run_cli("outline", "images/quercus_01.png", "--set", "veins.main.kappa=4"), "--set veins.main.kappa",
              "outline.* or limits.image_pixels")
     assert not list(tmp_path.iterdir())

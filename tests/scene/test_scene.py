@@ -281,6 +281,14 @@ BAD = [
                   "output": {"mesh": "glb", "every": 5, "texture": "baked"}}]}, "key 'output.texture': 'baked' holds one state"),
     ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1},
                   "output": {"mesh": "ply", "texture": "baked"}}]}, "key 'output.texture': PLY carries vertex colours"),
+    # options that were dropped without a word: the mesh's options without a mesh, and a group
+    # mesh spacing the level of detail overrode
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1},
+                  "output": {"texture": "photo"}}]}, "key 'output.texture': an option of the exported mesh, but output.mesh is null"),
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1},
+                  "output": {"veins": True}}]}, "key 'output.veins': an option of the exported mesh"),
+    ({"groups": [{"name": "a", "species": "oak", "count": 1, "stop": {"frames": 1}, "params": {"mesh.spacing": 0.05},
+                  "lod": {"simulate": 0.07, "show": 0.035}}]}, "key 'lod': sets the meshes (simulate 0.07, show 0.035), and params sets mesh.spacing = 0.05"),
 ]
 
 
