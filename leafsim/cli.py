@@ -65,7 +65,8 @@ def _seed(text: str) -> int:
 
 
 def _common(p: argparse.ArgumentParser, seed=True):
-    p.add_argument("--species", default=None, help="species key from the config (see `leafsim species`)")
+    p.add_argument("--species", default=None, help="species key from the config (see `leafsim species`; default "
+                   "maple)")
     p.add_argument("--config", default=None, metavar="FILE", help=CONFIG_HELP)
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                    help="override a declared parameter, e.g. --set veins.main.kappa=4 (repeatable)")

@@ -144,8 +144,38 @@ def _pair(path, sp, key, value):
     return (float(arr[0, 0]), float(arr[0, 1]))
 
 
-def load_library(path: str | Path | None = None) -> dict[str, Species]:
-    """Load and validate every species of a config file."""
+class UnknownSpecies(LeafsimError, KeyError):
+    """A species key that is not in the library (a LeafsimError, and a KeyError for code that
+    looks keys up in a dict); its text is the one line, not a quoted key."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+def _unknown(name, known, where: str = "") -> UnknownSpecies:
+    import difflib
+
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6) if isinstance(name, str) and name else []
+    hint = f"did you mean '{close[0]}'? " if close else ""
+    what = "no species given" if not name else f"unknown species {_show(name)}{where}"
+    return UnknownSpecies(f"{what} ({hint}known: {', '.join(sorted(known))})")
+
+
+class Library(dict):
+    """The species of a config, by key (:func:`load_library`): a dict whose unknown key is one
+    line naming the file, the known keys and the closest one (:class:`UnknownSpecies`), not a
+    bare ``KeyError: 'birch'``."""
+
+    def __init__(self, entries, path: Path):
+        super().__init__(entries)
+        self.path = path
+
+    def __missing__(self, key):
+        raise _unknown(key, self, f" in {self.path}")
+
+
+def load_library(path: str | Path | None = None) -> Library:
+    """Load and validate every species of a config file (a :class:`Library`: a dict by key)."""
     if path is not None and not isinstance(path, (str, os.PathLike)):
         raise LeafsimError(f"species config {path!r}: expected a file path (str or Path)")
     path = Path(path) if path is not None else default_config()
@@ -162,7 +192,7 @@ def load_library(path: str | Path | None = None) -> dict[str, Species]:
             if name in entries or (name != k and name in data["species"]):
                 raise _err(path, k, "variants" if name != k else None, f"species key {_show(name)} is defined twice")
             entries[name] = entry
-    return {_check_key(path, k): _parse_entry(path, k, v) for k, v in entries.items()}
+    return Library({_check_key(path, k): _parse_entry(path, k, v) for k, v in entries.items()}, path)
 
 
 def _variants(path: Path, key: str, e: Any) -> dict:
@@ -377,16 +407,11 @@ def _teeth(path: Path, key: str, teeth: Any) -> dict:
 def get_species(name: str, path: str | Path | None = None) -> Species:
     """The species ``name`` of the library at ``path`` (default: the built-in one); an unknown
     or empty name is an error that lists the known keys and suggests the closest one."""
-    import difflib
-
     lib = load_library(path)
     if not isinstance(name, str) and name is not None:
         raise LeafsimError(f"species name {name!r}: expected a string (known: {', '.join(sorted(lib))})")
     if name not in lib:
-        close = difflib.get_close_matches(name, list(lib), n=1, cutoff=0.6) if name else []
-        hint = f"did you mean '{close[0]}'? " if close else ""
-        what = "no species given" if not name else f"unknown species '{name}'"
-        raise LeafsimError(f"{what} ({hint}known: {', '.join(sorted(lib))})")
+        raise _unknown(name, lib)
     return lib[name]
 
 

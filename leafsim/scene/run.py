@@ -540,7 +540,8 @@ def _run_scene(scene: Scene, out, workers: int, scheduler: str | None, client, p
     report = {"scene": scene.name, "out": str(out), "leaves": len(scene.jobs), "ran": len(todo) - len(failed),
               "skipped": len(scene.jobs) - len(todo), "failed": [{"name": r["name"], "error": r["error"]} for r in failed],
               "workers": None if scheduler else workers, "scheduler": scheduler, "simulate_s": round(sim_s, 3),
-              "leaves_per_s": round(len(todo) / sim_s, 4) if todo and sim_s > 0 else None,
+              # the leaves simulated to their end (a failed leaf is no output; it was counted too)
+              "leaves_per_s": round((len(todo) - len(failed)) / sim_s, 4) if todo and sim_s > 0 else None,
               "leaf_s": {r["name"]: round(r["seconds"], 3) for r in sorted(results, key=lambda r: r["name"])},
               "leaf_cpu_s": round(sum(r.get("cpu_s", 0.0) for r in results), 3)}
     # leaf folders of an earlier version of the scene (a group's count lowered, a group renamed):

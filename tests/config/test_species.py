@@ -121,6 +121,13 @@ def test_missing_config_and_unknown_species(tmp_path):
         load_library(tmp_path / "nope.json")
     with pytest.raises(LeafsimError, match="unknown species 'fern'.*maple"):
         get_species("fern")
+    # a library looked up by key: one line naming the file (was a bare KeyError: 'birch'), still
+    # a KeyError for code that catches one
+    lib = load_library()
+    with pytest.raises(LeafsimError, match=r"^unknown species 'mapel' in .*leaves\.json \(did you mean 'maple'\? known: ") as e:
+        lib["mapel"]
+    assert isinstance(e.value, KeyError) and "\n" not in str(e.value)
+    assert lib.get("mapel") is None and "maple" in lib
 
 
 def test_the_readme_species_snippet_loads(tmp_path):

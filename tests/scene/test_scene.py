@@ -228,6 +228,7 @@ def test_failed_leaf_is_reported_by_name_and_the_others_finish(tmp_path):
     assert r.returncode == 1
     rep = json.loads(r.stdout)
     assert [f["name"] for f in rep["failed"]] == ["stuck-000"] and "not reached within max_frames = 15" in rep["failed"][0]["error"]
+    assert rep["ran"] == 2 and rep["leaves_per_s"] == pytest.approx(2 / rep["simulate_s"], rel=2e-3)  # (the failed leaf was counted)
     assert "stuck-000" in r.stderr.strip().splitlines()[-1] and "Traceback" not in r.stderr
     leaves = tmp_path / "out" / "leaves"
     assert sorted(p.name for p in leaves.iterdir()) == ["ok-000", "ok-001"]  # nothing of the failed leaf
