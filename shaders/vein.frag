@@ -58,11 +58,14 @@ uniform float u_shininess;
 
 out vec4 f_colour;
 
-// A ribbon carries the photo's texture coordinate of its centre line on both sides, so the
-// photo is sampled along that line only, and (seeing no change across the ribbon) at a sharper
-// mip level than the blade's: its texel-to-texel variation came out as bands across the vein.
-// It is sampled this many mip levels coarser (a 2^1.5 ≈ 3 texel blur)
-#define UV_BLUR 1.5
+// A ribbon's sides carry the photo's texture coordinates of where they lie on the blade
+// (leafsim.render.geom.VeinRibbons), so the photo is sampled across the ribbon as the blade
+// samples it, at the blade's mip level (u_uv_blur 0).  Without the blade's rest positions both
+// sides carry the centre line's coordinate: the GPU then sees no change across the ribbon and
+// samples sharper than on the blade (texel rows came out as bands across the vein), so it
+// samples u_uv_blur = 1.5 mip levels coarser (a 2^1.5 ≈ 3 texel blur).
+uniform float u_uv_blur;
+#define UV_BLUR u_uv_blur
 
 void main() {
 #if LS_TEX

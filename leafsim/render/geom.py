@@ -193,7 +193,7 @@ class VeinRibbons:
     consecutive points of one polyline form a quad.
     """
 
-    def __init__(self, vein_lines, n_vertices: int, texcoords=None):
+    def __init__(self, vein_lines, n_vertices: int, texcoords=None, rest=None):
         idx, width, order, prev, nxt, quads = [], [], [], [], [], []
         start = 0
         for line in vein_lines or []:
@@ -213,6 +213,7 @@ class VeinRibbons:
             quads.append(np.stack([2 * s, 2 * s + 1, 2 * s + 2, 2 * s + 1, 2 * s + 3, 2 * s + 2], 1))
             start += p
         self.count = start
+        self.across_uv = False
         if start == 0:
             return
         self.idx = np.concatenate(idx)
@@ -228,10 +229,47 @@ class VeinRibbons:
         static[:, :, 0] = hw[:, None]
         static[:, 0, 1], static[:, 1, 1] = -1.0, 1.0
         static[:, :, 2:4] = uv[:, None, :]
+        duv = None if texcoords is None or rest is None else self._across_uv(texcoords, rest, hw)
+        self.across_uv = duv is not None  # the sides sample the photo where they lie
+        if duv is not None:
+            # each side samples the photo where it lies, half the vein's width across it: the
+            # ribbon shows the photo's own vein at its own width.  With the centre line's
+            # coordinate on both sides, a photo vein 3 px wide was drawn as a band of the
+            # ribbon's width (8 px on hornbeam's midrib) in the vein's darkest colour
+            static[:, 0, 2:4] = uv - duv
+            static[:, 1, 2:4] = uv + duv
         static[:, :, 4] = order[:, None]
         self.static = static.reshape(-1, 5)
         self.dynamic = np.empty((start, 2, 9), dtype=np.float32)  # centre, side, normal
         self.base = np.empty((start, 2, 13), dtype=np.float32)
+
+    def _across_uv(self, texcoords, rest, hw) -> np.ndarray | None:
+        """(p, 2) the texture-coordinate step from a ribbon's centre line to its v = +1 side:
+        half the vein's width across the vein in the rest plane (as :meth:`mottle_rows` moves
+        the mottle's samples), through the affine map from rest positions to texture
+        coordinates that a photo leaf's blade follows (fitted on the vertices that follow one
+        map: a stalk's are placed otherwise, and their ribbon keeps its centre's coordinate).
+        None where no affine map holds for most vertices (residual over 10⁻⁴) or without rest
+        positions."""
+        uvs = np.asarray(texcoords, np.float64)
+        xy = np.asarray(rest, np.float64)[:, :2]
+        if len(xy) != len(uvs) or len(xy) < 3 or not np.ptp(xy, axis=0).all():
+            return None
+        X = np.column_stack([xy, np.ones(len(xy))])
+        fit = np.ones(len(xy), bool)
+        for _ in range(3):  # refit on the vertices the map holds for (hornbeam: 1203 of 1224, its stalk's out)
+            A, *_ = np.linalg.lstsq(X[fit], uvs[fit], rcond=None)
+            if not np.isfinite(A).all():
+                return None
+            res = np.abs(X @ A - uvs).max(1)
+            fit = res <= max(1e-4, float(np.percentile(res, 80)))
+        held = res <= 1e-4
+        if held.sum() < 0.5 * len(xy):
+            return None
+        t = xy[self.idx[self.next]] - xy[self.idx[self.prev]]
+        ln = np.linalg.norm(t, axis=1, keepdims=True)
+        perp = np.where(ln > 1e-12, np.stack([-t[:, 1], t[:, 0]], 1) / np.maximum(ln, 1e-12), np.array([1.0, 0.0]))
+        return np.where(held[self.idx][:, None], (perp * hw[:, None]) @ A[:2], 0.0)
 
     def frame(self, pos: np.ndarray, nrm: np.ndarray) -> np.ndarray:
         """(2p, 9) float32: centre, side, normal per ribbon vertex."""

@@ -272,7 +272,7 @@ class Renderer:
 
     def _vein_buffers(self, lines, uv: np.ndarray) -> None:
         """The drawn veins' ribbons (none without vein lines)."""
-        self.veins = VeinRibbons(lines, self.n, uv if self.has_uv else None)
+        self.veins = VeinRibbons(lines, self.n, uv if self.has_uv else None, self.rest if self.has_rest else None)
         if self.veins.count:
             self.vbo_vein_dyn = self._buf(self.veins.frame(self.pos, self.nrm), dynamic=True)
             self.vbo_vein_base = self._buf(self.veins.base_colours(self.colours, self.tint, self.chroma, self.vein_col), dynamic=True)
@@ -797,6 +797,9 @@ class Renderer:
         _set(v, "u_width_scale", float(opts.vein_width_scale))
         _set(v, "u_absolute", int(opts.vein_absolute))
         _set(v, "u_tex", 0)
+        # sides at their own coordinates: the blade's sampling; the centre's on both sides (no
+        # rest positions): 1.5 mip levels coarser, against bands across the vein
+        _set(v, "u_uv_blur", 0.0 if self.veins.across_uv else 1.5)
         if mode == 2:
             _set(v, "u_tex_mean", self.tex_mean)
         cols = list(opts.vein_colours)[:4]

@@ -570,12 +570,14 @@ def test_over_a_photo_the_veins_draw_no_second_pattern(off, albedo):
 
 
 def test_a_ribbon_over_a_photo_samples_it_smoothly_along_its_line(off):
-    """A ribbon carries its centre line's texture coordinate on both sides, so the GPU sees no
-    change across it and samples the photo sharper than on the blade: the texel rows along the
-    midrib came out as bands across the vein.  The vein samples 1.5 mip levels coarser.  Here
-    the photo alternates light and dark pairs of texel rows across the midrib: along the drawn
-    midrib they vary less than on the bare blade under it (std 2.8 against 8.5; 16.9 without
-    the coarser sample)."""
+    """Without the blade's rest positions a ribbon carries its centre line's texture coordinate
+    on both sides, so the GPU sees no change across it and samples the photo sharper than on the
+    blade: the texel rows along the midrib came out as bands across the vein.  The vein then
+    samples 1.5 mip levels coarser.  Here the photo alternates light and dark pairs of texel
+    rows across the midrib: along the drawn midrib they vary less than on the bare blade under
+    it (std 2.8 against 8.5; 16.9 without the coarser sample).  With the rest positions each
+    side samples where it lies, as the blade does, and the drawn midrib shows the photo under
+    it (within 3 levels of the bare blade)."""
     import dataclasses
 
     tex = np.zeros((256, 256, 4), np.uint8)
@@ -590,6 +592,15 @@ def test_a_ribbon_over_a_photo_samples_it_smoothly_along_its_line(off):
     rows, col = slice(H // 2 - 60, H // 2 + 60), W // 2  # the midrib (x = 0) runs up the middle
     along_bare, along_vein = np.std(bare[rows, col, 1]), np.std(drawn[rows, col, 1])
     assert along_bare > 4 and along_vein < 0.6 * along_bare, (along_vein, along_bare)
+    # with the blade's rest positions the sides sample the photo where they lie, as the blade
+    # does: along the midrib the drawn vein shows the photo's rows as the bare blade does
+    rest = np.asarray(mesh.positions, np.float32)[:, :2]
+    uv = np.column_stack([rest[:, 0] * 3.0 + 0.5, rest[:, 1] * 3.0 + 0.2]).astype(np.float32)
+    mesh = dataclasses.replace(mesh, texcoords=uv, mottle_rest=rest)
+    bare = off.render_array(mesh, cam, RenderOptions(veins=False, **opts)).astype(float)
+    drawn = off.render_array(mesh, cam, RenderOptions(**opts)).astype(float)
+    near = np.abs(drawn[rows, col - 2:col + 3] - bare[rows, col - 2:col + 3]).mean()
+    assert np.std(bare[rows, col, 1]) > 4 and near < 3.0, near
 
 
 def test_veins_seen_edge_on_stay_whole_lines(off, leaf):
@@ -800,6 +811,42 @@ def test_vein_ribbon_samples_the_mottle_across_its_width():
     half = 0.5 * (rows[:, 1, 10:] - rows[:, 0, 10:])
     np.testing.assert_allclose(np.linalg.norm(half, axis=1), width / 2, rtol=1e-5)
     np.testing.assert_allclose(half @ np.array([1.0, 2.0]) / np.sqrt(5), 0.0, atol=1e-7)  # across the line
+
+
+def test_vein_ribbon_samples_the_photo_across_its_width():
+    """Over a photo, a ribbon's sides carry the texture coordinates of where they lie, half the
+    vein's width across the line in the rest plane, through the rest -> uv map (affine on a
+    photo leaf): the photo's vein is drawn at its own width, not stretched to the ribbon's (a
+    3 px midrib became an 8 px band).  Coordinates that are no affine map keep the centre's."""
+    from leafsim.render.geom import VeinRibbons
+
+    rest = np.array([[0.0, 0.0], [0.001, 0.002], [0.002, 0.004], [0.003, 0.006], [0.004, -0.002]], np.float32)
+    A = np.array([[40.0, 5.0], [-3.0, 60.0]])  # uv = rest @ A + b (metres to texture units)
+    uv = rest @ A + np.array([0.3, 0.2])
+    width = np.array([0.002, 0.0016, 0.0012, 0.0008])
+    rib = VeinRibbons([(np.arange(4), width, 0)], 5, uv, rest)
+    st = rib.static.reshape(4, 2, 5)
+    centre = 0.5 * (st[:, 0, 2:4] + st[:, 1, 2:4])
+    np.testing.assert_allclose(centre, uv[:4], atol=1e-6)
+    half = 0.5 * (st[:, 1, 2:4] - st[:, 0, 2:4])
+    back = np.linalg.solve(A.T, half.T).T  # the rest-plane offset each side stands for
+    np.testing.assert_allclose(np.linalg.norm(back, axis=1), width / 2, rtol=1e-4)
+    np.testing.assert_allclose(back @ np.array([1.0, 2.0]) / np.sqrt(5), 0.0, atol=1e-7)  # across the line
+    st = VeinRibbons([(np.arange(4), width, 0)], 5, uv).static.reshape(4, 2, 5)  # no rest positions
+    np.testing.assert_array_equal(st[:, 0, 2:4], st[:, 1, 2:4])
+    # a blade on the map and a stalk placed otherwise (as a photo leaf's): the stalk's ribbon
+    # keeps its centre's coordinate; no affine map at all: every ribbon keeps it
+    g = np.random.default_rng(1)
+    pts = g.random((40, 2)) * 0.05
+    tex = pts @ A + 0.1
+    tex[:4] += 0.3  # the stalk's four vertices
+    line = [(np.array([0, 1, 2, 3, 10, 11, 12]), np.full(7, 0.001), 0)]
+    st = VeinRibbons(line, 40, tex, pts).static.reshape(7, 2, 5)
+    same = np.all(st[:, 0, 2:4] == st[:, 1, 2:4], axis=1)
+    assert same[:4].all() and not same[4:].any()
+    bent = np.column_stack([np.sin(40 * pts[:, 0]), pts[:, 1] ** 2 * 90])
+    st = VeinRibbons(line, 40, bent, pts).static.reshape(7, 2, 5)
+    np.testing.assert_array_equal(st[:, 0, 2:4], st[:, 1, 2:4])
 
 
 def _srgb_to_linear(c):
