@@ -15,6 +15,7 @@ Example
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,13 +110,18 @@ class Probe:
         self.n_interior = len(self.interior)
         self.rest3 = np.column_stack([self.points, np.zeros(len(self.points))])
         self.bbox = (lo, hi)
-        self._emb: dict[int, Embedding] = {}
+        self._emb: dict[int, tuple[weakref.ref, Embedding]] = {}
 
     def embedding(self, model: Model) -> Embedding:
+        """The probe points' embedding in ``model``'s blade, cached per live model: a model's
+        ``id`` is reused once it is freed, so the entry also holds a weak reference that must
+        still point at this model (a stale entry indexed a later model's triangles)."""
         key = id(model)
-        if key not in self._emb:
-            self._emb[key] = embed(model, self.points)
-        return self._emb[key]
+        hit = self._emb.get(key)
+        if hit is None or hit[0]() is not model:
+            self._emb = {k: v for k, v in self._emb.items() if v[0]() is not None}
+            hit = self._emb[key] = (weakref.ref(model), embed(model, self.points))
+        return hit[1]
 
     def fields(self, model: Model, state: State) -> dict:
         """Probe fields of one state: positions ``q`` (k, 3), own-frame positions ``q_own``,

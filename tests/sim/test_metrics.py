@@ -50,3 +50,17 @@ def test_known_bend_is_measured(two_meshes):
     assert f["margin_lift"] == pytest.approx(0.3 * ymax ** 2 / L / L, rel=0.02)
     e = field_errors(f, ref, L)
     assert e["height_rms"] > 0.05 and f["area_3d"] > 1.0 and f["area_top"] == pytest.approx(1.0, abs=0.01)
+
+
+def test_a_cached_embedding_serves_only_the_model_it_was_made_for(two_meshes):
+    """A freed model's ``id`` is reused by a later one (CI once indexed a coarse oak's 600
+    triangles with a fine oak's embedding): the cache must notice the entry is another model's."""
+    import weakref
+
+    from leafsim.sim.metrics import embed
+
+    probe, (a, b) = two_meshes
+    probe._emb[id(b)] = (weakref.ref(a), probe.embedding(a))  # as if ``a`` had died and ``b`` took its id
+    got, want = probe.embedding(b), embed(b, probe.points)
+    assert np.array_equal(got.tri, want.tri) and np.allclose(got.bary, want.bary)
+    assert probe.fields(b, b.state())["q"].shape == (len(probe.points), 3)
