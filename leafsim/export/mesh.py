@@ -381,6 +381,9 @@ def side_files(path, fmt: str, texture: str = "colours") -> list:
     png = [(texture_file(path, texture), "texture")] if texture != "colours" else []
     if texture == "baked":  # (written only when the blade has a crinkle)
         png.append((normal_file(path), "normal map"))
+        if fmt == "obj":  # the lower face's turned copies (written with the normal map)
+            png += [(lower_file(texture_file(path, texture)), "lower face's texture"),
+                    (lower_file(normal_file(path)), "lower face's normal map")]
     return {"gltf": [(path.with_suffix(".bin"), "glTF buffer")],
             "obj": [(path.with_suffix(".mtl"), "material"), *png]}.get(fmt, [])
 
@@ -396,6 +399,23 @@ def normal_file(path) -> Path:
     crinkle (the glTF's normalTexture), when the blade has one."""
     path = Path(path)
     return path.with_name(f"{path.stem}_baked_normal.png")
+
+
+def lower_file(png) -> Path:
+    """The copy of an OBJ's texture ``png`` turned by 180° for the blade's lower face."""
+    png = Path(png)
+    return png.with_name(f"{png.stem}_lower.png")
+
+
+def _turned_png(png: bytes) -> bytes:
+    """A PNG turned by 180° (pixel for pixel: the same texels, read from the other corner)."""
+    import cv2
+
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
+    ok, buf = cv2.imencode(".png", cv2.rotate(img, cv2.ROTATE_180))
+    if img is None or not ok:
+        raise LeafsimError("export: cannot turn the texture for the OBJ's lower face")
+    return buf.tobytes()
 
 
 #: the MTL's specular colour and exponent, as Blender's OBJ importer turns them into the glTF
@@ -425,22 +445,33 @@ def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None 
     Blender's importer (and its exporter) read as a tangent-space normal map, tangents from the
     texture coordinates (MikkTSpace, as a glTF client without TANGENT makes them).  Its y is up
     the image, the increasing OBJ ``vt``; a reader that takes ``map_Bump`` as a height map
-    shades it wrongly, one that ignores it draws the blade smooth."""
+    shades it wrongly, one that ignores it draws the blade smooth.
+
+    With the normal map, the shell's lower face (``Surface.lower``) takes a material of its own,
+    ``blade_lower``, whose two images are the texture and the map turned by 180°
+    (:func:`lower_file`), and texture coordinates (1 − u, 1 − v) of its own: it reads the same
+    texels as the upper face, in a frame turned by 180° about its normal, as the glTF's lower
+    face does with negated coordinates and a mirrored sampler (MTL has no mirrored wrap; with
+    the upper face's coordinates, as before, a reader drew the underside's relief mirrored).
+    The rim keeps the upper face's coordinates."""
     mtl = path.with_suffix(".mtl")
     png = png if png is not None else texture_file(path, "photo")
     normal = normal if normal is not None else normal_file(path)
     lines = ["# leafsim mesh export", f"mtllib {mtl.name}"]
     mat = ["# leafsim materials"]
-    base = 0
+    base = vt_base = 0
+    turned = False
     for name, s in surfaces.items():
         lines.append(f"o {name}")
         lines.append(f"usemtl {name}")
         textured = photo_png is not None and s.uv is not None
+        mapped = normal_png is not None and s.uv is not None and name == "blade"
         kd = _diffuse(None if textured else s.colours)
-        mat += [f"newmtl {name}", "Ka 0 0 0", f"Kd {kd[0]:.4f} {kd[1]:.4f} {kd[2]:.4f}", *MTL_GLOSS, "d 1", "illum 2"]
+        material = ["Ka 0 0 0", f"Kd {kd[0]:.4f} {kd[1]:.4f} {kd[2]:.4f}", *MTL_GLOSS, "d 1", "illum 2"]
+        mat += [f"newmtl {name}", *material]
         if textured:
             mat.append(f"map_Kd {png.name}")
-        if normal_png is not None and s.uv is not None and name == "blade":
+        if mapped:
             mat.append(f"map_Bump -bm 1 {normal.name}")
         rgb = None if s.colours is None else _srgb8(s.colours) / 255.0
         for i, p in enumerate(s.positions):
@@ -448,14 +479,34 @@ def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None 
         uv = s.uv if s.uv is not None else np.zeros((len(s.positions), 2), np.float32)
         lines += [f"vt {u:.7g} {1.0 - v:.7g}" for u, v in uv]
         lines += [f"vn {n[0]:.6f} {n[1]:.6f} {n[2]:.6f}" for n in s.normals]
-        f = s.triangles.astype(np.int64) + base + 1
-        lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}" for a, b, c in f]
+        tri = s.triangles.astype(np.int64)
+        low = np.zeros(len(tri), bool)
+        if mapped and textured and s.lower is not None:  # the lower face: its own material and coordinates
+            low = s.lower[tri].all(axis=1)
+            lo = np.flatnonzero(s.lower)
+            lines += [f"vt {1.0 - u:.7g} {v:.7g}" for u, v in uv[lo]]  # (1 − u, 1 − v) in the image's terms
+            at = np.full(len(uv), -1, np.int64)
+            at[lo] = len(uv) + np.arange(len(lo))
+            mat += ["newmtl blade_lower", *material, f"map_Kd {lower_file(png).name}",
+                    f"map_Bump -bm 1 {lower_file(normal).name}"]
+            turned = True
+        f = tri + base + 1
+        ft = tri + vt_base + 1
+        lines += [f"f {a}/{at_}/{a} {b}/{bt}/{b} {c}/{ct}/{c}" for (a, b, c), (at_, bt, ct) in zip(f[~low], ft[~low])]
+        if low.any():
+            lines.append("usemtl blade_lower")
+            fl = at[tri[low]] + vt_base + 1
+            lines += [f"f {a}/{at_}/{a} {b}/{bt}/{b} {c}/{ct}/{c}" for (a, b, c), (at_, bt, ct) in zip(f[low], fl)]
         base += len(s.positions)
+        vt_base += len(uv) + (int(s.lower.sum()) if low.any() else 0)
     written = []
     if photo_png is not None:
         written.append(atomic_write_bytes(png, photo_png, "texture"))
     if normal_png is not None:
         written.append(atomic_write_bytes(normal, normal_png, "normal map"))
+    if turned:
+        written.append(atomic_write_bytes(lower_file(png), _turned_png(photo_png), "lower face's texture"))
+        written.append(atomic_write_bytes(lower_file(normal), _turned_png(normal_png), "lower face's normal map"))
     written.append(atomic_write_bytes(mtl, ("\n".join(mat) + "\n").encode(), "material"))
     written.append(atomic_write_bytes(path, ("\n".join(lines) + "\n").encode(), "mesh"))
     return written

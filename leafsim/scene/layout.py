@@ -11,7 +11,7 @@ from leafsim.base.errors import LeafsimError
 
 #: the files a leaf's folder holds (:func:`leafsim.scene.job.run_leaf`), and the temporaries of
 #: their atomic writes (``.NAME.XXXXXXXX.tmp``)
-_LEAF_FILES = re.compile(r"(view\.npz|state\.npz|stats\.jsonl|lod\.json|done\.json|leaf(_photo|_baked|_baked_normal)?\.(glb|gltf|bin|obj|mtl|ply|png))")
+_LEAF_FILES = re.compile(r"(view\.npz|state\.npz|stats\.jsonl|lod\.json|done\.json|leaf(_photo|_baked|_baked_normal|_baked_lower|_baked_normal_lower)?\.(glb|gltf|bin|obj|mtl|ply|png))")
 _FRAME_FILES = re.compile(r"state_\d{6}\.npz")
 _TEMP = re.compile(r"\..+\.tmp")
 

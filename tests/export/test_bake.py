@@ -434,11 +434,39 @@ def test_the_crinkle_s_normal_map_is_what_the_window_draws(tmp_path, key, way):
     lines = obj.read_text().splitlines()
     blade_end = lines.index("o veins")
     vt = np.array([[float(a) for a in ln.split()[1:3]] for ln in lines[:blade_end] if ln.startswith("vt ")])
-    assert np.allclose(vt, np.c_[np.abs(Uf[:2 * nT, 0]), 1.0 - np.abs(Uf[:2 * nT, 1])], atol=1e-6)  # the upper face's on both
-    rim_vt = np.c_[Uf[2 * nT:, 0], 1.0 - Uf[2 * nT:, 1]]  # (the glb's rim copies: its rim triangles' frames go unused)
-    tx_o, vt_dir = _client_frames(Pf, np.concatenate([vt, rim_vt]), trif, flip_v=True)  # y along +∂P/∂vt: OBJ's vt grows up the image
-    assert np.median(np.sum(Tf[v, :3] * tx_o[first[v]], axis=1)[top]) > 0.99
-    assert np.median(np.sum(up * vt_dir[first[v]], axis=1)[top]) > 0.99
+    upper = np.c_[np.abs(Uf[:2 * nT, 0]), 1.0 - np.abs(Uf[:2 * nT, 1])]  # the upper face's coordinates, as OBJ vt
+    assert len(vt) == 3 * nT and np.allclose(vt[:2 * nT], upper, atol=1e-6)  # every vertex's, then the lower face's own
+    assert np.allclose(vt[2 * nT:], 1.0 - upper[:nT], atol=1e-6)  # (1 − u, 1 − v): the texel the upper face reads, turned
+    # the lower face (and only it) is drawn with blade_lower: the turned copies of the texture and the map
+    assert f"map_Kd {key}_baked_lower.png" in mtl["blade_lower"] and f"map_Bump -bm 1 {key}_baked_normal_lower.png" in mtl["blade_lower"]
+    turned = {n: cv2.cvtColor(cv2.imread(str(tmp_path / f"{key}_{n}.png"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+              for n in ("baked", "baked_lower", "baked_normal_lower")}
+    assert str(tmp_path / f"{key}_baked_lower.png") in files and str(tmp_path / f"{key}_baked_normal_lower.png") in files
+    assert np.array_equal(turned["baked_normal_lower"], nmap[::-1, ::-1]) and np.array_equal(turned["baked_lower"], turned["baked"][::-1, ::-1])
+    faces, mats, cur = [], [], None
+    for ln in lines[:blade_end]:
+        if ln.startswith("usemtl "):
+            cur = ln.split()[1]
+        elif ln.startswith("f "):
+            faces.append([[int(x) - 1 for x in c.split("/")] for c in ln.split()[1:]])
+            mats.append(cur)
+    faces, mats = np.array(faces), np.array(mats)
+    fv, ft = faces[:, :, 0], faces[:, :, 1]
+    on_lower = mats == "blade_lower"
+    assert np.array_equal(on_lower, (fv < nT).all(axis=1))  # the lower face's triangles, no rim one
+    assert np.all(ft[on_lower] >= 2 * nT) and np.all(ft[~on_lower] < 2 * nT) and np.all(ft[on_lower] - 2 * nT == fv[on_lower])
+    h, w = nmap.shape[:2]
+    for img, ref_img in ((turned["baked_normal_lower"], nmap), (turned["baked_lower"], turned["baked"])):
+        read_low = bilinear(img.astype(float), vt[2 * nT:, 0], 1.0 - vt[2 * nT:, 1], wrap=False)
+        read_up = bilinear(ref_img.astype(float), vt[nT:2 * nT, 0], 1.0 - vt[nT:2 * nT, 1], wrap=False)
+        assert np.abs(read_low - read_up).max() < 0.01  # the same texels under a lower vertex and its twin (vt: 7 digits)
+    # the frames a reader derives from the file's vt (x along increasing u, y along increasing vt,
+    # i.e. up the image) are the glTF's on both faces: the lower face's turned by 180°
+    vt_of_glb = np.concatenate([vt[2 * nT:], vt[nT:2 * nT], np.c_[Uf[2 * nT:, 0], 1.0 - Uf[2 * nT:, 1]]])
+    tx_o, vt_dir = _client_frames(Pf, vt_of_glb, trif, flip_v=True)  # y along +∂P/∂vt: OBJ's vt grows up the image
+    for side in (top, ~top):
+        assert np.median(np.sum(Tf[v, :3] * tx_o[first[v]], axis=1)[side]) > 0.99
+        assert np.median(np.sum(up * vt_dir[first[v]], axis=1)[side]) > 0.99
     for quiet in (Simulator(model, params, seed=0).state(), None):
         p = params if quiet is not None else params.with_overrides({"render.crinkle": 0.0})
         plain = tmp_path / "plain.glb"
