@@ -25,6 +25,11 @@ def _stage(r) -> str:
     return f"{s['frame']}, {100 * s['water']:.1f} % ({r['note'].replace(' stages every 50 frames', '')})"
 
 
+def _pct(x) -> str:
+    """A share as a percentage (— where the run did not measure it)."""
+    return "—" if x is None else f"{100 * x:.1f} %"
+
+
 def _row_name(key, r) -> str:
     return r["kind"] + (" (another leaf)" if r["kind"] == "senescent" and key == "aspen" else "")
 
@@ -57,14 +62,15 @@ def render(folder: Path) -> str:
             if w and w.get("stages"):
                 out.append(f"| {k}{' (other leaf)' if k == 'aspen' else ''} | {w['stages']} | {w['median_tv']:.3f} | {w['p90_tv']:.3f} | "
                            f"{w['max_tv']:.3f} | {w['share_tv_le_0.35']:.2f} | {w['dried_tv']:.3f} |")
-    out += ["", "| species | row | hue spread photo / model (°) | L* spread photo / model | ratio hue / L* | dark spots photo / model |",
-            "|---|---|---|---|---|---|"]
+    out += ["", "| species | row | hue spread photo / model (°) | L* spread photo / model | ratio hue / L* | dark spots photo / model | dark share of the blade photo / model |",
+            "|---|---|---|---|---|---|---|"]
     for k, rep in reps.items():
         for r in rep["rows"]:
             sp, sm, q = r.get("spread_photo"), r.get("spread_model"), r.get("spread_ratio")
             if sp and sm:
                 out.append(f"| {k} | {_row_name(k, r)} | {sp['hue_sd_deg']} / {sm['hue_sd_deg']} | {sp['lightness_sd']} / "
-                           f"{sm['lightness_sd']} | {q['hue']} / {q['lightness']} | {sp['spots']} / {sm['spots']} |")
+                           f"{sm['lightness_sd']} | {q['hue']} / {q['lightness']} | {sp['spots']} / {sm['spots']} | "
+                           f"{_pct(sp.get('dark_share'))} / {_pct(sm.get('dark_share'))} |")
     out += ["", "| species | vein offset along the photo's traced veins: mean px (× L) | p90 px (× L) | midrib mean px (× L) |",
             "|---|---|---|---|"]
     for k, rep in reps.items():

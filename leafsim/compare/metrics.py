@@ -24,7 +24,7 @@ Metrics (:func:`compare_images`):
   distances of the L* histogram (10 bins) and of the hue histogram (18 bins of 20°, pixels
   with C* ≥ 8).
 * **Spread** (:func:`colour_spread`): the within-leaf variation — circular spread of the hue,
-  spread of L*, and the dark spots (count, median diameter / L) — of photo and model, and
+  spread of L*, and the dark spots (count, median diameter / L, share of the blade) — of photo and model, and
   the model / photo ratios.
 * **Vein offset** (:func:`vein_offset`): the photo's own veins traced
   (:mod:`leafsim.outline.venation`) against the model's: how far, along every traced midrib,
@@ -227,11 +227,12 @@ def total_variation(p, q) -> float:
 def colour_spread(rgb: np.ndarray, mask: np.ndarray, length_px: float) -> dict:
     """Within-leaf colour variation of the masked pixels: the circular spread of the CIELAB hue
     (degrees, pixels with C* ≥ 8), the spread of L*, and the dark spots — connected regions at
-    least 15 L* darker than the blade's median and at least (0.01 L)² large: their count and
-    median equivalent diameter over L."""
+    least 15 L* darker than the blade's median and at least (0.01 L)² large: their count,
+    median equivalent diameter over L, and the share of the blade they cover (``dark_share``:
+    steadier than the count, which a streak broken in two doubles)."""
     m = np.asarray(mask, bool)
     if not m.any():
-        return {"hue_sd_deg": None, "lightness_sd": None, "spots": 0, "spot_diameter_L": None}
+        return {"hue_sd_deg": None, "lightness_sd": None, "spots": 0, "spot_diameter_L": None, "dark_share": None}
     lab = _lab(rgb)
     px = lab[m]
     C = np.hypot(px[:, 1], px[:, 2])
@@ -244,7 +245,8 @@ def colour_spread(rgb: np.ndarray, mask: np.ndarray, length_px: float) -> dict:
     areas = areas[areas >= (0.01 * length_px) ** 2]
     return {"hue_sd_deg": None if hue_sd is None else round(hue_sd, 2), "lightness_sd": round(float(px[:, 0].std()), 2),
             "spots": int(areas.size),
-            "spot_diameter_L": round(float(np.median(np.sqrt(4.0 * areas / np.pi))) / length_px, 4) if areas.size else None}
+            "spot_diameter_L": round(float(np.median(np.sqrt(4.0 * areas / np.pi))) / length_px, 4) if areas.size else None,
+            "dark_share": round(float(areas.sum()) / float(m.sum()), 4)}
 
 
 def mean_lab(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:

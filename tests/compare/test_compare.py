@@ -128,3 +128,36 @@ def test_montage_text_is_wrapped_to_the_picture():
     assert len(out) > 2 and out[-1] == "short"
     assert all(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)[0][0] <= 400 for t in out)
     assert " ".join(t.strip() for t in out[:-1]).split() == line.split()
+
+
+def test_colour_spread_counts_and_measures_the_dark_spots_it_is_given():
+    """A uniform blade with dark squares: the spots at least (0.01 L)² large are counted, their
+    median diameter and the share of the blade they cover are the squares' (smaller ones and
+    a merely darker patch, 10 L* down, are not spots); one hue has no spread, two hues Δ apart
+    half and half the circular spread √(−2 ln cos(Δ/2)) (Δ from OpenCV's own CIELAB)."""
+    import numpy as np
+
+    from leafsim.compare.metrics import colour_spread
+
+    L = 1000.0  # leaf length in px: a spot must cover 10 × 10 px
+    img = np.zeros((400, 400, 3), np.uint8)
+    img[:] = (150, 170, 60)  # RGB yellow-green
+    mask = np.zeros((400, 400), bool)
+    mask[20:380, 20:380] = True
+    base = colour_spread(img, mask, L)
+    assert base["spots"] == 0 and base["dark_share"] == 0.0 and base["hue_sd_deg"] < 1e-3
+    sides = (12, 20, 30, 6)  # the last is under the size threshold
+    for k, a in enumerate(sides):
+        img[40 + 80 * k:40 + 80 * k + a, 60:60 + a] = (40, 45, 20)
+    img[300:340, 200:240] = (125, 143, 50)  # ~10 L* darker: no spot
+    got = colour_spread(img, mask, L)
+    assert got["spots"] == 3
+    assert abs(got["spot_diameter_L"] - np.sqrt(4 * 20 ** 2 / np.pi) / L) < 1e-4
+    assert abs(got["dark_share"] - (12 ** 2 + 20 ** 2 + 30 ** 2) / mask.sum()) < 1e-4
+    two = np.zeros_like(img)
+    two[:] = (150, 170, 60)
+    two[:, 200:] = (170, 150, 60)  # another hue
+    lab = cv2.cvtColor(np.array([[[150, 170, 60], [170, 150, 60]]], np.float32) / 255.0, cv2.COLOR_RGB2Lab)[0]
+    hue = np.arctan2(lab[:, 2], lab[:, 1])
+    want = np.degrees(np.sqrt(-2.0 * np.log(np.cos(0.5 * abs(hue[0] - hue[1])))))
+    assert want > 5.0 and abs(colour_spread(two, mask, L)["hue_sd_deg"] - want) < 0.5
