@@ -81,6 +81,10 @@ def _configure_threads() -> None:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
+
+class _Shown(LeafsimError):
+    """A refusal the status bar already shows under its own topic (``guard`` posts no second)."""
+
 class LeafApp:
     """One window: a session, its renderer, camera and the UI state.
 
@@ -240,6 +244,8 @@ class LeafApp:
     def guard(self, fn, *args, topic: str = "app"):
         try:
             return fn(*args)
+        except _Shown:  # already in the status bar under its own topic
+            pass
         except LeafsimError as e:
             self.fail(str(e), topic)
         except Exception as e:  # the GUI must survive anything
@@ -346,6 +352,13 @@ class LeafApp:
             if self.take is not None and s.frame >= self._last_recorded_frame + max(self.record_every, 1):
                 self.requests.append(("record", None))
         pb = s.playback
+        if pb.dry_stalled and self.status.get("dry") is None:
+            stalled = pb.dry_stalled
+            self.status.error("dry", stalled, holds=lambda: pb.dry_stalled == stalled)
+            if self.until_dry:  # the dry leaf asked for will never come
+                self.fatal = stalled
+                self.exit_code = 2
+                self._exit()
         if pb.sim_error and self.status.get("sim") is None:
             self.status.error("sim", pb.sim_error, holds=lambda: pb.sim_error is not None)
             if self.frames is not None or self.until_dry:  # the frame asked for will never come
@@ -537,8 +550,15 @@ class LeafApp:
         return np.ascontiguousarray(np.frombuffer(data, np.uint8).reshape(h, w, 3)[::-1])
 
     def _export_folder(self) -> Path:
-        """The export folder, created when missing (the status bar says so)."""
-        folder, created = ensure_folder(self.export_dir)
+        """The export folder, created when missing (the status bar says so).  A folder it
+        refuses is an error of the topic "folder", cleared once a folder is usable (it stayed
+        after the folder was corrected)."""
+        try:
+            folder, created = ensure_folder(self.export_dir)
+        except LeafsimError as e:
+            self.fail(str(e), "folder")
+            raise _Shown(str(e)) from None
+        self.status.clear("folder", "error")
         if created:
             self.status.info("folder", f"created export folder {folder}", path=folder)
         return folder
@@ -577,6 +597,8 @@ class LeafApp:
         """A new numbered take folder; frames are written while the leaf changes."""
         try:
             self.take = new_take(self._export_folder())
+        except _Shown:
+            return
         except LeafsimError as e:
             self.fail(str(e), "record")
             return
@@ -596,12 +618,13 @@ class LeafApp:
 
     # ------------------------------------------------------------------ actions
     def export_mesh(self) -> Path:
-        """The current snapshot as ``<species>_frame_NNNNN.glb`` in the export folder."""
+        """The current snapshot as ``leafsim_<species>_seed<seed>_f<frame>.glb`` in the export folder."""
         s = self.session
         if s.state is not None and not np.isfinite(s.state.particle_q).all():
             raise LeafsimError(f"Export mesh: the simulation diverged (positions NaN/Inf at frame {s.frame}); "
                                "expected a finite leaf: press Reset")
-        path = free_path(self._export_folder(), f"{s.species_key}_frame_{s.frame:05d}", ".glb", self.mesh_paths)
+        path = free_path(self._export_folder(), f"leafsim_{s.species_key}_seed{s.seed}_f{s.frame:06d}", ".glb",
+                         self.mesh_paths)  # (named as Export frame names its PNG)
         # the blade's colour baked as the window draws it (sub-grid mottle, the photo's detail):
         # about a second of work, on a thread of its own with its own view of the leaf (the
         # window's view keeps drawing), from a copy of the state on screen
@@ -643,7 +666,14 @@ class LeafApp:
         self.status.info("preset", f"loaded {path}", path=path)
 
     def set_params(self, changes: dict) -> None:
-        self.session.set_params(self.session.params.with_overrides(changes))
+        """Stage or apply the panel's changes; a refused value is an error of the topic
+        "params" until a change is accepted (it stayed after the value was corrected)."""
+        try:
+            self.session.set_params(self.session.params.with_overrides(changes))
+        except LeafsimError as e:
+            self.fail(str(e), "params")
+            raise _Shown(str(e)) from None
+        self.status.clear("params", "error")
         self.dirty = True
 
     def switch_species(self, key: str) -> None:

@@ -4,7 +4,9 @@ Each message belongs to a *topic* ("build", "sim", "export", "preset", "record",
 message replaces the topic's old one, so a failed save replaces "saved ..." and a finished
 take replaces "recording ...".  A message may carry a ``holds()`` condition (dropped as soon
 as it is false: "recording" while recording, "diverged" until Reset) and information expires
-after ``INFO_SECONDS``; errors stay until dismissed or replaced by their topic's next message.
+after ``INFO_SECONDS`` (never after a newer note: notes go in the order they came); errors stay
+until dismissed, replaced by their topic's next message, or cleared when what they were about
+succeeds (a parameter accepted, the export folder usable).
 Every text is kept as one line the window can draw (:func:`one_line`): a multi-line reason
 (numba's errors) would be cut by the bar's fixed height, and a path that is not UTF-8 would
 stop imgui from drawing the bar at all.
@@ -56,6 +58,10 @@ class Status:
 
     def info(self, topic: str, text: str, path=None, holds=None, seconds: float | None = INFO_SECONDS) -> None:
         exp = None if (seconds is None or holds is not None) else time.monotonic() + seconds
+        if exp is not None:  # an older note never outlives a newer one (it came back as the newest shown:
+            for m in self._msgs.values():  # "defaults restored" after a later "loaded preset")
+                if m.level == "info" and m.holds is None and (m.expires is None or m.expires > exp):
+                    m.expires = exp
         self._msgs[topic] = Message(topic, one_line(text), "info", None if path is None else str(path), holds, exp)
 
     def error(self, topic: str, text: str, path=None, holds=None) -> None:

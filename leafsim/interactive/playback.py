@@ -167,6 +167,11 @@ class Playback:
         """The last "dry to end" reached the dry threshold (or its frame budget)."""
         return self.worker is not None and self.worker.dry_done
 
+    @property
+    def dry_stalled(self) -> str | None:
+        """Why the last "dry to end" gave up (the water could not fall), or None."""
+        return None if self.worker is None else self.worker.dry_stalled
+
     def dry_to_end(self, on: bool = True) -> None:
         """Fast-forward until the leaf is dry (:meth:`SimWorker.dry_to_end`; before the first
         model: once it is there)."""

@@ -34,7 +34,7 @@ from typing import Any, Callable
 import numpy as np
 
 from leafsim.interactive.eta import DryingEta
-from leafsim.sim.run import DRY_END_FRACTION, DRY_MAX_FRAMES, Run
+from leafsim.sim.run import DRY_END_FRACTION, DRY_MAX_FRAMES, STALL_FRAMES, Run
 
 #: nice increment of the worker thread (Linux: per thread); the UI and llvmpipe keep priority
 WORKER_NICE = 5
@@ -114,6 +114,8 @@ class SimWorker:
         self._steps = 0            # single steps requested
         self._dry = False
         self._dry_until = 0
+        self._dry_best = (1.0, 0)  # (least water fraction seen while drying, the frame it was seen)
+        self.dry_stalled: str | None = None  # why the last "Dry to end" gave up (None: it did not)
         self._eta = DryingEta(DRY_END_FRACTION)  # the time "Dry to end" still needs
         self._pause_at: int | None = None  # play pauses at this frame (scripted runs)
         self._hold_every: int | None = None  # recording: free play waits at every this many frames
@@ -268,7 +270,8 @@ class SimWorker:
         wf = self.water_fraction(s) if drying else 1.0
         if drying:
             self._eta.frame(time.monotonic(), wf, self.simulator.on_coarsest)
-        done = drying and (wf <= DRY_END_FRACTION or self.error is not None or s.frame >= self._dry_until)
+        stalled = drying and self._dry_stall(wf, s.frame)
+        done = drying and (wf <= DRY_END_FRACTION or self.error is not None or s.frame >= self._dry_until or stalled)
         pause = self._pause_at is not None and s.frame >= self._pause_at
         hold = self._hold_every is not None and s.frame >= self._hold_next
         if hold:
@@ -285,6 +288,20 @@ class SimWorker:
             with self._cond:
                 self._dry = self._playing = False
                 self.dry_done = True
+
+    def _dry_stall(self, wf: float, frame: int) -> bool:
+        """True (and :attr:`dry_stalled` says why) when the water left has not fallen in
+        :data:`~leafsim.sim.run.STALL_FRAMES` frames, as a command-line ``--until dry`` gives up
+        (not under a weather record, which may hold the air saturated for days): with no
+        evaporation the button ran for ever, its bar at 0 %, and said nothing."""
+        best, since = self._dry_best
+        if wf < best - 1e-9 * max(best, 1.0):
+            self._dry_best = (wf, frame)
+        elif frame - since >= STALL_FRAMES and self.simulator.params["environment.drive"] != "weather":
+            self.dry_stalled = (f"Dry to end stopped at frame {frame}: the water left ({100 * wf:.1f} %) has not fallen in "
+                                f"{STALL_FRAMES} frames (evaporation 0, or air that cannot take more water?)")
+            return True
+        return False
 
     def water_fraction(self, state=None) -> float:
         s = self.run.state if state is None else state
@@ -410,6 +427,11 @@ class SimWorker:
         with self._cond:
             self._dry = bool(on) and self.error is None
             self._dry_until = self.run.state.frame + DRY_MAX_FRAMES
+            self._dry_best = (self.water_fraction(), self.run.state.frame)
+            self.dry_stalled = None
+            if self._dry and not self.simulator.effects.get("osmosis", False):
+                self._dry = False
+                self.dry_stalled = "Dry to end: the water left cannot fall with effects.osmosis off"
             self.dry_done = False
             if self._dry:
                 self._eta.start(time.monotonic(), self.dry_progress())
@@ -464,6 +486,7 @@ class SimWorker:
             self._hold_next = state.frame + (self._hold_every or 0)
         self._dry = False
         self.dry_done = False
+        self.dry_stalled = None
         self._rate.clear()
         with self._cond:
             self._apply_params()

@@ -255,7 +255,7 @@ def test_export_mesh_button_writes_a_glb(tmp_path):
 
     app = run_gui(body)
     assert app.error is None
-    files = sorted(out.glob("oak_frame_*.glb"))
+    files = sorted(out.glob("leafsim_oak_seed*_f*.glb"))
     assert len(files) == 2 and files[0].stem + "_2" == files[1].stem
     assert seen["first"].startswith(("exporting mesh", "exported mesh"))
     assert seen["msg"].path and str(out) in str(seen["msg"].path) and seen["msg"].text.startswith("exported mesh")
@@ -484,6 +484,26 @@ def test_gui_until_dry_ends_at_the_dry_frame():
     assert app.exit_code == 0 and session.frame > 0
     assert session.water_fraction() <= DRY_END_FRACTION + 1e-9
     assert session.frame == session.playback.worker.run.state.frame  # the drawn frame is the last one
+
+
+def test_gui_until_dry_of_a_leaf_that_cannot_dry_exits_with_the_reason(monkeypatch):
+    """No evaporation: "Dry to end" gives up once the water has not fallen for STALL_FRAMES
+    frames (it ran for ever, silent); the window shows why, and ``--until dry`` exits 2 with it."""
+    from imgui_bundle import immapp
+
+    from leafsim.gui.app import LeafApp, _configure_threads
+    from leafsim.interactive import worker as wmod
+    from leafsim.interactive.session import Session
+
+    monkeypatch.setattr(wmod, "STALL_FRAMES", 30)
+    _configure_threads()
+    session = Session("oak", overrides={"mesh.spacing": 0.06, "osmosis.evaporation_top": 0.0,
+                                        "osmosis.evaporation_bottom": 0.0}, build=False)
+    session.rebuild_async()
+    app = LeafApp(session, until_dry=True)
+    immapp.run(app.runner_params(), app.addons())
+    assert app.exit_code == 2 and "has not fallen in 30 frames" in app.fatal
+    assert app.status.get("dry").level == "error" and session.water_fraction() > 0.99
 
 
 def test_cli_gui_build_error_is_one_line_on_stderr(tmp_path, xdisplay):

@@ -98,10 +98,11 @@ def test_bad_export_folders_are_one_line_errors_for_every_export_button(tmp_path
                 seen[(name, button)] = (errors(app), app.take is not None)
                 if app.take is not None:
                     ctx.item_click("**/###record")
-        clear(app)
-        ctx.item_input_value("**/export folder", str(good))
+        seen["last bad"] = errors(app)
+        ctx.item_input_value("**/export folder", str(good))  # (the last refusal is not dismissed: the export clears it)
         ctx.item_click("**/Export frame")
         wait_until(ctx, lambda: app.exported, 60)
+        seen["after frame"] = errors(app)  # Export mesh's refusal went when the folder served another button
         ctx.item_click("**/Export mesh")
         ctx.yield_(2)
         seen["good"] = errors(app)
@@ -114,7 +115,7 @@ def test_bad_export_folders_are_one_line_errors_for_every_export_button(tmp_path
         assert not recording, f"{name} / {button}: recording started"
     assert "empty" in seen[("empty", "Export frame")][0][0]
     assert "broken symbolic link" in seen[("broken link", "Export frame")][0][0]
-    assert seen["good"] == [] and seen["usable"] == (True, True)
+    assert len(seen["last bad"]) == 1 and seen["after frame"] == [] and seen["good"] == [] and seen["usable"] == (True, True)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before + ["out"])
     assert len(list(good.glob("*.png"))) == 1 and len(list(good.glob("*.glb"))) == 1
 
@@ -294,6 +295,12 @@ def test_typed_slider_values_stay_in_range_and_finite():
             ctx.item_input_value(widget_ref(name), text)
             ctx.yield_(2)
             seen[text] = (s.params[name], s.simulator.params[name], errors(app))
+        ctx.item_input_value(widget_ref(name), "nan")  # refused; then a good value clears the error
+        ctx.yield_(2)
+        seen["refused"] = errors(app)
+        ctx.item_input_value(widget_ref(name), str(0.5 * (p.lo + p.hi)))
+        ctx.yield_(2)
+        seen["accepted"] = errors(app)
         ctx.item_close("**/###group Osmosis")
         ctx.item_click("**/as fast as possible")
         for text in ("nan", "inf"):
@@ -307,6 +314,7 @@ def test_typed_slider_values_stay_in_range_and_finite():
         v, sim_v, errs = seen[text]
         assert np.isfinite(v) and p.lo <= v <= p.hi and v == sim_v, (text, v)
         assert errs == [] or (len(errs) == 1 and one_line(errs[0]) and name in errs[0]), (text, errs)
+    assert seen["accepted"] == [], seen  # the refusal went with the next accepted value (it stayed)
     for text in ("nan", "inf"):
         speed, alpha, worker_speed, errs = seen[("speed", text)]
         assert np.isfinite(speed) and 0.001 <= speed <= 2.0 and 0.0 <= alpha <= 1.0, (text, speed, alpha)

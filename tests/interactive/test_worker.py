@@ -350,3 +350,26 @@ def test_a_reset_asked_for_while_one_fails_is_still_made(s, monkeypatch):
     release.set()
     assert until(lambda: w.epoch >= second, 300)
     assert len(calls) == 2 and w.error is None
+
+
+def test_dry_to_end_gives_up_with_a_reason_when_the_water_cannot_fall(s, monkeypatch):
+    """No evaporation: the button ran for ever, its bar at 0 %, and said nothing.  Now it stops
+    once the water left has not fallen for STALL_FRAMES frames (as ``--until dry`` does) and says
+    why; with osmosis off it refuses at once; a later press with evaporation dries as before."""
+    from leafsim.interactive import worker as wmod
+
+    monkeypatch.setattr(wmod, "STALL_FRAMES", 40)
+    s.set_params({"osmosis.evaporation_top": 0.0, "osmosis.evaporation_bottom": 0.0})
+    pb = s.playback
+    pb.dry_to_end()
+    assert until(lambda: (pb.take_snapshot() or True) and not pb.drying, 120)
+    assert pb.dry_stalled and "has not fallen in 40 frames" in pb.dry_stalled and "\n" not in pb.dry_stalled
+    assert 40 <= s.frame <= 60 and s.water_fraction() > 0.99
+    s.set_params({"osmosis.evaporation_top": 50.0, "osmosis.evaporation_bottom": 50.0})
+    pb.dry_to_end()
+    assert pb.dry_stalled is None
+    assert until(lambda: (pb.take_snapshot() or True) and not pb.drying, 120)
+    assert pb.dry_stalled is None and s.water_fraction() <= DRY_END_FRACTION + 1e-9
+    s.set_params({"effects.osmosis": False})
+    pb.dry_to_end()
+    assert not pb.drying and "effects.osmosis off" in pb.dry_stalled
