@@ -89,6 +89,12 @@ def species_params(args, effects: bool = False) -> tuple[Species, ParamSet]:
         raise LeafsimError(f"--set {both[0]} with --effects {args.effects}: --effects switches every effect on or off; "
                            f"list the effects you want in --effects, or use --set effects.* without it")
     params = sp.params.with_overrides({**given, **extra}, where="--set")
+    if effects:  # a command that simulates: substeps coarser than any measured level give a wrong shape, silently
+        from leafsim.sim.effects.dynamics import unmeasured_substeps
+
+        coarse = unmeasured_substeps(params)
+        if coarse:
+            warn(coarse)
     RESOLVED.clear()
     RESOLVED.update(species=sp.key, config=str(sp.config) if sp.config is not None else "(shipped configs/leaves.json)",
                     seed=getattr(args, "seed", None), quality=getattr(args, "quality", None),

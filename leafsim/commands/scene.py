@@ -19,6 +19,29 @@ def usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
+def _warn_unmeasured_substeps(scene) -> None:
+    """One warning line per group whose simulated mesh runs XPBD substeps coarser than every
+    measured quality level (:func:`~leafsim.sim.effects.dynamics.unmeasured_substeps`)."""
+    from leafsim.config.species import get_species
+    from leafsim.sim.effects import EFFECTS
+    from leafsim.sim.effects.dynamics import unmeasured_substeps
+
+    seen = set()
+    for job in scene.jobs:
+        group = job.meta.get("group")
+        if group in seen:
+            continue
+        seen.add(group)
+        p = get_species(job.species, job.config).params.with_overrides(job.overrides)
+        if job.lod is not None:
+            p = p.with_overrides({"mesh.spacing": job.lod["simulate"]})
+        if job.effects is not None:  # the group's own effect list (the canopy's leaves: colour only)
+            p = p.with_overrides({f"effects.{e}": e in job.effects for e in EFFECTS})
+        coarse = unmeasured_substeps(p)
+        if coarse:
+            warn(f"{scene.path}: group {group!r}: {coarse}")
+
+
 def cmd_scene(args):
     if args.out is not None and not args.out.strip():
         raise LeafsimError("--out '': expected a folder name for the scene's files (or leave --out out)")
@@ -31,6 +54,7 @@ def cmd_scene(args):
     if args.scheduler is None and min(workers, len(scene.jobs)) > cpus:
         warn(f"--workers {workers} is more than the CPUs this process may use ({cpus}): the leaves will share "
              f"cores (each worker holds its own leaf in memory; the results are the same for any worker count)")
+    _warn_unmeasured_substeps(scene)
     out = Path(args.out) if args.out else Path("out") / Path(args.scene).stem
     if not args.out:  # the default out/NAME: its parent is leafsim's to make (--out's must exist)
         try:

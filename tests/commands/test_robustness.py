@@ -456,3 +456,43 @@ def test_a_senescent_photos_given_end_on_its_background_is_refused(tmp_path):
     cfg.write_text(json.dumps({"species": {"t": entry}}))
     one_line(*run_cli("compare", "--config", cfg, "--species", "t"), "senescent_photo.base_px", "outside the leaf traced",
              "old.png")
+
+
+def test_substeps_coarser_than_every_measured_level_are_named_not_run_silently(tmp_path):
+    """XPBD substeps coarser (h²/(M r⁴)) than the coarsest quality level's give a shape nothing
+    measured (maple at dynamics.substeps 1 dried nearly flat, the window said nothing): one
+    warning line naming the parameters; every quality level, species default and shipped scene
+    stays quiet, and an integrator or effect set that runs no XPBD substeps too."""
+    from leafsim.config.params import ParamSet
+    from leafsim.config.presets import QUALITY
+    from leafsim.config.species import get_species, load_library
+    from leafsim.sim.effects.dynamics import unmeasured_substeps
+
+    assert all(unmeasured_substeps(ParamSet(v)) is None for v in QUALITY.values())
+    assert all(unmeasured_substeps(get_species(k).params) is None for k in load_library())
+    for over, ratio in (({"dynamics.substeps": 1}, 392), ({"dynamics.dt": 0.02}, 24.5), ({"dynamics.substeps": 10}, 3.92)):
+        w = unmeasured_substeps(ParamSet(over))
+        assert w and f"{ratio:.3g}x coarser" in w and "dynamics.substeps" in w and "\n" not in w, (over, w)
+    assert unmeasured_substeps(ParamSet({"dynamics.substeps": 20})) is None  # as coarse as draft (with its M = 256)
+    assert unmeasured_substeps(ParamSet({"dynamics.substeps": 1, "effects.pbd": False, "effects.bending": False})) is None
+    assert unmeasured_substeps(ParamSet({"dynamics.substeps": 1, "dynamics.integrator": "sun"})) is None
+    code, _, err = run_cli("run", *OAK, "--set", "dynamics.substeps=1", "--frames", "2")
+    assert code == 0 and err.count("leafsim: warning: dynamics: substeps of") == 1 and err.count("\n") == 1, err
+    code, _, err = run_cli("run", *OAK, "--frames", "2")
+    assert code == 0 and "warning" not in err, err
+    from leafsim.commands.scene import _warn_unmeasured_substeps
+    from leafsim.scene.run import load_scene
+
+    for scene in sorted(Path("configs/scenes").glob("*.json")):  # (the canopy's dt 0.05 s: colour only, no XPBD)
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            _warn_unmeasured_substeps(load_scene(scene))
+        assert err.getvalue() == "", (scene, err.getvalue())
+    coarse = {"name": "t", "seed": 0, "groups": [
+        {"name": "slow", "species": "oak", "count": 2, "params": {"mesh.spacing": 0.06, "dynamics.substeps": 1}, "stop": {"frames": 1}},
+        {"name": "fine", "species": "oak", "count": 1, "params": {"mesh.spacing": 0.06}, "stop": {"frames": 1}}]}
+    (tmp_path / "t.json").write_text(json.dumps(coarse))
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        _warn_unmeasured_substeps(load_scene(tmp_path / "t.json"))
+    assert err.getvalue().count("\n") == 1 and "group 'slow'" in err.getvalue(), err.getvalue()

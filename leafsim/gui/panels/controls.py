@@ -16,6 +16,7 @@ from leafsim.gui.status import printable
 from leafsim.gui.widgets import params_panel
 from leafsim.config.params import check_seed
 from leafsim.interactive.session import species_keys
+from leafsim.sim.effects.dynamics import unmeasured_substeps
 
 
 def path_field(label: str, value: str) -> str:
@@ -114,6 +115,11 @@ class ControlsPanel:
         lines = quality_lines(table, quality_of(ParamSet()))
         tip("Mesh and solver settings, measured against each species' converged limit (docs/accuracy.md):\n"
             + "\n".join(lines))
+        coarse = unmeasured_substeps(app.session.params)
+        if coarse:  # (a leaf at dynamics.substeps 1 dried flat, and nothing said why)
+            imgui.same_line()
+            imgui.text_colored((0.95, 0.55, 0.1, 1.0), "substeps too coarse")
+            tip(coarse.replace(": ", ":\n", 1))
 
     def playback_rows(self) -> None:
         app = self.app
