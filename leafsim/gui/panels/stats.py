@@ -11,6 +11,14 @@ from leafsim.gui.photo import UV_CORNERS, leaf_axes, panel_quad, screen_rotation
 from leafsim.sim.environment import clock_text
 
 
+
+def grams(g: float) -> str:
+    """A mass in grams, 3 digits, in mg below 0.1 g and µg below 0.1 mg ("0.0001238 g" ran past
+    the panel's edge)."""
+    if abs(g) >= 0.1 or g == 0.0:
+        return f"{g:.3g} g"
+    return f"{1e3 * g:.3g} mg" if abs(g) >= 1e-4 else f"{1e6 * g:.3g} µg"
+
 class StatsPanel:
     def __init__(self, app):
         self.app = app
@@ -63,8 +71,8 @@ class StatsPanel:
         # the blade's water and share, the stalk's apart (one total beside the blade's share misread)
         w, b = s.state.particle_water, s.model.blade_particles
         stalk = 1e3 * float(w[~b].sum())
-        imgui.text(f"water: blade {1e3 * float(w[b].sum()):.4g} g ({100 * s.water_fraction():.1f} %)"
-                   + (f", stalk {stalk:.3g} g" if (~b).any() else ""))
+        imgui.text(f"water: blade {grams(1e3 * float(w[b].sum()))} ({100 * s.water_fraction():.1f} %)"
+                   + (f", stalk {grams(stalk)}" if (~b).any() else ""))
         if h["residual"]:
             imgui.text(f"residual {h['residual'][-1]:.3g}   kinetic {h['kinetic'][-1]:.3g} J")
         self.plots()

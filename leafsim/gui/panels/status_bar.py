@@ -40,9 +40,10 @@ class StatusBar:
             more = f"  (+{len(msgs) - 1})" if len(msgs) > 1 else ""
             imgui.push_style_color(imgui.Col_.text, colour)
             x_end = x_left + avail - PROGRESS_W - 12  # long text is cut here (full text: tooltip)
-            imgui.push_clip_rect(imgui.get_cursor_screen_pos(), (x_end, 1e5), True)
-            imgui.text_unformatted(("Error: " if m.level == "error" else "") + m.text + more)
-            imgui.pop_clip_rect()
+            full = ("Error: " if m.level == "error" else "") + m.text
+            room = x_end - imgui.get_cursor_screen_pos().x - imgui.calc_text_size(more).x
+            # cut with an ellipsis (it stopped mid-word at the progress bar, as if that were all)
+            imgui.text_unformatted(fit_text(full, max(room, 40.0), imgui.calc_text_size) + more)
             imgui.pop_style_color()
             if imgui.is_item_hovered():
                 imgui.set_tooltip("\n".join(("Error: " if x.level == "error" else "") + x.text for x in msgs))

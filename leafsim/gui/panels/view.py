@@ -20,6 +20,22 @@ LEGEND_CARD = (0.97, 0.97, 0.95, 0.82)
 
 
 
+#: the widest line of the colour bar's label [px] (a longer label wraps)
+LEGEND_TEXT_W = 120.0
+
+
+def wrap_words(text: str, width: float, measure) -> list[str]:
+    """``text`` in lines of at most ``width`` px (``measure(s)`` → px), broken between words (a
+    word wider than that keeps a line of its own)."""
+    lines: list[str] = []
+    for word in text.split():
+        if lines and measure(lines[-1] + " " + word) <= width:
+            lines[-1] += " " + word
+        else:
+            lines.append(word)
+    return lines or [""]
+
+
 def tick_labels(values) -> list[str]:
     """The colour bar's tick labels: 3 significant digits, more where that would print two
     ticks alike (a field spanning 99.6-100 % read "100" at every tick)."""
@@ -47,18 +63,32 @@ class ViewOverlay:
             txt = f"{sp.name}  frame {s.frame}  {clock_text(s.state, s.params)}  water {100 * s.water_fraction():.1f} %"
             dl.add_text((x0 + 12, y0 + h - 24), imgui.get_color_u32((0.1, 0.1, 0.1, 1.0)), txt)
             if app.view in HEAT_UNITS and app.renderer is not None and app.renderer.mesh is not None:
-                self.legend(dl, x0 + w - 70, y0 + 44, h * 0.33)
+                self.legend(dl, x0 + w - 70, y0 + 8, h * 0.33)
 
-    def legend(self, dl, x: float, y: float, height: float) -> None:
-        """Colour bar of the heat map with its range, ticks and unit."""
+    def legend(self, dl, x: float, card_top: float, height: float) -> None:
+        """Colour bar of the heat map with its range, ticks and unit, on a card whose top is at
+        ``card_top``; the bar is ``height`` px tall."""
         app = self.app
         label, unit, k = HEAT_UNITS[app.view]
         opts = app.render_options()
         lo, hi = app.renderer.scalar_range(opts)
-        tw = imgui.calc_text_size(label).x
+        # the label wrapped to the card's width: on one line a long one ("lamina's excess length
+        # (render.crinkle)") made a 265 px card that hid most of maple's right lobe
+        ts = np.linspace(0.0, 1.0, 5)
+        ticks = tick_labels((lo + (hi - lo) * ts) * k)
+        # the card reaches past the widest tick label ("0.0323" touched its edge), the view's
+        # right edge staying where it was: a wider label moves the bar left
+        right = 26 + max(imgui.calc_text_size(t).x for t in ticks) + 8
+        x -= max(right - 66.0, 0.0)
+        lines = wrap_words(label, LEGEND_TEXT_W, lambda t: imgui.calc_text_size(t).x)
+        lh = imgui.get_text_line_height()
+        tw = max(imgui.calc_text_size(t).x for t in lines)
+        top = card_top + 6
+        y = top + lh * len(lines) + 22  # the bar, under the label and the unit
         # a light card behind the bar, its ticks and its label: they stay legible where the leaf
         # reaches under them (a wide leaf's lobe ran under the bar, its numbers unreadable)
-        dl.add_rect_filled((min(x - 10, x + 54 - tw), y - 42), (x + 66, y + height + 28),
+        edge = x + max(right, 66.0)
+        dl.add_rect_filled((min(x - 10, edge - 6 - tw), top - 6), (edge, y + height + 28),
                            imgui.get_color_u32(LEGEND_CARD), 6.0)
         n = 32
         for i in range(n):  # top = high
@@ -70,16 +100,16 @@ class ViewOverlay:
             dl.add_rect_filled_multi_color((x, y_a), (x + 18, y_b), u0, u0, u1, u1)
         ink = imgui.get_color_u32((0.1, 0.1, 0.1, 1.0))
         dl.add_rect((x, y), (x + 18, y + height), ink)
-        ts = np.linspace(0.0, 1.0, 5)
-        for t, text in zip(ts, tick_labels((lo + (hi - lo) * ts) * k)):
+        for t, text in zip(ts, ticks):
             ty = y + height * (1.0 - t)
             dl.add_line((x + 18, ty), (x + 23, ty), ink)
             dl.add_text((x + 26, ty - 7), ink, text)
-        dl.add_text((x + 60 - tw, y - 36), ink, label)
+        for i, t in enumerate(lines):  # right-aligned, as the card's right edge is fixed
+            dl.add_text((edge - 6 - imgui.calc_text_size(t).x, top + lh * i), ink, t)
         dl.add_text((x, y - 20), ink, f"[{unit}]")
         if not opts.scalar_range:
             note = "2nd..98th pct"
-            dl.add_text((x + 60 - imgui.calc_text_size(note).x, y + height + 8), ink, note)
+            dl.add_text((edge - 6 - imgui.calc_text_size(note).x, y + height + 8), ink, note)
 
     def photo_overlay(self, dl) -> None:
         """The photo projected onto the leaf's rest place (overlay or blink compare)."""
