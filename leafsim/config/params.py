@@ -240,9 +240,9 @@ _f("environment.time_warp", 3.0e4, 1.0, 1.0e7, "s/s", "Real seconds of weather p
 
 # ---------------------------------------------------------------- shrink (live)
 G = "Shrink"
-_f("shrink.sigma_surface_top", 0.16, 0.0, 3.0, "", "σ of surface springs in the top layer V.", G, False)
-_f("shrink.sigma_surface_bottom", 0.15, 0.0, 3.0, "", "σ of surface springs in the bottom layer T.", G, False)
-_f("shrink.sigma_vein", 0.05, 0.0, 3.0, "", "σ of vein springs.", G, False)
+_f("shrink.sigma_surface_top", 0.16, 0.0, 3.0, "", "Shrinkage σ of the top layer V's surface springs (dimensionless): a spring's rest length is l₀ (1 − σ (1 − v)^α), v its cells' remaining water share (α = shrink.alpha), clamped at shrink.l_min; 0.16 shortens a fully dried spring by 16 %. Top above bottom curls the blade up (the bilayer); 3 is far beyond any measured leaf (real leaves shrink a few to 20 % in area).", G, False)
+_f("shrink.sigma_surface_bottom", 0.15, 0.0, 3.0, "", "Shrinkage σ of the bottom layer T's surface springs (dimensionless): rest length l₀ (1 − σ (1 − v)^α), v the remaining water share, clamped at shrink.l_min; 0.15 shortens a fully dried spring by 15 %. Bottom above top curls the blade down.", G, False)
+_f("shrink.sigma_vein", 0.05, 0.0, 3.0, "", "Shrinkage σ of the vein springs (dimensionless): rest length l₀ (1 − σ (1 − v)^α) as for the surface; veins shrink far less than the lamina (0.05: 5 % when dry), so the lamina between them puckers.", G, False)
 _f("shrink.alpha", 1.0, 0.1, 4.0, "", "Exponent α of (1 − v_rel) in the shrink law.", G, False)
 _f("shrink.curl_anisotropy", 0.6, 0.0, 1.0, "", "Anisotropy β of the bilayer curl relative to the local main/lateral vein direction: hinges that bend the blade across a vein curl × (1 + β), along it × (1 − β), so lobes cup about their own veins (0: isotropic).", G, False)
 _f("shrink.patchiness", 0.0, 0.0, 1.5, "", "Spread of the shrinkage within the blade: each spring's shrink and each hinge's bilayer curl × (1 + a z), z a seeded smooth random field (zero mean, unit spread) with correlation length shrink.patch_size, the same at any mesh spacing; patches that shrink less than their surroundings are pressed by them and the blade crumples and twists (dried leaves crumple from internal strain gradients whose origin is not known: Guo et al. 2025).  0 = the tissue shrinks alike everywhere.", G, False)
