@@ -46,6 +46,8 @@ class Param:
     rebuild : True when a change needs outline/veins/mesh to be regenerated.
     choices : allowed values for ``kind == "choice"``.
     log : GUI slider on a logarithmic scale.
+    only : ``(key, value)``: the parameter acts only while ``key`` has ``value`` (the weather's
+        temperature only with ``environment.drive = weather``); the GUI dims it otherwise.
     """
 
     name: str
@@ -59,6 +61,11 @@ class Param:
     rebuild: bool = False
     choices: tuple[str, ...] = ()
     log: bool = False
+    only: tuple = ()  # (key, value): the parameter acts only while key has that value (else unused)
+
+    def applies(self, params) -> bool:
+        """Whether this parameter acts under ``params`` (see ``only``)."""
+        return not self.only or params[self.only[0]] == self.only[1]
 
     def coerce(self, value: Any, where: str = "") -> Any:
         """Return ``value`` converted to this parameter's type, or raise LeafsimError."""
@@ -125,8 +132,8 @@ def show(value: Any, limit: int = 40) -> str:
 _DECL: list[Param] = []
 
 
-def _f(name, default, lo, hi, unit="", help="", group="", rebuild=False, log=False):
-    _DECL.append(Param(name, "float", float(default), lo, hi, unit, help, group, rebuild, (), log))
+def _f(name, default, lo, hi, unit="", help="", group="", rebuild=False, log=False, only=()):
+    _DECL.append(Param(name, "float", float(default), lo, hi, unit, help, group, rebuild, (), log, tuple(only)))
 
 
 def _i(name, default, lo, hi, unit="", help="", group="", rebuild=False):
@@ -215,8 +222,8 @@ _f("mass.water_fraction", 0.7, 0.05, 0.95, "", "Fraction of the fresh mass that 
 # ---------------------------------------------------------------- osmosis (live)
 G = "Osmosis"
 _f("osmosis.diffusion", 1e-5, 0.0, 1e5, "m²/s", "Osmotic diffusivity D of the water concentration (effective D·τ̄ with Jeong's τ); D·T_dry/L² ≲ 0.1 keeps margin-first drying visible, ≫ 1 dries every layer uniformly.", G, False, log=True)
-_f("osmosis.evaporation_top", 0.014, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the top surface (layer V) per unit leaf area and simulated second (the simulated clock is compressed: see docs/method.md).", G, False, log=True)
-_f("osmosis.evaporation_bottom", 0.0105, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the bottom surface (layer T) per unit leaf area and simulated second.", G, False, log=True)
+_f("osmosis.evaporation_top", 0.014, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the top surface (layer V) per unit leaf area and simulated second (the simulated clock is compressed: see docs/method.md).", G, False, log=True, only=("environment.drive", "rates"))
+_f("osmosis.evaporation_bottom", 0.0105, 0.0, 100.0, "kg/(m²·s)", "Evaporation from the bottom surface (layer T) per unit leaf area and simulated second.", G, False, log=True, only=("environment.drive", "rates"))
 _f("osmosis.edge_evaporation", 2.0, 0.0, 20.0, "", "Margin-enhanced evaporation β: a particle at distance d from the margin evaporates 1 + β √(ℓ/(d + ℓ)) times more (the boundary layer is thin at the edge), normalised so the blade's mean stays the declared rate; 0 = uniform.", G, False)
 _f("osmosis.edge_length", 0.003, 0.0, 0.1, "m", "Length scale ℓ of the margin-enhanced evaporation (a few mm: the boundary layer thickness near the edge).", G, False, log=True)
 _f("osmosis.patchiness", 0.0, 0.0, 2.0, "", "Patchy hydraulic failure a: evaporation × exp(a·f) for the blade's seeded smooth patch field f (zero mean, unit spread; patches ≈ 0.12 leaf lengths), normalised so the blade's mean stays the declared rate; 0 = none.", G, False)
@@ -224,19 +231,19 @@ _b("osmosis.through_thickness", True, "Water also flows between the two layers t
 _i("osmosis.every", 1, 1, 50, "frames", "Solve osmosis and evaporation every k-th frame over k Δt (water moves far slower than the blade: a cheaper frame for a small error, see docs/accuracy.md).", G, False)
 _c("osmosis.solver", "auto", ("auto", "direct", "halves", "cg", "jacobi"), "Linear solver of the implicit osmosis step: direct = factored once, two triangular solves a step; halves = the same factored in two halves and a separator, the halves solved on two threads when that times faster (a 132 k-particle solve 20 → 13–14 ms on a quiet 2-core machine, 12 % slower with the other core busy or drawing the window, and on one numba thread; docs/performance.md; direct where the leaf is too small to cut, under about a thousand particles); cg, jacobi = iterative, to osmosis.tolerance; auto = direct up to 300 k unknowns, else cg.", G, False)
 _f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True)
-_f("osmosis.g_min", 4.0, 0.1, 50.0, "mmol/(m²·s)", "Minimum (cuticular) leaf conductance to water vapour after the stomata have shut, both sides together per leaf area (Duursma et al. 2019 compile 1–11 for our genera); used when environment.drive = weather.", G, False, log=True)
-_f("osmosis.g_stomata", 60.0, 0.0, 1000.0, "mmol/(m²·s)", "Stomatal conductance of the detached leaf while its stomata are open (environment.drive = weather); they shut as the tissue loses water (osmosis.stomata_*_rwc).", G, False)
-_f("osmosis.stomata_top", 0.0, 0.0, 1.0, "", "Share of the stomatal conductance on the top (adaxial) surface: 0 = hypostomatous (the trees here), 0.5 = amphistomatous.", G, False)
-_f("osmosis.stomata_open_rwc", 0.97, 0.0, 1.0, "", "Relative water content above which the stomata are fully open (weather drive); a value below osmosis.stomata_closed_rwc counts as that one (they then shut at once).", G, False)
-_f("osmosis.stomata_closed_rwc", 0.85, 0.0, 1.0, "", "Relative water content below which the stomata are shut and only the cuticle loses water (weather drive); linear between the two.", G, False)
+_f("osmosis.g_min", 4.0, 0.1, 50.0, "mmol/(m²·s)", "Minimum (cuticular) leaf conductance to water vapour after the stomata have shut, both sides together per leaf area (Duursma et al. 2019 compile 1–11 for our genera); used when environment.drive = weather.", G, False, log=True, only=("environment.drive", "weather"))
+_f("osmosis.g_stomata", 60.0, 0.0, 1000.0, "mmol/(m²·s)", "Stomatal conductance of the detached leaf while its stomata are open (environment.drive = weather); they shut as the tissue loses water (osmosis.stomata_*_rwc).", G, False, only=("environment.drive", "weather"))
+_f("osmosis.stomata_top", 0.0, 0.0, 1.0, "", "Share of the stomatal conductance on the top (adaxial) surface: 0 = hypostomatous (the trees here), 0.5 = amphistomatous.", G, False, only=("environment.drive", "weather"))
+_f("osmosis.stomata_open_rwc", 0.97, 0.0, 1.0, "", "Relative water content above which the stomata are fully open (weather drive); a value below osmosis.stomata_closed_rwc counts as that one (they then shut at once).", G, False, only=("environment.drive", "weather"))
+_f("osmosis.stomata_closed_rwc", 0.85, 0.0, 1.0, "", "Relative water content below which the stomata are shut and only the cuticle loses water (weather drive); linear between the two.", G, False, only=("environment.drive", "weather"))
 
 # ---------------------------------------------------------------- environment (live)
 G = "Environment"
 _c("environment.drive", "rates", ("rates", "weather"), "What drives evaporation: rates = the declared osmosis.evaporation_* per simulated second (a compressed clock); weather = temperature, humidity and wind through the cuticular, stomatal and boundary-layer conductances, in real time × environment.time_warp (docs/method.md §3).", G, False)
-_f("environment.temperature", 20.0, -10.0, 45.0, "°C", "Air (and leaf) temperature; sets the saturation vapour pressure (weather drive).", G, False)
-_f("environment.humidity", 0.5, 0.0, 0.99, "", "Relative humidity of the air, 0–1 (weather drive): the vapour-pressure deficit is e_s(T)(1 − RH).", G, False)
-_f("environment.wind", 0.5, 0.0, 20.0, "m/s", "Air speed over the leaf (weather drive): the boundary-layer conductance grows as √(u/d); still air counts as 0.1 m/s.", G, False)
-_f("environment.time_warp", 3.0e4, 1.0, 1.0e7, "s/s", "Real seconds of weather per simulated second (weather drive): drying takes hours to days, the blade's mechanics milliseconds, so the drying clock runs this much faster (3·10⁴: a day in ≈ 3 simulated seconds).", G, False, log=True)
+_f("environment.temperature", 20.0, -10.0, 45.0, "°C", "Air (and leaf) temperature; sets the saturation vapour pressure (weather drive).", G, False, only=("environment.drive", "weather"))
+_f("environment.humidity", 0.5, 0.0, 0.99, "", "Relative humidity of the air, 0–1 (weather drive): the vapour-pressure deficit is e_s(T)(1 − RH).", G, False, only=("environment.drive", "weather"))
+_f("environment.wind", 0.5, 0.0, 20.0, "m/s", "Air speed over the leaf (weather drive): the boundary-layer conductance grows as √(u/d); still air counts as 0.1 m/s.", G, False, only=("environment.drive", "weather"))
+_f("environment.time_warp", 3.0e4, 1.0, 1.0e7, "s/s", "Real seconds of weather per simulated second (weather drive): drying takes hours to days, the blade's mechanics milliseconds, so the drying clock runs this much faster (3·10⁴: a day in ≈ 3 simulated seconds).", G, False, log=True, only=("environment.drive", "weather"))
 
 # ---------------------------------------------------------------- shrink (live)
 G = "Shrink"
@@ -555,7 +562,8 @@ def markdown_table() -> str:
             if p.group != g:
                 continue
             rng = ", ".join(p.choices) if p.kind == "choice" else ("true/false" if p.kind == "bool" else f"{p.lo:g} … {p.hi:g}")
-            lines.append(f"| `{p.name}` | {p.default} | {rng} | {p.unit} | {'yes' if p.rebuild else 'live'} | {p.help} |")
+            only = f" Acts only with `{p.only[0]}` = {p.only[1]}." if p.only else ""
+            lines.append(f"| `{p.name}` | {p.default} | {rng} | {p.unit} | {'yes' if p.rebuild else 'live'} | {p.help}{only} |")
         lines.append("")
     if JOINTS:
         lines += ["## Joint constraints", "", "Checked after the single values (species values and `--set` together):", ""]

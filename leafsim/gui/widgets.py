@@ -21,6 +21,10 @@ DRAWN: set[str] = set()
 STAGED_COLOUR = (1.0, 0.78, 0.25, 1.0)
 
 
+#: the tooltip's note on a parameter that does not act now
+IDLE_NOTE_COLOUR = (0.95, 0.6, 0.2, 1.0)
+
+
 def reset_drawn() -> None:
     DRAWN.clear()
 
@@ -41,19 +45,23 @@ def widget_ref(name: str) -> str:
     return f"**/###{name}"
 
 
-def _tooltip(p: Param) -> None:
+def _tooltip(p: Param, idle: bool = False) -> None:
     if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
         imgui.begin_tooltip()
         imgui.push_text_wrap_pos(imgui.get_font_size() * 28.0)
         imgui.text_unformatted(p.name)
+        if idle:
+            imgui.text_colored(IDLE_NOTE_COLOUR, f"Unused now: acts only with {p.only[0]} = {p.only[1]}")
         imgui.text_unformatted(p.help)
         imgui.text_disabled(f"{p.describe()}; default {p.default}; {'needs Rebuild' if p.rebuild else 'applies live'}")
         imgui.pop_text_wrap_pos()
         imgui.end_tooltip()
 
 
-def param_widget(p: Param, value: Any) -> tuple[bool, Any]:
-    """Draw the widget of one declared parameter; returns ``(changed, new_value)``.
+def param_widget(p: Param, value: Any, idle: bool = False) -> tuple[bool, Any]:
+    """Draw the widget of one declared parameter; returns ``(changed, new_value)``.  ``idle``:
+    the parameter does not act under the current values (:meth:`Param.applies`): its tooltip
+    says so (it stays editable, to be set before it acts).
 
     The new value is always valid for the declaration (clamped to [lo, hi]; float sliders
     round to float32, so a value that was not changed is returned unchanged).
@@ -83,7 +91,7 @@ def param_widget(p: Param, value: Any) -> tuple[bool, Any]:
             new = p.choices[i]
     else:  # pragma: no cover - the declaration has only these kinds
         imgui.text(f"{p.name}: unsupported kind {p.kind}")
-    _tooltip(p)
+    _tooltip(p, idle)
     if changed and new == value:
         changed = False
     return changed, new
@@ -119,10 +127,13 @@ def params_panel(params: ParamSet, built: ParamSet | None = None, open_groups: t
         imgui.push_item_width(max(imgui.get_content_region_avail().x - label_px - gap, MIN_WIDGET_PX))
         for p in plist:
             staged = p.rebuild and built is not None and params[p.name] != built[p.name]
-            if staged:
-                imgui.push_style_color(imgui.Col_.text, STAGED_COLOUR)
-            ch, v = param_widget(p, params[p.name])
-            if staged:
+            # dimmed while it does not act (the weather's temperature under the rates drive
+            # looked as live as the rates themselves)
+            idle = not p.applies(params)
+            if staged or idle:
+                imgui.push_style_color(imgui.Col_.text, STAGED_COLOUR if staged else imgui.get_style_color_vec4(imgui.Col_.text_disabled))
+            ch, v = param_widget(p, params[p.name], idle)
+            if staged or idle:
                 imgui.pop_style_color()
             if ch:
                 changes[p.name] = v
