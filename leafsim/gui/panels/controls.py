@@ -13,7 +13,7 @@ from leafsim.config.params import ParamSet
 from leafsim.config.presets import quality_lines, quality_of, quality_table
 from leafsim.gui.layout import ALBEDOS, COMPARES, SCALES, VIEWS, tip
 from leafsim.gui.status import printable
-from leafsim.gui.widgets import params_panel
+from leafsim.gui.widgets import STAGED_COLOUR, params_panel
 from leafsim.config.params import check_seed
 from leafsim.interactive.session import species_keys
 from leafsim.sim.effects.dynamics import unmeasured_substeps
@@ -88,7 +88,12 @@ class ControlsPanel:
         s = app.session
         if self._seed_shown != s.seed:  # changed elsewhere (a loaded preset)
             self._seed_text, self._seed_shown = str(s.seed), s.seed
+        staged = s.built_seed is not None and s.seed != s.built_seed  # orange until Rebuild, as a staged slider
+        if staged:
+            imgui.push_style_color(imgui.Col_.text, STAGED_COLOUR)
         ch, text = imgui.input_text("seed", self._seed_text, imgui.InputTextFlags_.chars_decimal)
+        if staged:
+            imgui.pop_style_color()
         if not ch:
             return
         self._seed_text = text

@@ -62,9 +62,12 @@ class StatsPanel:
         imgui.text(f"particles {c['particles']} (T {c['particles_T']}, V {c['particles_V']})")
         imgui.text(f"springs {c['springs']}   triangles {c['triangles']}   hinges {c['hinges']}")
         ms = pb.last_ms
-        imgui.text(f"step {sum(ms.values()):.2f} ms:")  # the stages wrap to the panel's width
-        imgui.same_line()
-        imgui.text_wrapped(", ".join(f"{k} {v:.1f}" for k, v in ms.items()))  # whole names ("watc" was the watchdog)
+        if ms:
+            imgui.text(f"step {sum(ms.values()):.2f} ms:")  # the stages wrap to the panel's width
+            imgui.same_line()
+            imgui.text_wrapped(", ".join(f"{k} {v:.1f}" for k, v in ms.items()))  # whole names ("watc" was the watchdog)
+        else:  # (it read "step 0.00 ms:" before the first step)
+            imgui.text_disabled("step: none yet")
         if app.timing:
             imgui.text_disabled("frame: " + "  ".join(f"{k} {v:.1f}" for k, v in app.timing.items()) + " ms")
         h = pb.history
