@@ -24,7 +24,7 @@ from hypothesis import HealthCheck, settings
 import leafsim  # noqa: F401
 
 # property-based tests (tests/test_properties.py): a quick, reproducible profile by default;
-# HYPOTHESIS_PROFILE=nightly runs 20x the examples with fresh randomness (a longer, nightly run)
+# HYPOTHESIS_PROFILE=nightly runs 30x the examples with fresh randomness (a longer, nightly run)
 settings.register_profile("quick", max_examples=40, deadline=None, derandomize=True, database=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("nightly", max_examples=1200, deadline=None, database=None,
