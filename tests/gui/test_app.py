@@ -467,20 +467,28 @@ def test_the_camera_follows_a_leaf_falling_in_the_free_scene():
     assert np.allclose(app.camera.target, centre, atol=1e-9)
 
 
-def test_gui_until_dry_ends_at_the_dry_frame():
-    """``gui --until dry`` runs "Dry to end", draws the dry leaf and exits by itself."""
+def _until_dry(evaporation: float):
+    """``gui --until dry`` on a coarse oak evaporating at ``evaporation`` kg/(m²·s) from both
+    faces: (the app after it exited, its session)."""
     from imgui_bundle import immapp
 
     from leafsim.gui.app import LeafApp, _configure_threads
     from leafsim.interactive.session import Session
-    from leafsim.sim.run import DRY_END_FRACTION
 
     _configure_threads()
-    session = Session("oak", overrides={"mesh.spacing": 0.06, "osmosis.evaporation_top": 50.0,
-                                        "osmosis.evaporation_bottom": 50.0}, build=False)
+    session = Session("oak", overrides={"mesh.spacing": 0.06, "osmosis.evaporation_top": evaporation,
+                                        "osmosis.evaporation_bottom": evaporation}, build=False)
     session.rebuild_async()
     app = LeafApp(session, until_dry=True)
     immapp.run(app.runner_params(), app.addons())
+    return app, session
+
+
+def test_gui_until_dry_ends_at_the_dry_frame():
+    """``gui --until dry`` runs "Dry to end", draws the dry leaf and exits by itself."""
+    from leafsim.sim.run import DRY_END_FRACTION
+
+    app, session = _until_dry(50.0)
     assert app.exit_code == 0 and session.frame > 0
     assert session.water_fraction() <= DRY_END_FRACTION + 1e-9
     assert session.frame == session.playback.worker.run.state.frame  # the drawn frame is the last one
@@ -489,19 +497,10 @@ def test_gui_until_dry_ends_at_the_dry_frame():
 def test_gui_until_dry_of_a_leaf_that_cannot_dry_exits_with_the_reason(monkeypatch):
     """No evaporation: "Dry to end" gives up once the water has not fallen for STALL_FRAMES
     frames (it ran for ever, silent); the window shows why, and ``--until dry`` exits 2 with it."""
-    from imgui_bundle import immapp
-
-    from leafsim.gui.app import LeafApp, _configure_threads
     from leafsim.interactive import worker as wmod
-    from leafsim.interactive.session import Session
 
     monkeypatch.setattr(wmod, "STALL_FRAMES", 30)
-    _configure_threads()
-    session = Session("oak", overrides={"mesh.spacing": 0.06, "osmosis.evaporation_top": 0.0,
-                                        "osmosis.evaporation_bottom": 0.0}, build=False)
-    session.rebuild_async()
-    app = LeafApp(session, until_dry=True)
-    immapp.run(app.runner_params(), app.addons())
+    app, session = _until_dry(0.0)
     assert app.exit_code == 2 and "has not fallen in 30 frames" in app.fatal
     assert app.status.get("dry").level == "error" and session.water_fraction() > 0.99
 
