@@ -394,21 +394,33 @@ def die_with_parent() -> None:
         os._exit(1)
 
 
+#: the longest a scene's command waits for its workers without running Python (so a signal is handled) [s]
+WAIT_POLL_S = 0.2
+
+
 def _local_results(jobs: list, out: Path, workers: int):
     """Yield results of ``jobs`` from a local process pool (spawned workers: no forked
     numba/OpenGL state; each dies with this process)."""
     import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent)
     try:
         with _signals_deferred_while_workers_start():
             futs = {pool.submit(run_leaf, j, str(out)): j for j in jobs}  # (the workers are started here)
-        for f in as_completed(futs):
-            try:
-                yield f.result()
-            except Exception as e:  # a worker process died: this leaf failed, the pool may go on
-                yield {"name": futs[f].name, "ok": False, "error": f"worker process failed: {type(e).__name__}: {e}"}
+        order = {f: k for k, f in enumerate(futs)}
+        pending = set(futs)
+        while pending:
+            # waits of at most WAIT_POLL_S: a signal the kernel hands to another thread (the pool's
+            # own, or the progress bar's) only runs its handler when this thread runs Python again,
+            # and a wait with no timeout never returned before the next leaf was done (a SIGTERM
+            # under load left the command waiting for a leaf of a million frames)
+            done, pending = wait(pending, timeout=WAIT_POLL_S, return_when=FIRST_COMPLETED)
+            for f in sorted(done, key=order.get):
+                try:
+                    yield f.result()
+                except Exception as e:  # a worker process died: this leaf failed, the pool may go on
+                    yield {"name": futs[f].name, "ok": False, "error": f"worker process failed: {type(e).__name__}: {e}"}
     except BaseException:  # interrupted (a signal, or the caller stopped reading): stop now
         _stop_pool(pool)
         raise
