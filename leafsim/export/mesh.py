@@ -412,8 +412,8 @@ def _turned_png(png: bytes) -> bytes:
     import cv2
 
     img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
-    ok, buf = cv2.imencode(".png", cv2.rotate(img, cv2.ROTATE_180))
-    if img is None or not ok:
+    ok, buf = (False, None) if img is None else cv2.imencode(".png", cv2.rotate(img, cv2.ROTATE_180))
+    if not ok:
         raise LeafsimError("export: cannot turn the texture for the OBJ's lower face")
     return buf.tobytes()
 
@@ -481,10 +481,12 @@ def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None 
         lines += [f"vn {n[0]:.6f} {n[1]:.6f} {n[2]:.6f}" for n in s.normals]
         tri = s.triangles.astype(np.int64)
         low = np.zeros(len(tri), bool)
+        extra = 0  # the lower face's own vt lines
         if mapped and textured and s.lower is not None:  # the lower face: its own material and coordinates
             low = s.lower[tri].all(axis=1)
             lo = np.flatnonzero(s.lower)
             lines += [f"vt {1.0 - u:.7g} {v:.7g}" for u, v in uv[lo]]  # (1 − u, 1 − v) in the image's terms
+            extra = len(lo)
             at = np.full(len(uv), -1, np.int64)
             at[lo] = len(uv) + np.arange(len(lo))
             mat += ["newmtl blade_lower", *material, f"map_Kd {lower_file(png).name}",
@@ -498,7 +500,7 @@ def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None 
             fl = at[tri[low]] + vt_base + 1
             lines += [f"f {a}/{at_}/{a} {b}/{bt}/{b} {c}/{ct}/{c}" for (a, b, c), (at_, bt, ct) in zip(f[low], fl)]
         base += len(s.positions)
-        vt_base += len(uv) + (int(s.lower.sum()) if low.any() else 0)
+        vt_base += len(uv) + extra
     written = []
     if photo_png is not None:
         written.append(atomic_write_bytes(png, photo_png, "texture"))

@@ -82,6 +82,14 @@ def _configure_threads() -> None:
 
 
 
+def leaf_file_stem(session) -> str:
+    """``leafsim_<species>_seed<seed>_f<frame>``: an exported frame's or mesh's name, after the
+    leaf on screen (the built one: a species or seed waiting for Rebuild is not it yet)."""
+    key = session.built_species or session.species_key
+    seed = session.built_seed if session.built_seed is not None else session.seed
+    return f"leafsim_{key}_seed{seed}_f{session.frame:06d}"
+
+
 class _Shown(LeafsimError):
     """A refusal the status bar already shows under its own topic (``guard`` posts no second)."""
 
@@ -104,6 +112,7 @@ class LeafApp:
         self.frames = frames
         self.window_frames = window_frames
         self.until_dry = bool(until_dry)
+        self._dry_posted: str | None = None  # the "Dry to end" stall last put in the status bar
         # no smaller than the panels and a usable view between them (at 640 x 400 the stats panel
         # covered the controls and the leaf; at 800 x 600 the view was 90 px wide)
         self.window_size = tuple(max(int(v), lo) for v, lo in zip(window_size, MIN_WINDOW))
@@ -352,8 +361,8 @@ class LeafApp:
             if self.take is not None and s.frame >= self._last_recorded_frame + max(self.record_every, 1):
                 self.requests.append(("record", None))
         pb = s.playback
-        if pb.dry_stalled and self.status.get("dry") is None:
-            stalled = pb.dry_stalled
+        if pb.dry_stalled and pb.dry_stalled != self._dry_posted:  # once per stall: dismissable
+            stalled = self._dry_posted = pb.dry_stalled
             self.status.error("dry", stalled, holds=lambda: pb.dry_stalled == stalled)
             if self.until_dry:  # the dry leaf asked for will never come
                 self.fatal = stalled
@@ -571,7 +580,7 @@ class LeafApp:
         s = self.session
         if kind == "frame":
             folder = self._export_folder()
-            path = free_path(folder, f"leafsim_{s.species_key}_seed{s.seed}_f{s.frame:06d}")
+            path = free_path(folder, leaf_file_stem(s))
             self._write_png(path)
             self.status.info("export", f"exported frame {s.frame} to {path}", path=path)
             return
@@ -618,13 +627,13 @@ class LeafApp:
 
     # ------------------------------------------------------------------ actions
     def export_mesh(self) -> Path:
-        """The current snapshot as ``leafsim_<species>_seed<seed>_f<frame>.glb`` in the export folder."""
+        """The current snapshot as ``leafsim_<species>_seed<seed>_f<frame>.glb`` in the export folder
+        (:func:`leaf_file_stem`)."""
         s = self.session
         if s.state is not None and not np.isfinite(s.state.particle_q).all():
             raise LeafsimError(f"Export mesh: the simulation diverged (positions NaN/Inf at frame {s.frame}); "
                                "expected a finite leaf: press Reset")
-        path = free_path(self._export_folder(), f"leafsim_{s.species_key}_seed{s.seed}_f{s.frame:06d}", ".glb",
-                         self.mesh_paths)  # (named as Export frame names its PNG)
+        path = free_path(self._export_folder(), leaf_file_stem(s), ".glb", self.mesh_paths)  # (as Export frame's PNG)
         # the blade's colour baked as the window draws it (sub-grid mottle, the photo's detail):
         # about a second of work, on a thread of its own with its own view of the leaf (the
         # window's view keeps drawing), from a copy of the state on screen
@@ -663,6 +672,7 @@ class LeafApp:
         path = user_path(self.preset_path, "preset JSON", "JSON file")
         self.session.load_params(path, rebuild=True)
         self.dirty = True
+        self.status.clear("params", "error")  # every value is a valid one now
         self.status.info("preset", f"loaded {path}", path=path)
 
     def set_params(self, changes: dict) -> None:
@@ -693,6 +703,7 @@ class LeafApp:
     def species_defaults(self) -> None:
         names = self.session.species_defaults()
         self.dirty = True
+        self.status.clear("params", "error")  # every value is a valid one now
         what = ", ".join(names) if names else "nothing was changed"
         self.status.info("species", f"{self.session.species.name} defaults restored ({what})", seconds=30.0)
 

@@ -314,7 +314,8 @@ def test_typed_slider_values_stay_in_range_and_finite():
         v, sim_v, errs = seen[text]
         assert np.isfinite(v) and p.lo <= v <= p.hi and v == sim_v, (text, v)
         assert errs == [] or (len(errs) == 1 and one_line(errs[0]) and name in errs[0]), (text, errs)
-    assert seen["accepted"] == [], seen  # the refusal went with the next accepted value (it stayed)
+    assert len(seen["refused"]) == 1 and name in seen["refused"][0], seen  # "nan" is refused here ...
+    assert seen["accepted"] == [], seen  # ... and the refusal went with the next accepted value (it stayed)
     for text in ("nan", "inf"):
         speed, alpha, worker_speed, errs = seen[("speed", text)]
         assert np.isfinite(speed) and 0.001 <= speed <= 2.0 and 0.0 <= alpha <= 1.0, (text, speed, alpha)

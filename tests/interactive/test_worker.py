@@ -363,12 +363,14 @@ def test_dry_to_end_gives_up_with_a_reason_when_the_water_cannot_fall(s, monkeyp
     pb = s.playback
     pb.dry_to_end()
     assert until(lambda: (pb.take_snapshot() or True) and not pb.drying, 120)
+    pb.take_snapshot()  # the frame it stopped at (published before "drying" went off)
     assert pb.dry_stalled and "has not fallen in 40 frames" in pb.dry_stalled and "\n" not in pb.dry_stalled
     assert 40 <= s.frame <= 60 and s.water_fraction() > 0.99
     s.set_params({"osmosis.evaporation_top": 50.0, "osmosis.evaporation_bottom": 50.0})
     pb.dry_to_end()
     assert pb.dry_stalled is None
     assert until(lambda: (pb.take_snapshot() or True) and not pb.drying, 120)
+    pb.take_snapshot()
     assert pb.dry_stalled is None and s.water_fraction() <= DRY_END_FRACTION + 1e-9
     s.set_params({"effects.osmosis": False})
     pb.dry_to_end()

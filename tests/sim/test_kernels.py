@@ -404,3 +404,36 @@ def test_settle_looking_only_at_moved_pairs_changes_no_bit(tiny, ground):
     want = _settle_full_passes(qb, invm, vidx, m.thickness, ground, db)
     assert out[2] == want and want > squeeze.sum()  # later passes corrected pairs too
     assert np.array_equal(qa, qb) and np.array_equal(da, db)
+
+
+@pytest.mark.parametrize("vonly,hm", [(False, 1.0), (True, 0.8)])
+def test_uninvert_since_looks_at_a_pair_only_if_a_particle_moved_since_its_last_look(vonly, hm):
+    """One pass of :func:`uninvert_since` (the momentum-conserving one and settle's last,
+    V-only one at a lower height): pairs whose particles were stamped at or after their last
+    look (``since`` + t) are treated exactly as :func:`uninvert` treats them, the others are
+    left alone even when below the height, and each pair corrected stamps its particles with
+    ``now`` + t."""
+    rng = np.random.default_rng(8)
+    n_pairs, hmin = 300, 5e-5 * hm
+    q = rng.normal(scale=2e-3, size=(4 * n_pairs, 3))
+    vidx = np.arange(4 * n_pairs, dtype=np.int64).reshape(n_pairs, 4)[:, [3, 0, 1, 2]].copy()
+    invm = rng.uniform(0.5, 2.0, 4 * n_pairs)
+    for iv, ia, ib, ic in vidx:  # every V particle below the height (each pair on its own particles)
+        a, b, c = q[ia], q[ib], q[ic]
+        nrm = np.cross(b - a, c - a)
+        q[iv] = (a + b + c) / 3.0 + rng.uniform(-1.0, 0.9) * hmin * nrm / np.linalg.norm(nrm)
+    m, since, now = n_pairs, 5 * n_pairs, 6 * n_pairs
+    stamp = np.full(len(q), -1, np.int64)
+    looked = rng.random(n_pairs) < 0.5
+    t = np.flatnonzero(looked)
+    which = rng.integers(0, 4, len(t))  # one particle of each such pair, moved at or after its last look
+    stamp[vidx[t, which]] = since + t + rng.integers(0, m, len(t))
+    stamp[vidx[t[::3], which[::3]]] = since + t[::3]  # exactly at its last look (its own correction)
+    qa, qb = q.copy(), q.copy()
+    da, db = np.zeros_like(q), np.zeros_like(q)
+    k = kp.uninvert_since(qa, invm, vidx, hmin, vonly, False, da, stamp, now, since)
+    want = kp.uninvert(qb, invm, vidx[looked], hmin, vonly, False, db)
+    assert k == want == looked.sum() and np.array_equal(qa, qb) and np.array_equal(da, db)
+    assert np.array_equal(stamp[vidx[t]], np.repeat((now + t)[:, None], 4, axis=1))
+    untouched = vidx[~looked].ravel()
+    assert np.array_equal(qa[untouched], q[untouched]) and (stamp[untouched] == -1).all()
