@@ -28,6 +28,9 @@ from leafsim.sim.layout import check_layout, state_layout
 from leafsim.sim.model import Model, State
 from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_allowed, path_params, work_done
 
+#: the stage clock: CPU seconds of the calling thread (about 1 µs a call, 6 calls a frame)
+_clock = time.thread_time
+
 #: the prefix of the drying-path mesh's simulator's records in :meth:`Simulator.carry`
 CARRY_PATH = "pathmesh_"
 
@@ -219,24 +222,25 @@ class Simulator:
         return self._dynamics.last_iterations if (self._dynamics and self.dynamic) else 0
 
     def step(self, state: State) -> dict:
-        """Advance one frame in place; returns milliseconds per executed stage.  ``state`` must
-        be a state of this simulator's model (its arrays' shapes and dtypes are checked: the
-        kernels trust them)."""
+        """Advance one frame in place; returns milliseconds per executed stage, the CPU time of
+        the calling thread (``time.thread_time``: in the window, a stage that waits for the GIL
+        while the UI thread draws does not count the wait).  ``state`` must be a state of this
+        simulator's model (its arrays' shapes and dtypes are checked: the kernels trust them)."""
         check_layout(state, self._layout, "Simulator.step: state")
         if state.path is not None and self.model.path is not None:
             if self._path_layout is None:
                 self._path_layout = state_layout(self.model.path)
             check_layout(state.path, self._path_layout, "Simulator.step: state (drying-path mesh)")
         ms = {}
-        t0 = time.perf_counter()
+        t0 = _clock()
         if self.effects["osmosis"] and state.frame % self.osmosis_every == 0:
             self._osmosis.apply(state)  # one step of k Δt every k-th frame (osmosis.every)
-            t1 = time.perf_counter()
+            t1 = _clock()
             ms["osmosis"] = (t1 - t0) * 1e3
             t0 = t1
         if self.effects["shrink"]:
             self._shrink.apply(state)
-            t1 = time.perf_counter()
+            t1 = _clock()
             ms["shrink"] = (t1 - t0) * 1e3
             t0 = t1
         if self.dynamic:
@@ -253,7 +257,7 @@ class Simulator:
                     self._dynamics.solve_now = True
                 self._dynamics.apply(state)
             self._path_was_active = path
-            t1 = time.perf_counter()
+            t1 = _clock()
             ms["dynamics"] = (t1 - t0) * 1e3
             t0 = t1
         state.scalars[0] += self.dt
@@ -261,12 +265,12 @@ class Simulator:
         state.scalars[2] += self.weather_dt
         if self.watchdog is not None:
             self.watchdog.check(state)
-            t1 = time.perf_counter()
+            t1 = _clock()
             ms["watchdog"] = (t1 - t0) * 1e3
             t0 = t1
         if self.effects["colour"] and state.pigments is not None:
             self._colour.apply(state, self.dt)
-            ms["colour"] = (time.perf_counter() - t0) * 1e3
+            ms["colour"] = (_clock() - t0) * 1e3
         return ms
 
 

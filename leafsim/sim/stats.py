@@ -18,7 +18,8 @@ from leafsim.sim.model import LAYER_T, LAYER_V, Model, State
 
 def frame_stats(model: Model, state: State, ms: dict, sim=None) -> dict:
     """The blade's water per layer [kg] (``water_T``, ``water_V``; the petiole's left out, as in
-    Model.water_fraction), max residual |C|/l, kinetic energy [J], simulated time [s], NaN flag, ms per stage
+    Model.water_fraction), max residual |C|/l, kinetic energy [J], simulated time [s], NaN flag,
+    CPU ms per stage (the stepping thread's: :meth:`~leafsim.sim.simulator.Simulator.step`)
     (with ``sim``: its iterations and whether the drying-path mesh carried the mechanics).
 
     The residual is the solver's: over the springs of the mesh that carried the mechanics
