@@ -8,7 +8,7 @@ from pathlib import Path
 from leafsim.appearance.view import LeafView
 from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import check_output, not_an_input, output_target
-from leafsim.commands.common import Progress, emit, ready_kernels, species_inputs, species_params, stop_of
+from leafsim.commands.common import Progress, emit, ready_kernels, species_inputs, species_params, stop_of, warn
 from leafsim.export.mesh import export_mesh, format_of, side_files
 from leafsim.pipeline import build_leaf
 from leafsim.sim.run import Run, Stop
@@ -85,7 +85,14 @@ def cmd_export(args):
     run = Run(model, params, seed=args.seed)
     until = stop_of(args)
     keys = key_frames(run, until, args.every, Progress(args, run, until, sp.key))
+    if args.every and len(keys) < 2:  # (--until water=1 or season=0 hold at the fresh leaf)
+        raise LeafsimError(f"--every {args.every} with --until {args.until}: the run stopped at frame {run.state.frame}, so "
+                           "there is no drying to animate (give a later --until, or leave --every out)")
     view = LeafView.of_species(sp, model, params, pigments0=run.sim.state().pigments)
+    if args.texture == "photo" and fmt == "obj" and run.state.frame > 0:
+        # an OBJ holds the photo as its texture and nothing to age it by (a glTF carries _AGEING)
+        warn(f"--texture photo with OBJ: the texture is the photo as the leaf looked when photographed, not its colour "
+             f"at frame {run.state.frame} (OBJ cannot carry the ageing); use --texture baked, or glb / gltf")
     water = model.water_fraction(run.state.particle_water)
     about = {"species": sp.key, "seed": args.seed, "frame": run.state.frame, "time_s": round(float(run.state.time), 9),
              "water_fraction": round(water, 6)}
@@ -101,4 +108,6 @@ def cmd_export(args):
     counts = ", ".join(f"{k} {v['vertices']} vertices / {v['triangles']} triangles" for k, v in rep["meshes"].items())
     shown = "the base mesh; earlier key frames as morph targets" if rep["targets"] else "one frame"
     emit(args, rep, f"{sp.key}: frame {run.state.frame}, {100 * water:.1f} % of the blade's water left ({shown}); "
-                    f"{counts}, {rep['targets']} morph targets -> {', '.join(rep['files'])}")
+                    f"{counts}, {rep['targets']} morph targets -> {', '.join(rep['files'])}"
+                    + (f"; removed what an earlier export left there and this one did not write: {', '.join(rep['removed'])}"
+                       if rep.get("removed") else ""))

@@ -12,7 +12,8 @@ material's base colour as glTF defines it::
 with each weight_k driven by the shape key the importer made for target k, so colour and
 shape change together on the same animation.  A ``--texture photo`` export carries instead the
 factor the ageing multiplies the photo by, as ``_AGEING`` with its own morph deltas (COLOR_0
-must stay within 0-1, the factor does not); the base colour is then the photo times it.  It also sets the scene's frame range to the
+must stay within 0-1, the factor does not; one exported state has the factor alone); the base
+colour is then the photo times it.  It also sets the scene's frame range to the
 drying action's.
 
 An OBJ exported with ``--texture baked`` carries the crinkle's normal map as the MTL's
@@ -85,7 +86,7 @@ def colour_morphs(path) -> dict:
     "targets": [shape key names], "times": [s], "photo_factor": bool}}`` for every mesh of a
     leafsim glTF that has colour morph targets: ``COLOR_0`` (linear RGB, as stored), or with
     the photo as texture ``_AGEING``, the factor the ageing multiplies the photo by
-    (``photo_factor`` True)."""
+    (``photo_factor`` True) — also for one state, without targets (``deltas`` empty)."""
     doc, blob = _load(Path(path))
     times = []
     for anim in doc.get("animations", []):
@@ -95,7 +96,11 @@ def colour_morphs(path) -> dict:
         prim = mesh["primitives"][0]
         targets = prim.get("targets") or []
         key = next((k for k in ("COLOR_0", "_AGEING") if k in prim["attributes"] and targets and k in targets[0]), None)
-        if key is None:
+        if key is None and "_AGEING" in prim["attributes"]:
+            # one state with the photo as texture: the factor without deltas (Blender's importer
+            # keeps no custom attribute, so a dried leaf came in with the fresh photo's green)
+            key = "_AGEING"
+        if key is None:  # (a static COLOR_0 Blender's importer draws itself)
             continue
         names = (mesh.get("extras") or {}).get("targetNames") or [f"target_{k}" for k in range(len(targets))]
         out[mesh["name"]] = {"colours": [c[:3] for c in _floats(doc, blob, prim["attributes"][key])],

@@ -362,8 +362,28 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
         files = write_ply(Path(path), frames[0])
     if fmt not in ("glb", "gltf"):  # OBJ and PLY write the surfaces' vertices as they are
         counts = {k: {"vertices": len(s.positions), "triangles": len(s.triangles)} for k, s in frames[0].items()}
+    removed = _remove_stale(path, fmt, files)
     return {"format": fmt, "path": str(path), "files": [str(f) for f in files], "targets": len(states) - 1,
-            "meshes": counts}
+            "meshes": counts, "removed": [str(f) for f in removed]}
+
+
+def _remove_stale(path, fmt: str, written) -> list[Path]:
+    """The side files an earlier OBJ export to ``path`` wrote and this one did not (a fresh leaf's
+    export writes no normal map; a baked export no photo), removed: its MTL no longer names them,
+    yet a folder zipped for a client shipped them beside it.  Only regular files (not a link, a
+    folder or a device) with exactly the names an export to ``path`` writes; returns them."""
+    if fmt != "obj":
+        return []
+    keep = {Path(f).resolve() for f in written}
+    removed = []
+    for texture in ("photo", "baked"):
+        for side, _ in side_files(path, fmt, texture):
+            side = Path(side)
+            if side.resolve() in keep or side.is_symlink() or not side.is_file() or side in removed:
+                continue
+            side.unlink()
+            removed.append(side)
+    return removed
 
 
 # ------------------------------------------------------------------ static formats

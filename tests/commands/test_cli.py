@@ -275,3 +275,26 @@ def test_an_exported_gltf_says_which_leaf_it_is(capsys, tmp_path):
     assert code == 0 and root["name"] == "oak-seed2" and [doc["nodes"][i]["name"] for i in root["children"]] == ["blade", "veins"]
     about = root["extras"]["leafsim"]
     assert about["species"] == "oak" and about["seed"] == 2 and about["frame"] == 4 and 0 < about["water_fraction"] <= 1
+
+
+@pytest.mark.parametrize("until", ["water=1", "season=0"])
+def test_an_animation_whose_run_stops_at_the_fresh_leaf_is_refused(capsys, tmp_path, until):
+    """--every with a --until that holds at the fresh leaf asks, like --frames 0, for an animation
+    of no drying: refused in one line, no file (it wrote a glb of 0 targets, without animation)."""
+    out = tmp_path / "leaf.glb"
+    code, _, err = run(capsys, "export", "--species", "oak", "--set", "mesh.spacing=0.06", "--until", until, "--every", "10",
+                       "--out", str(out))
+    line = err.strip().splitlines()[-1]
+    assert code == 2 and "no drying to animate" in line and f"--until {until}" in line and not out.exists()
+
+
+def test_an_aged_leaf_as_obj_with_the_photo_says_the_photo_is_not_aged(capsys, tmp_path):
+    """An OBJ holds the photo as its texture and nothing to age it by: a dried leaf exported so
+    shows the fresh photo's green, which the command says in one warning (silent before)."""
+    code, _, err = run(capsys, "export", "--species", "oak", "--set", "mesh.spacing=0.06", "--frames", "3", "--texture", "photo",
+                       "--out", str(tmp_path / "leaf.obj"), "--json")
+    warnings = [ln for ln in err.splitlines() if ln.startswith("leafsim: warning:")]
+    assert code == 0 and len(warnings) == 1 and "--texture baked" in warnings[0] and "frame 3" in warnings[0]
+    code, _, err = run(capsys, "export", "--species", "oak", "--set", "mesh.spacing=0.06", "--texture", "photo",
+                       "--out", str(tmp_path / "fresh.obj"), "--json")
+    assert code == 0 and "warning" not in err  # the fresh leaf is the photo

@@ -6,6 +6,7 @@ import json
 import struct
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -198,6 +199,14 @@ def test_a_photo_export_carries_the_ageing(tmp_path):
     n = len(tint)
     assert np.allclose(last[:n], tint, rtol=1e-4, atol=1e-4) and np.allclose(last[n:], tint, rtol=1e-4, atol=1e-4)
     assert last.max() > 1.2  # above what COLOR_0 could hold
+    # one state (the dried leaf alone): the factor without targets reaches the add-on too (it
+    # read only primitives with morph targets, so a static photo export came into Blender green)
+    one = tmp_path / "vine_dried.glb"
+    export_mesh(model, states[-1:], one, params=params, view=view, texture="photo", veins=True)
+    assert_clean(one)
+    m1 = colour_morphs(one)
+    assert m1["blade"]["photo_factor"] and m1["blade"]["deltas"] == [] and m1["blade"]["targets"] == []
+    assert np.allclose(np.asarray(m1["blade"]["colours"]), last, rtol=1e-5, atol=1e-5)
 
 
 def _glb_json(path) -> dict:
@@ -407,3 +416,26 @@ def test_the_blender_addon_reads_a_gltf_whose_buffer_name_is_percent_encoded(lea
     path = tmp_path / "my leaf#1.gltf"
     export_mesh(model, states, path, params=params, view=view)
     assert set(colour_morphs(path)) == {"blade"}
+
+
+def test_an_obj_export_removes_the_side_files_an_earlier_export_left(leaf, tmp_path):
+    """Re-exporting an OBJ under the same name removes the textures an earlier export wrote there
+    and this one does not (a fresh leaf writes no normal map; a baked export no photo): its MTL no
+    longer names them, yet a folder zipped for a client shipped them.  Only regular files with
+    exactly those names: a link is left, and so is any other file."""
+    model, params, view, states = leaf
+    out = tmp_path / "oak.obj"
+    stale = [tmp_path / n for n in ("oak_baked_normal.png", "oak_baked_normal_lower.png")]
+    for p in stale:
+        p.write_bytes(b"an earlier export's")
+    outside = tmp_path / "mine.png"
+    outside.write_bytes(b"not leafsim's")
+    (tmp_path / "oak_photo.png").symlink_to(outside)  # (a photo export's name: not written by this one)
+    other = tmp_path / "oak_notes.png"
+    other.write_bytes(b"the user's")
+    rep = export_mesh(model, states[:1], out, params=params, view=view, texture="baked")
+    assert str(tmp_path / "oak_baked_normal.png") not in rep["files"]  # the fresh leaf: no crinkle, no map
+    assert sorted(rep["removed"]) == sorted(str(p) for p in stale) and not any(p.exists() for p in stale)
+    assert (tmp_path / "oak_photo.png").is_symlink() and outside.read_bytes() == b"not leafsim's"
+    assert other.read_bytes() == b"the user's" and all(Path(f).is_file() for f in rep["files"])
+    assert export_mesh(model, states[:1], tmp_path / "oak.glb", params=params, view=view, texture="baked")["removed"] == []
