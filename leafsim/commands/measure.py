@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import check_output, output_target
+from leafsim.base.fileio import check_output, not_an_input, output_target
 from leafsim.commands.common import RESOLVED, emit, ready_kernels
 from leafsim.measure.accuracy import GROUPS, markdown, study, write_report
 from leafsim.measure.bench import main as bench_main
@@ -27,8 +27,13 @@ def cmd_accuracy(args):
         # the report's files, checked before the study (a read-only picture failed after it,
         # leaving the other two written)
         names = ("limit.json", "limit.md", "limit_front.png") if args.limit else ("accuracy.json", "accuracy.md", "accuracy_pareto.png")
+        from leafsim.commands.common import species_inputs
+        from leafsim.config.species import get_species
+
+        inputs = species_inputs(get_species(args.species, args.config))  # (an unknown species says so here)
         for name in names:
             output_target(out / name, "report")
+            not_an_input(out / name, inputs, "--out")  # a config kept as OUT/accuracy.json became the report
     if args.floor < 0:
         raise LeafsimError(f"--floor {args.floor}: expected a count ≥ 0")
     if args.limit:

@@ -8,6 +8,7 @@ import json
 import math
 import signal
 import os
+import re
 import time
 from pathlib import Path
 
@@ -15,7 +16,7 @@ import numpy as np
 
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import check_output, no_folder, not_an_input, output_target, remove_stale_temps
+from leafsim.base.fileio import check_output, no_folder, not_an_input, output_target, remove_stale_temps, same_file
 from leafsim.base.signals import DeferredSignals, Interrupted
 from leafsim.commands import CHECKPOINT, CHECKPOINT_EVERY
 from leafsim.commands.common import Progress, emit, ready_kernels, species_inputs, species_params, stop_of
@@ -27,7 +28,8 @@ from leafsim.sim.run import Run, Stop
 from leafsim.sim.shape import save_npz
 from leafsim.sim.stats import StatsStream
 
-
+#: the names --every writes its PNG frames under (leafsim.render.sequence.FrameWriter)
+_FRAME_NAME = re.compile(r"frame_\d{5,}\.png")
 
 
 def _prior_seconds(meta: dict) -> float | None:
@@ -184,6 +186,12 @@ def cmd_run(args):
     for path, option in ((args.stats, "--stats"), *(((out / n), "--out") for n in ("final.npz", CHECKPOINT) if out is not None)):
         if path is not None:
             not_an_input(path, species_inputs(sp), option)
+    if out is not None and args.every:  # a photo kept as OUT/frame_00000.png became the first frame
+        for src in species_inputs(sp):
+            real = Path(os.path.realpath(src)) if src is not None else None  # (a link to such a file too)
+            if real is not None and _FRAME_NAME.fullmatch(real.name) and same_file(real.parent, out):
+                raise LeafsimError(f"--out {out}: --every {args.every} writes its frames as frame_NNNNN.png there, and the "
+                                   f"input {src} is one of those names (expected another folder; it would be replaced)")
     # what a checkpoint must have been made with to be resumed by this command
     meta = {"species": sp.key, "config": str(Path(args.config).resolve()) if args.config else None,
             "seed": args.seed, "params": params.to_dict()}

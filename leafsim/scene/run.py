@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import os
 import re
 import signal
 import sys
@@ -69,6 +70,9 @@ class Scene:
     layout: dict
     overview: dict | None
     jobs: tuple
+    #: the files the scene reads (the scene file, the species config, the groups' photos): no
+    #: output may replace one
+    inputs: tuple = ()
 
 
 class _Where:
@@ -142,6 +146,8 @@ def load_scene(path) -> Scene:
     data = _read_json(path)
     w = _Where(path)
     w.keys(data, _TOP_KEYS, "a scene")
+    if not isinstance(data.get("description", ""), str):
+        raise w.err("description", f"expected text, got {data['description']!r}")
     seed = w.int(data, "seed", 0, 0, SEED_MAX)
     config = data.get("config")
     if config is not None and not isinstance(config, str):
@@ -170,8 +176,11 @@ def load_scene(path) -> Scene:
         raise w.err("name", "expected text that UTF-8 can write (it holds a lone surrogate code point)") from None
     if not name.isprintable():
         raise w.err("name", f"expected one line of printable text, got {name!r}")
+    species = [lib[k] for k in dict.fromkeys(j.species for j in jobs)]
+    inputs = (path, Path(config_path or _default_config()),
+              *(p for sp in species for p in (sp.image, sp.senescent.image if sp.senescent is not None else None) if p is not None))
     return Scene(path=path, name=name, seed=seed, layout=_layout(w, data.get("layout", {"kind": "row"})),
-                 overview=_overview(w, data.get("overview", {})), jobs=tuple(jobs))
+                 overview=_overview(w, data.get("overview", {})), jobs=tuple(jobs), inputs=inputs)
 
 
 def _too_many(n: int) -> str:
@@ -217,6 +226,15 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
             raise w.err("effects", f"expected a non-empty list of effect names from {', '.join(EFFECTS)}, got {effects!r}")
         effects = tuple(effects)
     stop = _stop(w, g.get("stop"))
+    # a criterion the group's effects cannot move is refused now, in one line (each leaf of the
+    # group was built and then failed, a line per leaf, after the scene's files were begun)
+    on = {e: (e in effects) if effects is not None else bool(group_params[f"effects.{e}"]) for e in EFFECTS}
+    for kind, effect, what in (("water_left", "osmosis", "the water left cannot fall"),
+                               ("season", "colour", "the season clock stands still")):
+        if stop["kind"] == kind and not on[effect]:
+            key = "effects" if effects is not None else "params"
+            raise w.err(f"stop.{kind}", f"cannot be reached: {what} with the effect '{effect}' off (its {key}); "
+                                        f"switch '{effect}' on or stop after a number of frames")
     lod, check = _lod(w, g.get("lod"))
     if lod is not None and "mesh.spacing" in params and group_params["mesh.spacing"] != lod["simulate"]:
         # the level of detail sets both meshes: the group's other mesh.spacing was dropped without a word
@@ -280,6 +298,9 @@ def _stop(w: _Where, s) -> dict:
     mf = w.int(s, "max_frames", DEFAULT_MAX_FRAMES, 1, None, "stop.")
     if k == "frames":
         v = w.int(s, "frames", None, 0, MAX_RUN_FRAMES, "stop.")
+        if "max_frames" in s and mf < v:  # (it was raised to stop.frames without a word)
+            raise w.err("stop.max_frames", f"expected at least stop.frames = {v} (the frame budget of a leaf that stops "
+                                           f"after {v} frames), got {mf}; or leave it out")
     elif k == "water_left":
         v = w.num(s, "water_left", None, 0.0, 1.0, "stop.")
     else:
@@ -528,7 +549,12 @@ def _run_scene(scene: Scene, out, workers: int, scheduler: str | None, client, p
     for name, what in (("placement.json", "placement"), ("summary.json", "summary"), ("run.json", "run report"),
                        ("overview.png", "overview")):
         output_target(out / name, what)
-        not_an_input(out / name, (scene.path,), "--out")  # a scene file kept in its own output folder
+        not_an_input(out / name, scene.inputs or (scene.path,), "--out")  # a scene file (or config, photo) kept there
+    leaves = Path(os.path.realpath(out / "leaves"))
+    for src in scene.inputs:  # every leaf's folder is leafsim's: a file read from one would be replaced
+        if Path(os.path.realpath(src)).is_relative_to(leaves):
+            raise LeafsimError(f"--out {out}: the input {src} lies in {out / 'leaves'}, whose leaf folders the scene "
+                               "writes (expected the inputs outside it; they would be replaced)")
     t0 = time.perf_counter()
     todo = [j for j in scene.jobs if not is_done(j, out)]
     for j in todo:  # a leaf's folder is replaced only when it holds nothing but leafsim's files

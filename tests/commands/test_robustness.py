@@ -496,3 +496,67 @@ def test_substeps_coarser_than_every_measured_level_are_named_not_run_silently(t
     with contextlib.redirect_stderr(err):
         _warn_unmeasured_substeps(load_scene(tmp_path / "t.json"))
     assert err.getvalue().count("\n") == 1 and "group 'slow'" in err.getvalue(), err.getvalue()
+
+
+def test_no_output_folder_replaces_an_input_kept_in_it(tmp_path):
+    """The folder outputs (run's --every frames, accuracy's report, a scene's files and leaf
+    folders) never replace the command's inputs kept there: each was overwritten before (an audit)
+    and is refused in one line now, the input untouched."""
+    src = Path("images/quercus_01.png").read_bytes()
+    oak = json.loads(Path("configs/leaves.json").read_text())["species"]["oak"]
+    oak.pop("senescent_photo", None)
+    # run --every: a photo named as its first frame
+    rr = tmp_path / "rr"
+    rr.mkdir()
+    (rr / "frame_00000.png").write_bytes(src)
+    cfg = rr / "c.json"
+    cfg.write_text(json.dumps({"species": {"oak": {**oak, "image": "frame_00000.png"}}}))
+    one_line(*run_cli("run", "--config", cfg, *OAK, "--frames", "2", "--every", "2", "--out", rr), "--out", "frame_00000.png",
+             "would be replaced")
+    assert (rr / "frame_00000.png").read_bytes() == src
+    # accuracy: a config named as the report
+    acc = tmp_path / "acc"
+    acc.mkdir()
+    (acc / "accuracy.json").write_text(Path("configs/leaves.json").read_text())
+    before = (acc / "accuracy.json").read_bytes()
+    one_line(*run_cli("accuracy", "--config", acc / "accuracy.json", "--species", "oak", "--quick", "--out", acc), "--out",
+             "that is the input")
+    assert (acc / "accuracy.json").read_bytes() == before
+    # a scene: its config as summary.json, a photo in a leaf's folder
+    so = tmp_path / "so"
+    so.mkdir()
+    (so / "summary.json").write_text(json.dumps({"species": {"oak": {**oak, "image": str(Path("images/quercus_01.png").resolve())}}}))
+    scene = {"name": "s", "config": str(so / "summary.json"),
+             "groups": [{"name": "o", "species": "oak", "count": 1, "params": {"mesh.spacing": 0.06}, "stop": {"frames": 2}}]}
+    sf = tmp_path / "scene.json"
+    sf.write_text(json.dumps(scene))
+    before = (so / "summary.json").read_bytes()
+    one_line(*run_cli("scene", sf, "--out", so), "--out", "that is the input")
+    assert (so / "summary.json").read_bytes() == before
+    leaf = tmp_path / "s2" / "leaves" / "o-000"
+    leaf.mkdir(parents=True)
+    (leaf / "photo.png").write_bytes(src)
+    (tmp_path / "c2.json").write_text(json.dumps({"species": {"oak": {**oak, "image": str(leaf / "photo.png")}}}))
+    sf.write_text(json.dumps({**scene, "config": str(tmp_path / "c2.json")}))
+    one_line(*run_cli("scene", sf, "--out", tmp_path / "s2"), "--out", "lies in", "would be replaced")
+    assert (leaf / "photo.png").read_bytes() == src
+
+
+@pytest.mark.parametrize("change,needle", [
+    ({"effects": ["colour"], "stop": {"water_left": 0.02}}, "stop.water_left"),
+    ({"params": {"mesh.spacing": 0.06, "effects.colour": False}, "stop": {"season": 1.0}}, "stop.season"),
+    ({"stop": {"frames": 100, "max_frames": 5}}, "stop.max_frames"),
+    ({"description": 5}, "description"),
+])
+def test_a_scene_that_cannot_do_what_it_says_is_refused_before_any_leaf(tmp_path, change, needle):
+    """A stop its effects cannot reach (each leaf was built, then failed, a line per leaf), a frame
+    budget below the frames asked for (raised to them without a word) and a description that is
+    no text are refused in one line naming the key, and nothing is written."""
+    group = {"name": "m", "species": "oak", "count": 3, "params": {"mesh.spacing": 0.06}, "stop": {"frames": 2}}
+    top = {"name": "s"}
+    for k, v in change.items():
+        (top if k == "description" else group)[k] = v
+    sf = tmp_path / "scene.json"
+    sf.write_text(json.dumps({**top, "groups": [group]}))
+    one_line(*run_cli("scene", sf, "--out", tmp_path / "out"), needle)
+    assert not (tmp_path / "out").exists()
