@@ -75,3 +75,36 @@ def test_orbiting_keeps_the_eye_above_the_ground():
     for _ in range(200):
         free.drag(0.0, -5.0)
     assert free.pitch == -89.0
+
+
+def test_the_view_caption_keeps_the_water_in_a_small_window():
+    """The caption under the 3-D view fits the view: at 1024 x 700 it ran on under the stats
+    panel and the water left was hidden. It drops the species name, then the clock; the water
+    stays."""
+    from leafsim.gui.panels.view import caption
+
+    def measure(s):
+        return 7.0 * len(s)
+
+    parts = ("Hornbeam-like", "frame 1685", "t = 3.370 s", "water 41.9 %")
+    full = "  ".join(parts)
+    assert caption(*parts, measure(full), measure) == full
+    assert caption(*parts, measure(full) - 1, measure) == "frame 1685  t = 3.370 s  water 41.9 %"
+    assert caption(*parts, 7.0 * 26, measure) == "frame 1685  water 41.9 %"
+    assert caption(*parts, 7.0 * 5, measure) == "water 41.9 %"  # (too narrow for anything: the water, clipped)
+
+
+def test_the_eye_is_kept_above_the_ground_with_the_mouse_over_a_panel():
+    """The ground's check runs every frame, not only while the mouse is over the view: switching
+    the ground on (a checkbox, the mouse on a panel) with the eye below it showed the leaf through
+    the ground's underside until the mouse moved back over the view."""
+    from leafsim.gui.panels.view import ViewOverlay
+    from leafsim.render.camera import OrbitCamera
+
+    r = SimpleNamespace(mesh=object(), lo=np.array([-0.05, -0.05, 0.0]), radius=0.07)
+    cam = OrbitCamera(yaw=-90.0, pitch=-60.0)
+    cam.target = np.array([0.0, 0.0, 0.01])
+    cam.distance = 0.3
+    app = SimpleNamespace(renderer=r, camera=cam, show_ground=True, leaf_rect_px=(0, 0, 800, 600))
+    ViewOverlay(app).mouse(SimpleNamespace(want_capture_mouse=True))
+    assert cam.eye[2] > r.lo[2] - 0.004 * r.radius and cam.pitch > -60.0

@@ -70,7 +70,10 @@ class StatusBar:
             frac, text = 0.0, f"{state}  {pb.sim_rate:.3g} sim s / s"
         else:
             frac, text = 0.0, "starting"
-        shown = fit_text(text, width - 10.0, imgui.calc_text_size)
+        # a build's stage before its species when both do not fit ("building grapevine: veins:
+        # growing the ven..." hid the stage waited on; the species is the one being switched to)
+        short = s.progress_text if s.building and not compiling else text
+        shown = text if imgui.calc_text_size(text).x <= width - 10.0 else fit_text(short, width - 10.0, imgui.calc_text_size)
         imgui.progress_bar(frac, (width, 0), shown)
         if shown != text and imgui.is_item_hovered():
             imgui.set_tooltip(text)

@@ -46,6 +46,17 @@ def tick_labels(values) -> list[str]:
         labels = [f"{v:.{digits}g}" for v in values]
     return labels
 
+def caption(name: str, frame: str, clock: str, water: str, width: float, measure) -> str:
+    """The caption under the 3-D view within ``width`` px (``measure(text)`` its width): the whole
+    "NAME  frame N  t = …  water …", else without the name, then without the clock; the water
+    left is kept last (a small window cut the caption at the stats panel, the water first)."""
+    for parts in ((name, frame, clock, water), (frame, clock, water), (frame, water), (water,)):
+        text = "  ".join(parts)
+        if measure(text) <= width:
+            return text
+    return water
+
+
 class ViewOverlay:
     def __init__(self, app):
         self.app = app
@@ -60,8 +71,12 @@ class ViewOverlay:
         if s.ready:
             self.photo_overlay(dl)
             sp = s.shown_species  # the leaf on screen: the old species while a switch builds
-            txt = f"{sp.name}  frame {s.frame}  {clock_text(s.state, s.params)}  water {100 * s.water_fraction():.1f} %"
+            txt = caption(sp.name, f"frame {s.frame}", clock_text(s.state, s.params), f"water {100 * s.water_fraction():.1f} %",
+                          w - 24, lambda t: imgui.calc_text_size(t).x)
+            # within the view: at 1024 x 700 the caption ran on under the stats panel, its water hidden
+            dl.push_clip_rect((x0, y0), (x0 + w, y0 + h), True)
             dl.add_text((x0 + 12, y0 + h - 24), imgui.get_color_u32((0.1, 0.1, 0.1, 1.0)), txt)
+            dl.pop_clip_rect()
             if app.view in HEAT_UNITS and app.renderer is not None and app.renderer.mesh is not None:
                 self.legend(dl, x0 + w - 70, y0 + 8, h * 0.33)
 
@@ -131,16 +146,19 @@ class ViewOverlay:
 
     def mouse(self, io) -> None:
         app = self.app
-        if io.want_capture_mouse or app.renderer is None:
+        if app.renderer is None:
             return
-        _, _, _, h = app.leaf_rect_px
-        dx, dy = io.mouse_delta.x, io.mouse_delta.y
-        if imgui.is_mouse_down(imgui.MouseButton_.left) and (dx or dy):
-            app.camera.drag(dx, dy)
-        if (imgui.is_mouse_down(imgui.MouseButton_.right) or imgui.is_mouse_down(imgui.MouseButton_.middle)) and (dx or dy):
-            app.camera.pan(dx, dy, h)
-        if io.mouse_wheel:
-            app.camera.zoom(io.mouse_wheel)
+        if not io.want_capture_mouse:
+            _, _, _, h = app.leaf_rect_px
+            dx, dy = io.mouse_delta.x, io.mouse_delta.y
+            if imgui.is_mouse_down(imgui.MouseButton_.left) and (dx or dy):
+                app.camera.drag(dx, dy)
+            if (imgui.is_mouse_down(imgui.MouseButton_.right) or imgui.is_mouse_down(imgui.MouseButton_.middle)) and (dx or dy):
+                app.camera.pan(dx, dy, h)
+            if io.mouse_wheel:
+                app.camera.zoom(io.mouse_wheel)
+        # every frame, the mouse over a panel or not: the ground switched on with the eye below
+        # it (or the leaf falling past it) showed the leaf through the ground's underside
         if app.show_ground:
             keep_above_ground(app.camera, app.renderer)
 
