@@ -28,7 +28,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from leafsim.appearance.reflectance import ABSORPTION, BASE_REFLECTANCE, SURFACE_REFLECTANCE  # noqa: E402
-from leafsim.compare.metrics import CLASSES, classify_lab  # noqa: E402
+from leafsim.base.errors import LeafsimError  # noqa: E402
+from leafsim.compare.metrics import CLASSES, _lab, classify_lab  # noqa: E402
 from leafsim.config.species import get_species  # noqa: E402
 
 #: summer chlorophyll a+b [µg/cm²] the fractions are of (a temperate broadleaf's)
@@ -58,11 +59,13 @@ XYZ_TO_LINEAR_SRGB = np.array([[3.2406, -1.5372, -0.4986], [-0.9689, 1.8758, 0.0
 
 
 def spectrum_to_linear_srgb(lam: np.ndarray, refl: np.ndarray) -> np.ndarray:
-    """Linear sRGB of a reflectance spectrum under a 6504 K blackbody (white normalised to Y 1)."""
+    """Linear sRGB of a reflectance spectrum (sampled at ``lam`` nm, 400–700: the visible band the
+    colour is integrated over) under a 6504 K blackbody (white normalised to Y 1)."""
     S, C = planck(lam), cmf(lam)
     xyz = (S[:, None] * C * refl[:, None]).sum(0) / (S * C[:, 1]).sum()
     white = (S[:, None] * C).sum(0) / (S * C[:, 1]).sum()
-    # von Kries onto D65's white, so that a grey reflectance is grey in sRGB
+    # the blackbody's white scaled onto D65's in XYZ (a "wrong von Kries"; Bradford moves no
+    # colour here by more than one 8-bit level), so that a grey reflectance is grey in sRGB
     d65 = np.array([0.95047, 1.0, 1.08883])
     return XYZ_TO_LINEAR_SRGB @ (xyz * d65 / white)
 
@@ -73,10 +76,11 @@ def to_srgb8(lin: np.ndarray) -> np.ndarray:
 
 
 def describe(rgb8: np.ndarray) -> tuple:
-    """(sRGB, L*, C*, hue°, class) of one 8-bit sRGB colour, with compare's CIELAB and classes."""
-    lab = cv2.cvtColor(rgb8.reshape(1, 1, 3), cv2.COLOR_RGB2LAB).astype(np.float32)[0, 0]
-    L, a, b = lab[0] * 100 / 255, lab[1] - 128, lab[2] - 128
-    cls = CLASSES[int(classify_lab(np.array([[L, a, b]], np.float32))[0])]
+    """(sRGB, L*, C*, hue°, class) of one 8-bit sRGB colour, with compare's CIELAB (the float
+    conversion of ``leafsim.compare.metrics._lab``) and classes."""
+    lab = _lab(np.asarray(rgb8, np.uint8).reshape(1, 1, 3))[0, 0]
+    L, a, b = float(lab[0]), float(lab[1]), float(lab[2])
+    cls = CLASSES[int(classify_lab(lab.reshape(1, 3))[0])]
     return tuple(int(v) for v in rgb8), L, float(np.hypot(a, b)), float(np.degrees(np.arctan2(b, a)) % 360), cls
 
 
@@ -96,7 +100,10 @@ def main() -> None:
         import prosail
     except ImportError:
         sys.exit("prospect_check: needs the prosail package (pip install prosail; not a leafsim dependency)")
-    sp = get_species(args.species)
+    try:
+        sp = get_species(args.species)
+    except LeafsimError as e:
+        sys.exit(f"prospect_check: {e}")
     rows = []
     for car, k in ((10.0, 1.0), (7.0, 0.7)):
         for f in FRACTIONS:

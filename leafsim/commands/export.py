@@ -89,7 +89,7 @@ def cmd_export(args):
         raise LeafsimError(f"--every {args.every} with --until {args.until}: the run stopped at frame {run.state.frame}, so "
                            "there is no drying to animate (give a later --until, or leave --every out)")
     view = LeafView.of_species(sp, model, params, pigments0=run.sim.state().pigments)
-    if args.texture == "photo" and fmt == "obj" and run.state.frame > 0:
+    if args.texture == "photo" and fmt == "obj" and run.state.frame > 0 and run.sim.effects.get("colour", False):
         # an OBJ holds the photo as its texture and nothing to age it by (a glTF carries _AGEING)
         warn(f"--texture photo with OBJ: the texture is the photo as the leaf looked when photographed, not its colour "
              f"at frame {run.state.frame} (OBJ cannot carry the ageing); use --texture baked, or glb / gltf")
@@ -97,7 +97,8 @@ def cmd_export(args):
     about = {"species": sp.key, "seed": args.seed, "frame": run.state.frame, "time_s": round(float(run.state.time), 9),
              "water_fraction": round(water, 6)}
     rep = export_mesh(model, keys, args.out, format=fmt, params=params, view=view, layers=args.layers,
-                      veins=args.veins, texture=args.texture, name=f"{sp.key}-seed{args.seed}", extras={"leafsim": about})
+                      veins=args.veins, texture=args.texture, name=f"{sp.key}-seed{args.seed}", extras={"leafsim": about},
+                      keep=species_inputs(sp))
     rep.update(species=sp.key, seed=args.seed, frames=run.state.frame, water_fraction=round(water, 6), texture=args.texture)
     if fmt in ("glb", "gltf", "obj"):
         # the add-on that brings into Blender what its importers drop: a glTF's colour morphs and

@@ -29,7 +29,7 @@ from leafsim.sim.shape import save_npz
 from leafsim.sim.stats import StatsStream
 
 #: the names --every writes its PNG frames under (leafsim.render.sequence.FrameWriter)
-_FRAME_NAME = re.compile(r"frame_\d{5,}\.png")
+_FRAME_NAME = re.compile(r"frame_\d{5,}\.png", re.ASCII | re.IGNORECASE)  # (a case-blind file system too)
 
 
 def _prior_seconds(meta: dict) -> float | None:

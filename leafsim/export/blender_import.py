@@ -96,7 +96,7 @@ def colour_morphs(path) -> dict:
         prim = mesh["primitives"][0]
         targets = prim.get("targets") or []
         key = next((k for k in ("COLOR_0", "_AGEING") if k in prim["attributes"] and targets and k in targets[0]), None)
-        if key is None and "_AGEING" in prim["attributes"]:
+        if key is None and "_AGEING" in prim["attributes"] and not targets:
             # one state with the photo as texture: the factor without deltas (Blender's importer
             # keeps no custom attribute, so a dried leaf came in with the fresh photo's green)
             key = "_AGEING"

@@ -282,7 +282,7 @@ def format_of(path, fmt: str | None, flag: str = "format") -> str:
 
 def export_mesh(model: Model, states, path, format: str | None = None, params=None, view=None,
                 layers: str = "shell", veins: bool = False, texture: str = "colours", times=None,
-                albedo: str = "detail", name: str = "leaf", extras: dict | None = None) -> dict:
+                albedo: str = "detail", name: str = "leaf", extras: dict | None = None, keep=()) -> dict:
     """Write the leaf ``model`` in ``states`` (a State or a list; several = a glTF animation with
     one morph target per state after the first) to ``path``.
 
@@ -302,8 +302,11 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     name, extras : a glTF's root node, whose children the surfaces are: its name (``leafsim
         export`` gives the species and seed, a scene the leaf's name) and JSON-able facts about
         the leaf (species, seed, frame, ...) as its ``extras``.
+    keep : files never removed as an earlier OBJ export's leftovers (the species' config and
+        photos: :func:`_remove_stale`).
 
-    Returns a summary: format, path, files written, vertex and triangle counts per mesh, targets.
+    Returns a summary: format, path, files written, vertex and triangle counts per mesh, targets,
+    and ``removed``: the textures an earlier OBJ export to ``path`` wrote that this one did not.
     """
     from leafsim.config.params import ParamSet, as_params
 
@@ -350,6 +353,7 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
     frames = [src.surfaces(s) for s in states]
     times = [s.time for s in states] if times is None else times
     png, normal_png = src.texture_pngs(states[-1], normals=fmt in ("glb", "gltf", "obj"))
+    earlier = _mtl_maps(path) if fmt == "obj" else []  # (read before the new MTL replaces it)
     if fmt in ("glb", "gltf"):
         from leafsim.export.gltf import write_gltf
 
@@ -362,28 +366,66 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
         files = write_ply(Path(path), frames[0])
     if fmt not in ("glb", "gltf"):  # OBJ and PLY write the surfaces' vertices as they are
         counts = {k: {"vertices": len(s.positions), "triangles": len(s.triangles)} for k, s in frames[0].items()}
-    removed = _remove_stale(path, fmt, files)
+    removed = _remove_stale(path, earlier, files, keep)
     return {"format": fmt, "path": str(path), "files": [str(f) for f in files], "targets": len(states) - 1,
             "meshes": counts, "removed": [str(f) for f in removed]}
 
 
-def _remove_stale(path, fmt: str, written) -> list[Path]:
-    """The side files an earlier OBJ export to ``path`` wrote and this one did not (a fresh leaf's
-    export writes no normal map; a baked export no photo), removed: its MTL no longer names them,
-    yet a folder zipped for a client shipped them beside it.  Only regular files (not a link, a
-    folder or a device) with exactly the names an export to ``path`` writes; returns them."""
-    if fmt != "obj":
+#: the first line of every MTL leafsim writes (:func:`write_obj`)
+MTL_HEADER = "# leafsim materials"
+
+
+def _mtl_maps(path) -> list[Path]:
+    """The texture files the MTL beside ``path`` names (``map_Kd``, ``map_Bump``) when that MTL is
+    a regular file leafsim wrote (its first line :data:`MTL_HEADER`), else []: what an earlier
+    export to ``path`` wrote beside it."""
+    mtl = Path(path).with_suffix(".mtl")
+    try:
+        if mtl.is_symlink() or not mtl.is_file() or mtl.stat().st_size > 1 << 20:
+            return []
+        lines = mtl.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
         return []
-    keep = {Path(f).resolve() for f in written}
+    if not lines or lines[0].strip() != MTL_HEADER:
+        return []
+    out = []
+    for ln in lines:
+        parts = ln.split()
+        if len(parts) >= 2 and parts[0] in ("map_Kd", "map_Bump"):
+            out.append(Path(path).parent / parts[-1])
+    return out
+
+
+def _remove_stale(path, earlier, written, keep=()) -> list[Path]:
+    """Remove the textures an earlier OBJ export to ``path`` wrote (``earlier``: what its MTL
+    named, :func:`_mtl_maps`) that this one did not (``written``): a fresh leaf's export writes no
+    normal map, a baked export no photo, and a folder zipped for a client shipped the old ones
+    beside the new MTL.  Only regular files in ``path``'s folder with a name an export to ``path``
+    writes (:func:`side_files`), never one of ``keep`` (the species' inputs); a file that cannot
+    be removed is left.  Returns the removed files."""
+    ours = {Path(p).name for texture in ("photo", "baked") for p, _ in side_files(path, "obj", texture)}
+    mine = {os.path.realpath(f) for f in written}
+    kept = {os.path.realpath(f) for f in keep if f is not None}
     removed = []
-    for texture in ("photo", "baked"):
-        for side, _ in side_files(path, fmt, texture):
-            side = Path(side)
-            if side.resolve() in keep or side.is_symlink() or not side.is_file() or side in removed:
-                continue
-            side.unlink()
-            removed.append(side)
+    for old in dict.fromkeys(earlier):
+        old = Path(old)
+        real = os.path.realpath(old)
+        if (old.name not in ours or real in mine or real in kept or old.is_symlink() or not old.is_file()
+                or not same_folder(old.parent, Path(path).parent)):
+            continue
+        try:
+            old.unlink()
+        except OSError:
+            continue
+        removed.append(old)
     return removed
+
+
+def same_folder(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 # ------------------------------------------------------------------ static formats
@@ -478,7 +520,7 @@ def write_obj(path: Path, surfaces: dict[str, Surface], photo_png: bytes | None 
     png = png if png is not None else texture_file(path, "photo")
     normal = normal if normal is not None else normal_file(path)
     lines = ["# leafsim mesh export", f"mtllib {mtl.name}"]
-    mat = ["# leafsim materials"]
+    mat = [MTL_HEADER]
     base = vt_base = 0
     turned = False
     for name, s in surfaces.items():

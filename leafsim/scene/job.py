@@ -336,4 +336,5 @@ def _export(job: LeafJob, sp, model: Model, params, states: list, folder: Path, 
     about = {"leaf": job.name, "species": sp.key, "seed": int(job.seed), "frame": last.frame,
              "time_s": round(float(last.time), 9), "water_fraction": round(model.water_fraction(last.particle_water), 6)}
     export_mesh(model, states, folder / f"leaf.{o['mesh']}", params=params, view=view,
-                layers=o["layers"], veins=o["veins"], texture=o["texture"], name=job.name, extras={"leafsim": about})
+                layers=o["layers"], veins=o["veins"], texture=o["texture"], name=job.name, extras={"leafsim": about},
+                keep=(sp.config, sp.image, sp.senescent.image if sp.senescent is not None else None))

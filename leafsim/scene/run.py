@@ -32,7 +32,7 @@ from typing import Callable
 import numpy as np
 
 from leafsim.base.errors import LeafsimError
-from leafsim.base.fileio import atomic_write_bytes, no_folder, not_an_input, output_target, read_json
+from leafsim.base.fileio import atomic_write_bytes, no_folder, not_an_input, output_target, read_json, same_file
 from leafsim.config.params import SEED_MAX, json_typed
 from leafsim.export.mesh import FORMATS, LAYERS, TEXTURES
 from leafsim.scene.job import LeafJob, check_done, is_done, run_leaf
@@ -229,9 +229,12 @@ def _group_jobs(w: _Where, g, lib: dict, config: str | None, digest: str, names:
     # a criterion the group's effects cannot move is refused now, in one line (each leaf of the
     # group was built and then failed, a line per leaf, after the scene's files were begun)
     on = {e: (e in effects) if effects is not None else bool(group_params[f"effects.{e}"]) for e in EFFECTS}
+    v = stop["value"]
+    ahead = {"water_left": stop["kind"] == "water_left" and v < 1.0,  # (1, or the season it starts at: met at frame 0)
+             "season": stop["kind"] == "season" and max(v) > float(group_params["colour.season"])}
     for kind, effect, what in (("water_left", "osmosis", "the water left cannot fall"),
                                ("season", "colour", "the season clock stands still")):
-        if stop["kind"] == kind and not on[effect]:
+        if ahead[kind] and not on[effect]:
             key = "effects" if effects is not None else "params"
             raise w.err(f"stop.{kind}", f"cannot be reached: {what} with the effect '{effect}' off (its {key}); "
                                         f"switch '{effect}' on or stop after a number of frames")
@@ -336,6 +339,9 @@ def _output(w: _Where, o) -> dict:
            "texture": w.choice(o, "texture", "colours", TEXTURES, "output."), "stats": w.bool(o, "stats", False, "output.")}
     if out["texture"] != "colours" and mesh == "ply":
         raise w.err("output.texture", f"PLY carries vertex colours, not a {out['texture']} texture")
+    if out["texture"] == "photo" and mesh == "obj":  # (leafsim export warns; a batch is refused, not a leaf at a time)
+        raise w.err("output.texture", "'photo' in an OBJ is the photo as the leaf looked when photographed: an OBJ "
+                                      "cannot carry its ageing (use 'baked', or mesh glb / gltf)")
     if out["texture"] == "baked" and every and mesh:
         # a glTF texture cannot change with the key frames: refused here, not after the leaves dried
         raise w.err("output.texture", "'baked' holds one state's colour; frames every K need 'colours'")
@@ -375,6 +381,22 @@ def _overview(w: _Where, ov) -> dict | None:
 
 
 # ------------------------------------------------------------------ running
+
+def _no_input_in_leaf_folders(scene: Scene, out: Path) -> None:
+    """LeafsimError when one of the scene's inputs lies in the folder of one of its leaves
+    (``OUT/leaves/NAME/``, which a run of that leaf replaces); folders compared as files (the same
+    inode), names without regard to case (a case-blind file system)."""
+    leaves = out / "leaves"
+    if not leaves.is_dir():
+        return
+    names = {j.name.lower() for j in scene.jobs}
+    for src in scene.inputs:
+        real = Path(os.path.realpath(src))
+        for folder in real.parents:
+            if folder.name.lower() in names and same_file(folder.parent, leaves):
+                raise LeafsimError(f"--out {out}: the input {src} lies in {folder}, the folder of the scene's leaf "
+                                   f"{folder.name}, which the scene writes (expected it elsewhere; it would be replaced)")
+
 
 def check_out_dir(out) -> Path:
     """The output folder, created if its parent exists; LeafsimError if it cannot be written."""
@@ -544,17 +566,14 @@ def _run_scene(scene: Scene, out, workers: int, scheduler: str | None, client, p
                before: Callable[[], None] | None) -> dict:
     from tqdm import tqdm
 
+    # what the composition writes, checked before any leaf is simulated and before OUT is made
+    for name in ("placement.json", "summary.json", "run.json", "overview.png"):
+        not_an_input(Path(out) / name, scene.inputs or (scene.path,), "--out")  # a scene file (or config, photo) kept there
+    _no_input_in_leaf_folders(scene, Path(out))
     out = check_out_dir(out)
-    # what the composition writes, checked before any leaf is simulated
     for name, what in (("placement.json", "placement"), ("summary.json", "summary"), ("run.json", "run report"),
                        ("overview.png", "overview")):
         output_target(out / name, what)
-        not_an_input(out / name, scene.inputs or (scene.path,), "--out")  # a scene file (or config, photo) kept there
-    leaves = Path(os.path.realpath(out / "leaves"))
-    for src in scene.inputs:  # every leaf's folder is leafsim's: a file read from one would be replaced
-        if Path(os.path.realpath(src)).is_relative_to(leaves):
-            raise LeafsimError(f"--out {out}: the input {src} lies in {out / 'leaves'}, whose leaf folders the scene "
-                               "writes (expected the inputs outside it; they would be replaced)")
     t0 = time.perf_counter()
     todo = [j for j in scene.jobs if not is_done(j, out)]
     for j in todo:  # a leaf's folder is replaced only when it holds nothing but leafsim's files

@@ -532,14 +532,22 @@ def test_no_output_folder_replaces_an_input_kept_in_it(tmp_path):
     sf.write_text(json.dumps(scene))
     before = (so / "summary.json").read_bytes()
     one_line(*run_cli("scene", sf, "--out", so), "--out", "that is the input")
-    assert (so / "summary.json").read_bytes() == before
+    assert (so / "summary.json").read_bytes() == before and not (so / "leaves").exists()  # refused before OUT was made
     leaf = tmp_path / "s2" / "leaves" / "o-000"
     leaf.mkdir(parents=True)
-    (leaf / "photo.png").write_bytes(src)
-    (tmp_path / "c2.json").write_text(json.dumps({"species": {"oak": {**oak, "image": str(leaf / "photo.png")}}}))
+    (leaf / "leaf.png").write_bytes(src)  # a name leafsim writes there: the old check let the leaf's run replace it
+    (tmp_path / "c2.json").write_text(json.dumps({"species": {"oak": {**oak, "image": str(leaf / "leaf.png")}}}))
     sf.write_text(json.dumps({**scene, "config": str(tmp_path / "c2.json")}))
     one_line(*run_cli("scene", sf, "--out", tmp_path / "s2"), "--out", "lies in", "would be replaced")
-    assert (leaf / "photo.png").read_bytes() == src
+    assert (leaf / "leaf.png").read_bytes() == src
+    # an input in a folder of leaves/ the scene does not write is read, not refused
+    other = tmp_path / "s3" / "leaves" / "not-this-scene"
+    other.mkdir(parents=True)
+    (other / "leaf.png").write_bytes(src)
+    (tmp_path / "c3.json").write_text(json.dumps({"species": {"oak": {**oak, "image": str(other / "leaf.png")}}}))
+    sf.write_text(json.dumps({**scene, "config": str(tmp_path / "c3.json")}))
+    code, _, err = run_cli("scene", sf, "--out", tmp_path / "s3")
+    assert code == 0 and (other / "leaf.png").read_bytes() == src, err
 
 
 @pytest.mark.parametrize("change,needle", [
@@ -547,6 +555,7 @@ def test_no_output_folder_replaces_an_input_kept_in_it(tmp_path):
     ({"params": {"mesh.spacing": 0.06, "effects.colour": False}, "stop": {"season": 1.0}}, "stop.season"),
     ({"stop": {"frames": 100, "max_frames": 5}}, "stop.max_frames"),
     ({"description": 5}, "description"),
+    ({"output": {"mesh": "obj", "texture": "photo"}}, "output.texture"),
 ])
 def test_a_scene_that_cannot_do_what_it_says_is_refused_before_any_leaf(tmp_path, change, needle):
     """A stop its effects cannot reach (each leaf was built, then failed, a line per leaf), a frame
@@ -560,3 +569,14 @@ def test_a_scene_that_cannot_do_what_it_says_is_refused_before_any_leaf(tmp_path
     sf.write_text(json.dumps({**top, "groups": [group]}))
     one_line(*run_cli("scene", sf, "--out", tmp_path / "out"), needle)
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("stop", [{"water_left": 1.0}, {"season": 0.0}])
+def test_a_scene_stop_met_at_the_fresh_leaf_needs_no_effect(tmp_path, stop):
+    """A stop met at frame 0 (all the water left, the season the clock starts at) is not refused
+    for the effect that would move it being off: the leaves stop at once, as a run does."""
+    group = {"name": "m", "species": "oak", "count": 1, "params": {"mesh.spacing": 0.06}, "effects": ["shrink"], "stop": stop}
+    sf = tmp_path / "scene.json"
+    sf.write_text(json.dumps({"name": "s", "groups": [group]}))
+    code, out, err = run_cli("scene", sf, "--out", tmp_path / "out")
+    assert code == 0, err

@@ -419,23 +419,36 @@ def test_the_blender_addon_reads_a_gltf_whose_buffer_name_is_percent_encoded(lea
 
 
 def test_an_obj_export_removes_the_side_files_an_earlier_export_left(leaf, tmp_path):
-    """Re-exporting an OBJ under the same name removes the textures an earlier export wrote there
-    and this one does not (a fresh leaf writes no normal map; a baked export no photo): its MTL no
-    longer names them, yet a folder zipped for a client shipped them.  Only regular files with
-    exactly those names: a link is left, and so is any other file."""
+    """Re-exporting an OBJ under the same name removes the textures the earlier export's MTL named
+    and this one does not write (a fresh leaf writes no normal map; a baked export no photo): the
+    new MTL no longer names them, yet a folder zipped for a client shipped them.  Nothing else:
+    not a file of such a name no leafsim MTL named (a user's leaf_photo.png, which a name rule
+    removed), not one of ``keep`` (the species' photo), not a link."""
     model, params, view, states = leaf
     out = tmp_path / "oak.obj"
     stale = [tmp_path / n for n in ("oak_baked_normal.png", "oak_baked_normal_lower.png")]
     for p in stale:
         p.write_bytes(b"an earlier export's")
-    outside = tmp_path / "mine.png"
-    outside.write_bytes(b"not leafsim's")
-    (tmp_path / "oak_photo.png").symlink_to(outside)  # (a photo export's name: not written by this one)
+    photo = tmp_path / "oak_photo.png"  # the user's own, never named by a leafsim MTL
+    photo.write_bytes(b"the user's photo")
     other = tmp_path / "oak_notes.png"
     other.write_bytes(b"the user's")
+    mtl = out.with_suffix(".mtl")
+    mtl.write_text("# leafsim materials\nnewmtl blade\nmap_Kd oak_baked.png\nmap_Bump -bm 1 oak_baked_normal.png\n"
+                   "newmtl blade_lower\nmap_Kd oak_baked_lower.png\nmap_Bump -bm 1 oak_baked_normal_lower.png\n"
+                   "newmtl x\nmap_Kd oak_notes.png\n")
     rep = export_mesh(model, states[:1], out, params=params, view=view, texture="baked")
     assert str(tmp_path / "oak_baked_normal.png") not in rep["files"]  # the fresh leaf: no crinkle, no map
     assert sorted(rep["removed"]) == sorted(str(p) for p in stale) and not any(p.exists() for p in stale)
-    assert (tmp_path / "oak_photo.png").is_symlink() and outside.read_bytes() == b"not leafsim's"
-    assert other.read_bytes() == b"the user's" and all(Path(f).is_file() for f in rep["files"])
+    assert photo.read_bytes() == b"the user's photo" and other.read_bytes() == b"the user's"  # (not leafsim's names / not named)
+    assert all(Path(f).is_file() for f in rep["files"])
+    # an MTL that is not leafsim's names nothing leafsim removes; keep= protects an input
+    for p in stale:
+        p.write_bytes(b"again")
+    mtl.write_text("# someone else's\nmap_Kd oak_baked_normal.png\n")
+    out.unlink()
+    assert export_mesh(model, states[:1], out, params=params, view=view, texture="baked")["removed"] == []
+    mtl.write_text("# leafsim materials\nmap_Kd oak_baked_normal.png\nmap_Kd oak_baked_normal_lower.png\n")
+    rep = export_mesh(model, states[:1], out, params=params, view=view, texture="baked", keep=(stale[0],))
+    assert rep["removed"] == [str(stale[1])] and stale[0].read_bytes() == b"again"
     assert export_mesh(model, states[:1], tmp_path / "oak.glb", params=params, view=view, texture="baked")["removed"] == []
