@@ -14,6 +14,10 @@ from leafsim.pipeline import build_leaf
 from leafsim.sim.run import Run, Stop
 
 
+#: an animation with more key frames than this says so (each is a morph target: a copy of every vertex)
+MANY_TARGETS = 200
+
+
 def _check(args) -> str:
     if not str(args.out).strip():
         raise LeafsimError("--out '': expected a mesh file name (.glb, .gltf, .obj or .ply)")
@@ -85,6 +89,10 @@ def cmd_export(args):
     run = Run(model, params, seed=args.seed)
     until = stop_of(args)
     keys = key_frames(run, until, args.every, Progress(args, run, until, sp.key))
+    if args.every and len(keys) - 1 > MANY_TARGETS:
+        # (--every 1 over a whole drying wrote 2572 targets: a 290 MB glb, 2.9 GB of memory to write it)
+        warn(f"--every {args.every}: {len(keys) - 1} morph targets, each a copy of every vertex; the file and Blender's "
+             f"shape keys grow with them (--every {max(args.every, run.state.frame // 100)} gives about 100)")
     if args.every and len(keys) < 2:  # (--until water=1 or season=0 hold at the fresh leaf)
         raise LeafsimError(f"--every {args.every} with --until {args.until}: the run stopped at frame {run.state.frame}, so "
                            "there is no drying to animate (give a later --until, or leave --every out)")

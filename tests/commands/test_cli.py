@@ -298,3 +298,18 @@ def test_an_aged_leaf_as_obj_with_the_photo_says_the_photo_is_not_aged(capsys, t
     code, _, err = run(capsys, "export", "--species", "oak", "--set", "mesh.spacing=0.06", "--texture", "photo",
                        "--out", str(tmp_path / "fresh.obj"), "--json")
     assert code == 0 and "warning" not in err  # the fresh leaf is the photo
+
+
+def test_an_animation_of_very_many_key_frames_says_so(capsys, tmp_path):
+    """--every 1 over a long run wrote thousands of morph targets (a 290 MB glb, 2.9 GB of memory)
+    without a word: past MANY_TARGETS the command warns once, naming an --every that gives about 100."""
+    from leafsim.commands.export import MANY_TARGETS
+
+    n = MANY_TARGETS + 5
+    code, _, err = run(capsys, "export", "--species", "oak", "--set", "mesh.spacing=0.08", "--frames", str(n), "--every", "1",
+                       "--out", str(tmp_path / "a.glb"), "--json")
+    warnings = [ln for ln in err.splitlines() if "morph targets" in ln]
+    assert code == 0 and len(warnings) == 1 and f"{n} morph targets" in warnings[0] and "--every 2" in warnings[0]
+    code, _, err = run(capsys, "export", "--species", "oak", "--set", "mesh.spacing=0.08", "--frames", "20", "--every", "1",
+                       "--out", str(tmp_path / "b.glb"), "--json")
+    assert code == 0 and "morph targets" not in err
