@@ -41,6 +41,7 @@ uniform float u_mottle;
 uniform vec3 u_absorb[5];
 uniform vec3 u_base;
 uniform int u_absolute;        // vein colours are absolute linear RGB
+uniform float u_opacity;       // render.vein_alpha: the veins' opacity over the blade
 uniform sampler2D u_tex;
 uniform vec3 u_tex_mean;       // mean linear colour of the photo's leaf area (LS_TEX 2)
 uniform vec3 u_vein_cols[4];
@@ -75,7 +76,7 @@ void main() {
     if (v_order >= 2) discard;
 #endif
     float dist = abs(v_v) * v_hd;                   // pixels from the centre line
-    float cover = clamp(v_target - dist + 0.5, 0.0, 1.0) * v_alpha;
+    float cover = clamp(v_target - dist + 0.5, 0.0, 1.0) * v_alpha * u_opacity;
     if (cover <= 0.0) discard;
     // the rounded cross-section only where the vein is wide enough on screen to show it: on a
     // vein one or two pixels wide the bent normals lit alternate pixels light and dark along

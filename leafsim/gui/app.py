@@ -266,10 +266,8 @@ class LeafApp:
     # ------------------------------------------------------------------ per frame (GL)
     def render_options(self):
         p = self.session.params
-        opts = RenderOptions(view=self.view, translucency=float(p["render.translucency"]) * 1.8,
-                             specular=float(p["render.specular"]), veins=p["render.vein_alpha"] > 0.02,
-                             background=BACKGROUND, shadow_size=1024, ground=self.show_ground,
-                             shadows=self.shadows or self.self_shadow, self_shadow=self.self_shadow)
+        opts = RenderOptions.of_params(p, view=self.view, background=BACKGROUND, shadow_size=1024, ground=self.show_ground,
+                                       shadows=self.shadows or self.self_shadow, self_shadow=self.self_shadow)
         opts.ground_shadow = self.shadows  # "shadows": the soft shadow on the ground
         if not self.heat_fit and self.view not in OWN_RANGE:
             opts.scalar_range = (0.0, 1.0)

@@ -8,6 +8,8 @@ from leafsim.base.errors import LeafsimError
 
 #: Views that are not scalar heat maps; any other view name must be a key of ``mesh.scalars``.
 BASIC_VIEWS = ("shaded", "particles", "springs", "wireframe")
+#: render.translucency (default 0.35) × this is the shader's translucency (default 0.65)
+TRANSLUCENCY_SCALE = 0.65 / 0.35
 
 
 @dataclass
@@ -56,6 +58,8 @@ class RenderOptions:
         Multiplier of the vein widths.
     vein_min_px : float
         Veins thinner than this on screen are drawn this wide but faded (anti-aliasing).
+    vein_opacity : float
+        The drawn veins' opacity over the blade (``render.vein_alpha``), 0..1.
     point_size : float
         Particle size in pixels.
     spring_colours : tuple of (3,) float
@@ -97,6 +101,7 @@ class RenderOptions:
     vein_absolute: bool = False
     vein_width_scale: float = 1.0
     vein_min_px: float = 1.0
+    vein_opacity: float = 1.0
     point_size: float = 4.0
     spring_colours: tuple = ((0.15, 0.45, 0.95), (0.95, 0.35, 0.15), (0.6, 0.6, 0.6), (0.1, 0.75, 0.2))
     colormap: str = "turbo"
@@ -105,6 +110,17 @@ class RenderOptions:
     shadow_size: int = 1024
     ground_shadow_size: int = 256
     clear: bool = True
+
+    @classmethod
+    def of_params(cls, params, **kw) -> "RenderOptions":
+        """The options the ``render.*`` parameters set (the window and rendered frames alike; they
+        acted in the window only, a ``--set`` of them did nothing to ``run --every``'s frames):
+        ``render.translucency`` (scaled so its default gives the default 0.65),
+        ``render.specular`` and ``render.vein_alpha`` (the veins' opacity; hidden below 0.02),
+        then ``kw``."""
+        alpha = float(params["render.vein_alpha"])
+        return replace(cls(), translucency=float(params["render.translucency"]) * TRANSLUCENCY_SCALE,
+                       specular=float(params["render.specular"]), veins=alpha > 0.02, vein_opacity=alpha, **kw)
 
     @classmethod
     def coerce(cls, options) -> "RenderOptions":

@@ -796,6 +796,7 @@ class Renderer:
         _set(v, "u_min_px", float(opts.vein_min_px))
         _set(v, "u_width_scale", float(opts.vein_width_scale))
         _set(v, "u_absolute", int(opts.vein_absolute))
+        _set(v, "u_opacity", float(min(max(opts.vein_opacity, 0.0), 1.0)))
         _set(v, "u_tex", 0)
         # sides at their own coordinates: the blade's sampling; the centre's on both sides (no
         # rest positions): 1.5 mip levels coarser, against bands across the vein

@@ -34,7 +34,7 @@ class FrameWriter:
 
     def write(self, k: int, state) -> Path:
         """Render ``state`` as ``frame_{k:05d}.png`` (atomically)."""
-        opts = RenderOptions(albedo="detail" if self.view.use_texture(self.params) else "colours")
+        opts = RenderOptions.of_params(self.params, albedo="detail" if self.view.use_texture(self.params) else "colours")
         path = self.out / f"frame_{k:05d}.png"
         if self.renderer is None:
             self.renderer = OffscreenRenderer(960, 720)

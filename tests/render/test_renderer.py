@@ -222,6 +222,33 @@ def test_veins_visible_along_midrib(off, leaf):
     assert d_mid > 25 and d_off < 10 and d_plain < 10, (d_mid, d_off, d_plain)
 
 
+def test_vein_opacity_fades_the_veins_toward_the_blade(off, leaf):
+    """render.vein_alpha is the veins' opacity (it only switched them on and off): along the
+    midrib the half-opaque veins lie between the opaque ones and none, and the parameters set the
+    same options in the window and in rendered frames (RenderOptions.of_params)."""
+    import dataclasses
+
+    from leafsim.config.params import ParamSet
+
+    pale = dataclasses.replace(leaf, vein_colours=np.asarray(leaf.colours) * np.float32([1.6, 1.4, 1.2]))
+    full = render(off, pale, shadows=False).astype(int)
+    half = render(off, pale, shadows=False, vein_opacity=0.5).astype(int)
+    none = render(off, pale, veins=False, shadows=False).astype(int)
+    cam = top_camera()
+    px_per_m = H / (2 * cam.distance * math.tan(math.radians(cam.fov) / 2))
+    rows = [int(H / 2 - (y - B) * px_per_m) for y in np.linspace(0.02, 0.08, 12)]
+    col = W // 2
+    d_full = np.mean([np.abs(full[r, col - 1:col + 2] - none[r, col - 1:col + 2]).sum(-1).max() for r in rows])
+    d_half = np.mean([np.abs(half[r, col - 1:col + 2] - none[r, col - 1:col + 2]).sum(-1).max() for r in rows])
+    assert d_full > 25 and 0.3 * d_full < d_half < 0.7 * d_full, (d_full, d_half)
+    p = ParamSet({"render.vein_alpha": 0.3, "render.specular": 0.6, "render.translucency": 0.7})
+    o = RenderOptions.of_params(p, view="shaded")
+    assert o.vein_opacity == 0.3 and o.veins and o.specular == 0.6 and abs(o.translucency - 1.3) < 1e-9
+    d = RenderOptions.of_params(ParamSet({}))
+    assert abs(d.translucency - RenderOptions().translucency) < 1e-12 and d.vein_opacity == 1.0
+    assert not RenderOptions.of_params(ParamSet({"render.vein_alpha": 0.0})).veins
+
+
 def test_png_atomic_and_unwritable(off, leaf, tmp_path):
     out = tmp_path / "leaf.png"
     off.render_png(leaf, out, top_camera())
