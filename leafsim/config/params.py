@@ -61,11 +61,21 @@ class Param:
     rebuild: bool = False
     choices: tuple[str, ...] = ()
     log: bool = False
-    only: tuple = ()  # (key, value): the parameter acts only while key has that value (else unused)
+    only: tuple = ()  # (key, value or values): the parameter acts only while key has one of them (else unused)
 
     def applies(self, params) -> bool:
         """Whether this parameter acts under ``params`` (see ``only``)."""
-        return not self.only or params[self.only[0]] == self.only[1]
+        if not self.only:
+            return True
+        want = self.only[1]
+        return params[self.only[0]] in want if isinstance(want, tuple) else params[self.only[0]] == want
+
+    def only_text(self) -> str:
+        """``key = value`` (or ``key = a or b``) of ``only``; "" without it."""
+        if not self.only:
+            return ""
+        want = self.only[1]
+        return f"{self.only[0]} = {' or '.join(map(str, want)) if isinstance(want, tuple) else want}"
 
     def coerce(self, value: Any, where: str = "") -> Any:
         """Return ``value`` converted to this parameter's type, or raise LeafsimError."""
@@ -136,16 +146,16 @@ def _f(name, default, lo, hi, unit="", help="", group="", rebuild=False, log=Fal
     _DECL.append(Param(name, "float", float(default), lo, hi, unit, help, group, rebuild, (), log, tuple(only)))
 
 
-def _i(name, default, lo, hi, unit="", help="", group="", rebuild=False):
-    _DECL.append(Param(name, "int", int(default), lo, hi, unit, help, group, rebuild))
+def _i(name, default, lo, hi, unit="", help="", group="", rebuild=False, only=()):
+    _DECL.append(Param(name, "int", int(default), lo, hi, unit, help, group, rebuild, (), False, tuple(only)))
 
 
 def _b(name, default, help="", group="", rebuild=False):
     _DECL.append(Param(name, "bool", bool(default), None, None, "", help, group, rebuild))
 
 
-def _c(name, default, choices, help="", group="", rebuild=False):
-    _DECL.append(Param(name, "choice", default, None, None, "", help, group, rebuild, tuple(choices)))
+def _c(name, default, choices, help="", group="", rebuild=False, only=()):
+    _DECL.append(Param(name, "choice", default, None, None, "", help, group, rebuild, tuple(choices), False, tuple(only)))
 
 
 # ---------------------------------------------------------------- outline (rebuild)
@@ -230,7 +240,7 @@ _f("osmosis.patchiness", 0.0, 0.0, 2.0, "", "Patchy hydraulic failure a: evapora
 _b("osmosis.through_thickness", True, "Water also flows between the two layers through the blade's thickness (D over h/2: they stay in balance within milliseconds); off = Jeong's separate layers, where the faster-drying top curls the leaf transiently.", G, False)
 _i("osmosis.every", 1, 1, 50, "frames", "Solve osmosis and evaporation every k-th frame over k Δt (water moves far slower than the blade: a cheaper frame for a small error, see docs/accuracy.md).", G, False)
 _c("osmosis.solver", "auto", ("auto", "direct", "halves", "cg", "jacobi"), "Linear solver of the implicit osmosis step: direct = factored once, two triangular solves a step; halves = the same factored in two halves and a separator, the halves solved on two threads when that times faster (a 132 k-particle solve 20 → 13–14 ms on a quiet 2-core machine, 12 % slower with the other core busy or drawing the window, and on one numba thread; docs/performance.md; direct where no cut is balanced with a separator under 5 % of the unknowns); cg, jacobi = iterative, to osmosis.tolerance; auto = direct up to 300 k unknowns, else cg.", G, False)
-_f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True)
+_f("osmosis.tolerance", 1e-8, 1e-14, 1e-2, "", "Relative residual at which the iterative osmosis solver stops.", G, False, log=True, only=("osmosis.solver", ("auto", "cg", "jacobi")))
 _f("osmosis.g_min", 4.0, 0.1, 50.0, "mmol/(m²·s)", "Minimum (cuticular) leaf conductance to water vapour after the stomata have shut, both sides together per leaf area (Duursma et al. 2019 compile 1–11 for our genera); used when environment.drive = weather.", G, False, log=True, only=("environment.drive", "weather"))
 _f("osmosis.g_stomata", 60.0, 0.0, 1000.0, "mmol/(m²·s)", "Stomatal conductance of the detached leaf while its stomata are open (environment.drive = weather); they shut as the tissue loses water (osmosis.stomata_*_rwc).", G, False, only=("environment.drive", "weather"))
 _f("osmosis.stomata_top", 0.0, 0.0, 1.0, "", "Share of the stomatal conductance on the top (adaxial) surface: 0 = hypostomatous (the trees here), 0.5 = amphistomatous.", G, False, only=("environment.drive", "weather"))
@@ -269,17 +279,17 @@ _c("dynamics.integrator", "xpbd", ("xpbd", "sun", "static"), "How the blade's me
 _f("dynamics.static_tolerance", 1e-2, 1e-8, 1.0, "× weight", "With dynamics.integrator = static: the equilibrium solve stops when the largest force left on any particle is below this share of its weight (the stiff tissue puts the rounding floor of that force near 10⁻³ on the finer meshes).", G, False, log=True)
 _i("dynamics.static_every", 1, 1, 1000, "frames", "With dynamics.integrator = static: solve the equilibrium every this many frames (the leaf holds its shape in between): the drying's increments.  The water, shrink and plastic rest state do not depend on the shape, so only friction's path and where a snap-through lands see the increment (its convergence: docs/accuracy.md).", G, False)
 _i("dynamics.static_iterations", 200, 1, 1000, "", "With dynamics.integrator = static: the most Newton iterations of one equilibrium solve (where the drying leaf buckles off the ground into its curl it can take them all; a solve that stops at the cap leaves the leaf where the energy was lowest, and the next one goes on from there).", G, False)
-_i("dynamics.sun_substeps", 40, 1, 4000, "", "With dynamics.integrator = sun: the fewest explicit midpoint steps per frame at the default mesh spacing (scaled like dynamics.substeps); more are taken whenever the Courant limit needs them.", G, False)
-_f("dynamics.sun_courant", 1.5, 0.05, 2.0, "", "With dynamics.integrator = sun: the largest ω h allowed, ω a bound on the stiffest mode's frequency from this frame's stiffness and masses; it sets the step count.  Capped at what dynamics.sun_damping keeps stable (1.65 at ζ = 0.3, 2 from ζ = 0.5; docs/method.md).", G, False)
-_f("dynamics.sun_damping", 0.3, 0.05, 1.0, "", "With dynamics.integrator = sun: damping ratio ζ at the stiffness bound (Sun's damping force as Rayleigh damping F_d = −β k Ċ ∇C, β = 2ζ/ω, less for slower modes): the explicit step amplifies an undamped oscillation however small the step, so ζ also sets the largest stable ω h.", G, False)
+_i("dynamics.sun_substeps", 40, 1, 4000, "", "With dynamics.integrator = sun: the fewest explicit midpoint steps per frame at the default mesh spacing (scaled like dynamics.substeps); more are taken whenever the Courant limit needs them.", G, False, only=("dynamics.integrator", "sun"))
+_f("dynamics.sun_courant", 1.5, 0.05, 2.0, "", "With dynamics.integrator = sun: the largest ω h allowed, ω a bound on the stiffest mode's frequency from this frame's stiffness and masses; it sets the step count.  Capped at what dynamics.sun_damping keeps stable (1.65 at ζ = 0.3, 2 from ζ = 0.5; docs/method.md).", G, False, only=("dynamics.integrator", "sun"))
+_f("dynamics.sun_damping", 0.3, 0.05, 1.0, "", "With dynamics.integrator = sun: damping ratio ζ at the stiffness bound (Sun's damping force as Rayleigh damping F_d = −β k Ċ ∇C, β = 2ζ/ω, less for slower modes): the explicit step amplifies an undamped oscillation however small the step, so ζ also sets the largest stable ω h.", G, False, only=("dynamics.integrator", "sun"))
 _f("dynamics.mass_scaling", 64.0, 1.0, 4096.0, "", "Inertia × M with gravity ÷ M (weight and every static force unchanged; motion √M slower; with dynamics.rigid_inertia only the deformation modes').  A constraint's XPBD regime depends on h²/(compliance · mass): scaling the mass by M is, for the quasi-static drying, the same as √M times more substeps at no cost.  64: the drying shape of 160 substeps from 20 (docs/accuracy.md); from ≈ 256 the slowed leaf lags behind its drying; 1 = real inertia (a falling or swinging leaf moves at its real speed).", G, False, log=True)
 _b("dynamics.rigid_inertia", True, "Selective mass scaling: the leaf's rigid motion (falling through the air, swinging about its pinned stalk) keeps its real inertia and dynamics.mass_scaling slows only the deformation modes (bending, stretching), whose convergence the drying needs; the static shapes are the same either way.  A leaf touching the ground keeps the scaled inertia (tipping over and sliding stay √M slower).  Off: every motion √M slower.", G, False)
-_f("dynamics.air_damping", 6.0, 0.0, 1000.0, "1/s", "With dynamics.rigid_inertia: damping rate of the leaf's rigid motion in real time (air drag, linearised): a falling leaf's terminal speed is g / this (6/s: 1.6 m/s, a plate of 0.2 kg/m² falling broadside, drag coefficient 1.2).", G, False, log=True)
+_f("dynamics.air_damping", 6.0, 0.0, 1000.0, "1/s", "With dynamics.rigid_inertia: damping rate of the leaf's rigid motion in real time (air drag, linearised): a falling leaf's terminal speed is g / this (6/s: 1.6 m/s, a plate of 0.2 kg/m² falling broadside, drag coefficient 1.2).", G, False, log=True, only=("dynamics.rigid_inertia", True))
 _f("dynamics.relaxation", 1.0, 0.5, 1.3, "", "Over-relaxation ω of the bending projections (successive over-relaxation): > 1 carries a steady load across the mesh in fewer sweeps but a free curling leaf may then never come to rest (limit cycles measured from ω 1.3, blow-ups from 1.5 without damping); 1 = plain Gauss–Seidel.", G, False)
 _f("dynamics.tolerance", 1e-4, 1e-9, 1.0, "", "Stop iterating when the largest position change per iteration falls below this × leaf length.", G, False, log=True)
 _c("dynamics.path", "draft", ("own", "draft", "fine"), "Mesh that carries the blade's mechanics while the leaf dries: own = this mesh throughout; draft = a coarser mesh of the same leaf (the draft quality's mesh and solver) until the water falls to dynamics.handover, then this mesh (as close to the converged shape as own for 2.5–3.3× less CPU on maple; docs/performance.md); fine = the default quality's mesh and solver, for a mesh finer than it (with dynamics.handover 0 this mesh takes that mesh's shape to the end: a 100 k-particle leaf dries in minutes, not hours; docs/performance.md).  No effect when this mesh is not finer than the path's one, or when the solver settings (substeps, iterations, tolerance, inertia scaling) are not the defaults it stands in for.", G, True)
-_f("dynamics.handover", 0.15, 0.0, 1.0, "", "With dynamics.path = draft or fine: the share of the fresh leaf's water at which the leaf's own mesh takes over the mechanics (0 = never; 1 = at once).", G, False)
-_c("dynamics.finish", "xpbd", ("xpbd", "static"), "With dynamics.path = draft or fine: how the leaf's own mesh (and with fine the default mesh under it) finishes the drying after the hand-over: xpbd = XPBD frames, as for motion; static = the blade's static equilibrium every dynamics.static_every frames (the static integrator), only while the leaf has an equilibrium (on the ground, hanging by its stalk, or with no gravity; a free leaf that falls keeps xpbd); the first solve comes at the hand-over.  Measured per species (docs/performance.md, 'A static finish'): on oak 3–4× closer to the converged limit in position for less CPU, on maple, hornbeam, chestnut, walnut and pokeweed 1.3–15× slower.", G, False)
+_f("dynamics.handover", 0.15, 0.0, 1.0, "", "With dynamics.path = draft or fine: the share of the fresh leaf's water at which the leaf's own mesh takes over the mechanics (0 = never; 1 = at once).", G, False, only=("dynamics.path", ("draft", "fine")))
+_c("dynamics.finish", "xpbd", ("xpbd", "static"), "With dynamics.path = draft or fine: how the leaf's own mesh (and with fine the default mesh under it) finishes the drying after the hand-over: xpbd = XPBD frames, as for motion; static = the blade's static equilibrium every dynamics.static_every frames (the static integrator), only while the leaf has an equilibrium (on the ground, hanging by its stalk, or with no gravity; a free leaf that falls keeps xpbd); the first solve comes at the hand-over.  Measured per species (docs/performance.md, 'A static finish'): on oak 3–4× closer to the converged limit in position for less CPU, on maple, hornbeam, chestnut, walnut and pokeweed 1.3–15× slower.", G, False, only=("dynamics.path", ("draft", "fine")))
 _c("dynamics.precision", "float64", ("float64", "float32"), "Floating-point type the dynamics frame works in: positions, velocities and constraint records (float32: half the memory, positions rounded to ≈ 4·10⁻⁹ m on a 12 cm leaf near the origin, more on a leaf falling away from it in the free scene; its error and cost are measured in docs/accuracy.md); the xpbd integrator only, sun always runs in float64.", G, False)
 _f("dynamics.plasticity", 2.0, 0.0, 100.0, "1/s", "Rate at which drying tissue sets: bending hinges keep the largest bilayer curl they reached (0 = purely elastic, the curl relaxes when both layers are dry).", G, False, log=True)
 
@@ -293,7 +303,7 @@ _f("material.turgor_share", 0.0, 0.0, 0.95, "", "Share T of the fresh leaf's ben
 _f("material.turgor_loss_rwc", 0.85, 0.5, 0.99, "", "Relative water content at the turgor-loss point, where the cells' turgor (and T of the stiffness) is gone; 0.8–0.9 in temperate broadleaves (Bartlett et al. 2012).", G, False)
 _f("material.stiffening_power", 1.0, 1.0, 6.0, "", "Dry stiffening grows as (1 − RWC)^p: 1 = in proportion to the water lost; larger = only once the walls themselves dry (with turgor_share > 0 the wilting dip then shows).", G, False)
 _f("material.stiffening_stretch", 0.0, 0.0, 1.0, "", "Share of the dry stiffening that stiffens stretching too (the lamina's membrane springs × (1 + share·k_dry·dry^p)): 0 = bending only; 1 = the dried wall material is stiffer alike in bending and stretching, so its bending-to-stretching ratio (which sets wrinkle wavelengths and buckling strains) stays the fresh one.", G, False)
-_f("material.turgor_pressure", 0.0, 0.0, 3e6, "Pa", "With dynamics.integrator = sun: turgor pressure P of the fresh cells for Sun's turgor force (0.5–1 MPa in temperate broadleaves), lost linearly as the RWC falls to the turgor-loss point; cells losing it pull their neighbours in (a ΔP per membrane spring, a = the face between the two cells × half the thickness).  0 = off: the shrink effect already carries the whole drying contraction, calibrated per species, and P > 0 adds about (4/3) P / E of area loss on top.", G, False)
+_f("material.turgor_pressure", 0.0, 0.0, 3e6, "Pa", "With dynamics.integrator = sun: turgor pressure P of the fresh cells for Sun's turgor force (0.5–1 MPa in temperate broadleaves), lost linearly as the RWC falls to the turgor-loss point; cells losing it pull their neighbours in (a ΔP per membrane spring, a = the face between the two cells × half the thickness).  0 = off: the shrink effect already carries the whole drying contraction, calibrated per species, and P > 0 adds about (4/3) P / E of area loss on top.", G, False, only=("dynamics.integrator", "sun"))
 _f("material.vein_modulus", 5e8, 1e5, 1e11, "Pa", "Young's modulus of vein tissue: vein springs E_v·πw²/4/l, vein bending E_v·πw⁴/64 on the hinges that bend a vein lengthwise.", G, False, log=True)
 _c("dynamics.voronoi", "free", ("free", "replace"), "Layer V: free particles (stable) or re-placed over their triangle each frame (thesis).", G, False)
 _c("dynamics.scene", "ground", ("ground", "hanging", "free"), "Scene: lying on the ground, hanging from a pinned petiole, or free.", G, False)
@@ -562,7 +572,7 @@ def markdown_table() -> str:
             if p.group != g:
                 continue
             rng = ", ".join(p.choices) if p.kind == "choice" else ("true/false" if p.kind == "bool" else f"{p.lo:g} … {p.hi:g}")
-            only = f" Acts only with `{p.only[0]}` = {p.only[1]}." if p.only else ""
+            only = f" Acts only with `{p.only_text()}`." if p.only else ""
             lines.append(f"| `{p.name}` | {p.default} | {rng} | {p.unit} | {'yes' if p.rebuild else 'live'} | {p.help}{only} |")
         lines.append("")
     if JOINTS:

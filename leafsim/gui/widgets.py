@@ -51,7 +51,7 @@ def _tooltip(p: Param, idle: bool = False) -> None:
         imgui.push_text_wrap_pos(imgui.get_font_size() * 28.0)
         imgui.text_unformatted(p.name)
         if idle:
-            imgui.text_colored(IDLE_NOTE_COLOUR, f"Unused now: acts only with {p.only[0]} = {p.only[1]}")
+            imgui.text_colored(IDLE_NOTE_COLOUR, f"Unused now: acts only with {p.only_text()}")
         imgui.text_unformatted(p.help)
         imgui.text_disabled(f"{p.describe()}; default {p.default}; {'needs Rebuild' if p.rebuild else 'applies live'}")
         imgui.pop_text_wrap_pos()
