@@ -75,7 +75,8 @@ class Param:
         if not self.only:
             return ""
         want = self.only[1]
-        return f"{self.only[0]} = {' or '.join(map(str, want)) if isinstance(want, tuple) else want}"
+        text = (lambda v: str(v).lower() if isinstance(v, bool) else str(v))  # (true, as --set and the docs write it)
+        return f"{self.only[0]} = {' or '.join(map(text, want)) if isinstance(want, tuple) else text(want)}"
 
     def coerce(self, value: Any, where: str = "") -> Any:
         """Return ``value`` converted to this parameter's type, or raise LeafsimError."""
@@ -303,7 +304,7 @@ _f("material.turgor_share", 0.0, 0.0, 0.95, "", "Share T of the fresh leaf's ben
 _f("material.turgor_loss_rwc", 0.85, 0.5, 0.99, "", "Relative water content at the turgor-loss point, where the cells' turgor (and T of the stiffness) is gone; 0.8–0.9 in temperate broadleaves (Bartlett et al. 2012).", G, False)
 _f("material.stiffening_power", 1.0, 1.0, 6.0, "", "Dry stiffening grows as (1 − RWC)^p: 1 = in proportion to the water lost; larger = only once the walls themselves dry (with turgor_share > 0 the wilting dip then shows).", G, False)
 _f("material.stiffening_stretch", 0.0, 0.0, 1.0, "", "Share of the dry stiffening that stiffens stretching too (the lamina's membrane springs × (1 + share·k_dry·dry^p)): 0 = bending only; 1 = the dried wall material is stiffer alike in bending and stretching, so its bending-to-stretching ratio (which sets wrinkle wavelengths and buckling strains) stays the fresh one.", G, False)
-_f("material.turgor_pressure", 0.0, 0.0, 3e6, "Pa", "With dynamics.integrator = sun: turgor pressure P of the fresh cells for Sun's turgor force (0.5–1 MPa in temperate broadleaves), lost linearly as the RWC falls to the turgor-loss point; cells losing it pull their neighbours in (a ΔP per membrane spring, a = the face between the two cells × half the thickness).  0 = off: the shrink effect already carries the whole drying contraction, calibrated per species, and P > 0 adds about (4/3) P / E of area loss on top.", G, False, only=("dynamics.integrator", "sun"))
+_f("material.turgor_pressure", 0.0, 0.0, 3e6, "Pa", "With dynamics.integrator = sun or static, or a static finish (dynamics.finish = static): turgor pressure P of the fresh cells for Sun's turgor force (0.5–1 MPa in temperate broadleaves), lost linearly as the RWC falls to the turgor-loss point; cells losing it pull their neighbours in (a ΔP per membrane spring, a = the face between the two cells × half the thickness).  0 = off: the shrink effect already carries the whole drying contraction, calibrated per species, and P > 0 adds about (4/3) P / E of area loss on top.", G, False)
 _f("material.vein_modulus", 5e8, 1e5, 1e11, "Pa", "Young's modulus of vein tissue: vein springs E_v·πw²/4/l, vein bending E_v·πw⁴/64 on the hinges that bend a vein lengthwise.", G, False, log=True)
 _c("dynamics.voronoi", "free", ("free", "replace"), "Layer V: free particles (stable) or re-placed over their triangle each frame (thesis).", G, False)
 _c("dynamics.scene", "ground", ("ground", "hanging", "free"), "Scene: lying on the ground, hanging from a pinned petiole, or free.", G, False)

@@ -192,11 +192,11 @@ def test_the_parameters_of_one_integrator_path_or_solver_say_when_they_act():
     """Parameters whose help says "With X = Y" declare it, so the window dims them and the
     parameter table says so (a parameter audit found them active-looking where they do nothing):
     Sun's integrator's, the drying path's, the iterative osmosis solvers', the rigid modes' air
-    damping; a condition may name several values."""
+    damping; a condition may name several values.  (Turgor pressure is not one of them: the
+    static solves use it too.)"""
     want = {"dynamics.sun_substeps": ("dynamics.integrator", "sun", "xpbd"),
             "dynamics.sun_courant": ("dynamics.integrator", "sun", "static"),
             "dynamics.sun_damping": ("dynamics.integrator", "sun", "xpbd"),
-            "material.turgor_pressure": ("dynamics.integrator", "sun", "xpbd"),
             "dynamics.handover": ("dynamics.path", "fine", "own"),
             "dynamics.finish": ("dynamics.path", "draft", "own"),
             "osmosis.tolerance": ("osmosis.solver", "cg", "direct"),
@@ -208,3 +208,6 @@ def test_the_parameters_of_one_integrator_path_or_solver_say_when_they_act():
         assert p.applies(ParamSet({key: on})) and not p.applies(ParamSet({key: off})), name
         assert f"Acts only with `{p.only_text()}`." in doc, name
     assert PARAMS["dynamics.handover"].only_text() == "dynamics.path = draft or fine"
+    assert PARAMS["dynamics.air_damping"].only_text() == "dynamics.rigid_inertia = true"
+    # turgor pressure also acts in the static solves (a static integrator or finish): no only=
+    assert not PARAMS["material.turgor_pressure"].only
