@@ -23,9 +23,10 @@ A texel is at most a third of the mottle's correlation length on the blade (shar
 than the window at any zoom a user would draw the leaf), within :data:`BAKE_MIN` and
 :data:`BAKE_MAX` texels a side; over a photo the texture is the photo's size, or an integer
 multiple of it where the mottle asks for more (texel centres on the photo's pixels' grid, so
-its detail is not resampled at fractional offsets).  Where the stalk's texture coordinates
-overlap the blade's (the petiole drawn on a photo, or a drawn leaf's stalk at its base), the
-blade's triangles are baked and the stalk shows the blade's colour there.  A state is a still: an animation's texture could not
+its detail is not resampled at fractional offsets).  The stalk's texture coordinates lie on the
+blade's midrib near the base, where the blade's triangles are baked (first triangle wins): an
+export gives the stalk a mesh of its own with the window's albedo per vertex
+(:func:`vertex_albedo`).  A state is a still: an animation's texture could not
 change with its key frames, so animations carry vertex colours (:func:`leafsim.export.mesh.export_mesh`).
 """
 
@@ -271,6 +272,63 @@ def bake_normals(source, state, size: tuple[int, int]) -> np.ndarray | None:
 ALBEDOS = ("detail", "texture", "colours")
 
 
+class _Shading:
+    """What the fragment shader needs to draw the blade's albedo of ``source`` in ``state`` at a
+    point: the per-vertex attributes it interpolates (:attr:`attr`, rows of the view's vertices)
+    and the photo and mottle it samples (:meth:`shade`)."""
+
+    def __init__(self, source, state):
+        from leafsim.appearance.mottle import mottle_levels, mottle_scale
+
+        view, params = source.view, source.params
+        col, tint = view.colours(state, params)
+        col = np.asarray(col, np.float64)
+        mottle, self.msize, self.amount = view.mottle(state, params)
+        rest = np.asarray(view.mottle_rest(state), np.float64)
+        self.mode = getattr(source, "albedo", "detail")
+        self.photo = view.photo_rgba if view.use_texture(params) and self.mode != "colours" else None
+        if self.photo is not None:
+            if self.mode == "texture":
+                col = np.ones_like(col) if tint is None else np.asarray(tint, np.float64)  # the photo × the tint
+            self.tex = photo_texels(self.photo)
+            mask = np.asarray(self.photo)[:, :, 3] >= 128
+            lin = (np.asarray(self.photo)[:, :, :3][mask].astype(np.float64) / 255.0) ** 2.2  # the renderer's mean (u_tex_mean)
+            self.tex_mean = lin.mean(axis=0) if lin.size else np.array([0.2, 0.3, 0.1])
+        chroma = view.chroma(state, params) if self.photo is not None and self.mode == "detail" else None
+        self.chroma = chroma is not None
+        cols = [col]
+        if chroma is not None:
+            cols.append(np.asarray(chroma, np.float64))
+        self.use_mottle = mottle is not None and self.msize > 0 and self.amount > 0
+        if self.use_mottle:
+            cols += [np.asarray(mottle, np.float64), rest]
+            self.noise = mottle_levels()
+            self.scale = mottle_scale(self.msize)
+        self.attr = np.concatenate(cols, 1)
+
+    def shade(self, a: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(k, 3) linear albedo of points with interpolated attributes ``a`` (k, :attr:`attr`'s
+        columns) at texture coordinates ``u``, ``v`` (k,) (where the photo is sampled)."""
+        from leafsim.appearance.reflectance import mottle_ratio
+
+        albedo = a[:, :3]
+        k = 3
+        if self.photo is not None:
+            texel = bilinear(self.tex, u, v, wrap=False)
+            if self.mode == "texture":
+                albedo = texel * albedo
+            else:
+                ch = a[:, k:k + 4] if self.chroma else np.tile(NO_CHROMA, (len(a), 1))
+                k += 4 if self.chroma else 0
+                albedo = photo_detail(albedo, texel, self.tex_mean, ch)
+        if self.use_mottle:
+            rows, pos = a[:, k:k + 10], a[:, k + 10:k + 12]
+            lev = bilinear(self.noise, pos[:, 0] * self.scale, pos[:, 1] * self.scale, wrap=True) / 255.0
+            n = lev * (255.0 / 128.0) - (255.0 / 256.0)  # the shader's mottle_n
+            albedo = albedo * mottle_ratio(rows, n, self.amount)
+        return albedo
+
+
 def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(albedo (H, W, 3) float32 linear RGB, blade (H, W) bool) of ``source``'s blade in
     ``state`` over the texture space (``source``: a :class:`~leafsim.export.mesh.MeshSource`;
@@ -278,45 +336,19 @@ def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.
     species has a photo (and ``render.texture`` is on): "detail" (the pigment colour with the
     photo's detail, the window's default), "texture" (the photo times the view's tint) or
     "colours"; the pigment colour otherwise.  Outside the blade the nearest blade texel's colour."""
-    from leafsim.appearance.mottle import mottle_levels, mottle_scale
-    from leafsim.appearance.reflectance import mottle_ratio
-
-    view, params, model = source.view, source.params, source.model
+    view, model = source.view, source.model
     tri = _bake_triangles(source)
     uv = np.asarray(source.uv, np.float64)
-    col, tint = view.colours(state, params)
-    col = np.asarray(col, np.float64)
-    mottle, msize, amount = view.mottle(state, params)
-    rest = np.asarray(view.mottle_rest(state), np.float64)
-    mode = getattr(source, "albedo", "detail")
-    photo = view.photo_rgba if view.use_texture(params) and mode != "colours" else None
-    if photo is not None:
-        if mode == "texture":
-            col = np.ones_like(col) if tint is None else np.asarray(tint, np.float64)  # the photo × the tint
-        tex = photo_texels(photo)
-        mask = np.asarray(photo)[:, :, 3] >= 128
-        lin = (np.asarray(photo)[:, :, :3][mask].astype(np.float64) / 255.0) ** 2.2  # the renderer's mean (u_tex_mean)
-        tex_mean = lin.mean(axis=0) if lin.size else np.array([0.2, 0.3, 0.1])
+    sh = _Shading(source, state)
     if size is None:
-        size = texture_size(uv, model.particle_rest[view.T][:, :2], tri, msize if msize > 0 else 6e-4,
-                            None if photo is None else (tex.shape[1], tex.shape[0]))
+        size = texture_size(uv, model.particle_rest[view.T][:, :2], tri, sh.msize if sh.msize > 0 else 6e-4,
+                            None if sh.photo is None else (sh.tex.shape[1], sh.tex.shape[0]))
     W, H = int(size[0]), int(size[1])
-    chroma = view.chroma(state, params) if photo is not None and mode == "detail" else None
     tri_id = np.full((H, W), -1, np.int32)
     bary = np.zeros((H, W, 2), np.float32)
     _raster(uv * np.array([W, H], np.float64), tri, tri_id, bary)
     inside = tri_id >= 0
-    # per-vertex attributes the fragment shader interpolates
-    cols = [col]
-    if chroma is not None:
-        cols.append(np.asarray(chroma, np.float64))
-    use_mottle = mottle is not None and msize > 0 and amount > 0
-    if use_mottle:
-        cols += [np.asarray(mottle, np.float64), rest]
-    attr = np.concatenate(cols, 1)
-    if use_mottle:
-        noise = mottle_levels()
-        scale = mottle_scale(msize)
+    attr = sh.attr
     out = np.zeros((H, W, 3), np.float32)
     ys, xs = np.nonzero(inside)
     for lo in range(0, len(ys), CHUNK):
@@ -324,23 +356,20 @@ def bake_albedo(source, state, size: tuple[int, int] | None = None) -> tuple[np.
         t = tri[tri_id[y, x]]
         s, r = bary[y, x, 0:1].astype(np.float64), bary[y, x, 1:2].astype(np.float64)
         a = attr[t[:, 0]] * (1.0 - s - r) + attr[t[:, 1]] * s + attr[t[:, 2]] * r
-        albedo = a[:, :3]
-        k = 3
-        if photo is not None:
-            texel = bilinear(tex, (x + 0.5) / W, (y + 0.5) / H, wrap=False)
-            if mode == "texture":
-                albedo = texel * albedo
-            else:
-                ch = a[:, k:k + 4] if chroma is not None else np.tile(NO_CHROMA, (len(a), 1))
-                k += 4 if chroma is not None else 0
-                albedo = photo_detail(albedo, texel, tex_mean, ch)
-        if use_mottle:
-            rows, pos = a[:, k:k + 10], a[:, k + 10:k + 12]
-            lev = bilinear(noise, pos[:, 0] * scale, pos[:, 1] * scale, wrap=True) / 255.0
-            n = lev * (255.0 / 128.0) - (255.0 / 256.0)  # the shader's mottle_n
-            albedo = albedo * mottle_ratio(rows, n, amount)
-        out[y, x] = albedo
+        out[y, x] = sh.shade(a, (x + 0.5) / W, (y + 0.5) / H)
     return _fill_outside(out, inside), inside
+
+
+def vertex_albedo(source, state, vertices: np.ndarray) -> np.ndarray:
+    """(k, 3) linear albedo the window draws at the view's vertices ``vertices`` (k,) of
+    ``source``'s leaf in ``state``: the fragment shader's colour at the vertex (pigments, the
+    photo's detail at its texture coordinates, the mottle at its rest position).  What the
+    stalk carries per vertex in a baked export: its texture coordinates lie on the blade's
+    midrib, whose texels the blade's own colour fills (:func:`bake_albedo`)."""
+    vertices = np.asarray(vertices, np.int64)
+    sh = _Shading(source, state)
+    uv = np.asarray(source.uv, np.float64)[vertices]
+    return sh.shade(sh.attr[vertices], uv[:, 0], uv[:, 1]).astype(np.float32)
 
 
 def bake_png(source, state) -> bytes:

@@ -1,6 +1,6 @@
 """A small glTF 2.0 writer for :mod:`leafsim.export.mesh` (binary .glb, or .gltf JSON + .bin).
 
-One node and one mesh per exported surface (blade, veins), the children of one root node named
+One node and one mesh per exported surface (blade, stalk, veins), the children of one root node named
 after the leaf (with what it is as ``extras``), a double-sided metallic-roughness material each (baked pigment colours as ``COLOR_0``, or the photo as ``baseColorTexture``).
 Several frames: the base mesh is the **last** key frame (the state the export was asked for, so
 a viewer that does not play morph animations, such as trimesh or a still in an engine, shows
@@ -242,7 +242,7 @@ def build_gltf(frames: list[dict], times: list[float], photo_png: bytes | None =
     ``photo_png`` goes on every surface with texture coordinates, the normal map ``normal_png``
     (the blade's crinkle, in the same texture space) on the blade's.  The surfaces' nodes are the
     children of one node called ``name`` carrying ``extras`` (what leaf this is), so leaves
-    imported side by side stay apart by name (their surfaces all called blade and veins)."""
+    imported side by side stay apart by name (their surfaces all called blade, stalk and veins)."""
     g = GltfBuilder()
     tex = g.texture(photo_png, image_name) if photo_png is not None else None
     nrm = g.texture(normal_png, "crinkle") if normal_png is not None else None

@@ -101,15 +101,38 @@ def blade_surface(model, state, T, remap, layers, uv, col) -> tuple[Surface, np.
     return shell, top, n, p
 
 
+def split_surface(s: Surface, on: np.ndarray, colours: np.ndarray) -> tuple[Surface, Surface]:
+    """``s`` cut in two along the faces that touch a vertex of ``on`` (n,) bool: (the rest, with
+    ``s``'s attributes; those faces, with the vertex colours ``colours`` (n, 3) linear RGB and no
+    texture coordinates).  Each keeps only the vertices its faces use, so the vertices on the cut
+    are in both (a seam in the texture, not in the surface)."""
+    cut = on[s.triangles].any(axis=1)
+
+    def part(faces, uv, col) -> Surface:
+        used = np.unique(faces)
+        new = np.full(len(s.positions), -1, np.int64)
+        new[used] = np.arange(len(used))
+        pick = lambda x: None if x is None else x[used]  # noqa: E731
+        return Surface(positions=s.positions[used], normals=s.normals[used],
+                       triangles=new[faces].astype(np.uint32), uv=pick(uv),
+                       colours=None if col is None else np.clip(col[used], 0.0, 1.0).astype(np.float32),
+                       thickness=pick(s.thickness), ageing=pick(s.ageing), lower=pick(s.lower))
+
+    return part(s.triangles[~cut], s.uv, s.colours), part(s.triangles[cut], None, colours)
+
+
 def _ribbons(model: Model, remap: np.ndarray, sheet: np.ndarray, n: np.ndarray, up: float, uv, col,
-             max_order: int | None, base: int) -> tuple:
+             max_order: int | None, base: int, without: np.ndarray | None = None) -> tuple:
     """The vein ribbons on one face of the blade: ``sheet`` (nT, 3) its points, ``up`` +1 on the
     upper face (normals ``n``), −1 on the lower one (normals −n, the winding turned); vertex
-    numbers from ``base``.  Returns the lists (positions, normals, triangles, uvs, colours) and
-    the next free vertex number."""
+    numbers from ``base``; a vein with over half its points in ``without`` (particles, bool) is
+    left out.  Returns the lists (positions, normals, triangles, uvs, colours) and the next free
+    vertex number."""
     pos, nrm, tris, uvs, cols = [], [], [], [], []
     for k, (idx, width, order) in enumerate(model.vein_polylines()):
         if len(idx) < 2 or (max_order is not None and order > max_order):
+            continue
+        if without is not None and 2 * int(without[idx].sum()) > len(idx):
             continue
         # each ribbon a hair off the blade at its own height, the main veins farthest: where
         # ribbons met at one height (a branch point), Cycles drew the coplanar faces black
@@ -140,15 +163,17 @@ def _ribbons(model: Model, remap: np.ndarray, sheet: np.ndarray, n: np.ndarray, 
 
 
 def vein_surface(model: Model, remap: np.ndarray, top: np.ndarray, n: np.ndarray, uv, col,
-                 max_order: int | None = None, bottom: np.ndarray | None = None) -> Surface | None:
+                 max_order: int | None = None, bottom: np.ndarray | None = None,
+                 without: np.ndarray | None = None) -> Surface | None:
     """Flat ribbons of the vein widths on the upper surface ``top`` (nT, 3) with normals ``n``,
     and with ``bottom`` (nT, 3) the same on the lower surface (the window draws the veins from
     either side; on a real leaf they stand out below most); 2 vertices per vein point, 2
     triangles per segment, coloured ``col`` (nT, 3) (the vein tissue's own albedo, as the
-    renderer draws it).  None when the model has no veins."""
-    parts, base = _ribbons(model, remap, top, n, 1.0, uv, col, max_order, 0)
+    renderer draws it); a vein with over half its points in ``without`` (particles, bool) is
+    left out.  None when the model has no veins."""
+    parts, base = _ribbons(model, remap, top, n, 1.0, uv, col, max_order, 0, without)
     if bottom is not None and base:
-        below, _ = _ribbons(model, remap, bottom, n, -1.0, uv, col, max_order, base)
+        below, _ = _ribbons(model, remap, bottom, n, -1.0, uv, col, max_order, base, without)
         parts = tuple(a + b for a, b in zip(parts, below))
     pos, nrm, tris, uvs, cols = parts
     if not pos:
@@ -209,13 +234,27 @@ class MeshSource:
         blade, top, n, bottom = blade_surface(self.model, state, self.view.T, self.view.remap, self.layers, self.uv,
                                       None if baked else col)
         out = {"blade": blade}
+        stalk_v = ~self.model.blade_particles[self.view.T]  # the view's vertices on the stalk
+        if baked and stalk_v.any():
+            # the stalk's texture coordinates lie on the blade's midrib, whose texels the blade's
+            # colour fills: it takes the window's albedo per vertex instead (its own pigments)
+            from leafsim.export.bake import vertex_albedo
+
+            tri = self.view.remap[self.model.tri_T]
+            need = np.unique(tri[stalk_v[tri].any(axis=1)])  # the stalk's faces' vertices, the blade's on the cut too
+            alb = np.zeros((len(stalk_v), 3), np.float64)
+            alb[need] = vertex_albedo(self, state, need)
+            out["blade"], out["stalk"] = split_surface(blade, np.tile(stalk_v, len(blade.positions) // len(stalk_v)),
+                                                       np.tile(alb, (len(blade.positions) // len(stalk_v), 1)))
         if self.veins:
             vcol = None if col is None or veins_textured else self.view.vein_colours(state, self.params, col)
             # (and only the main veins and laterals, as the window draws over a photo: the finer
             # orders it grew would cross the photo's areoles as a second pattern)
             v = vein_surface(self.model, self.view.remap, top, n, None if baked and not veins_textured else self.uv,
                              None if veins_textured else (col if vcol is None else np.asarray(vcol, np.float64)),
-                             max_order=1 if veins_textured else None, bottom=bottom)
+                             max_order=1 if veins_textured else None, bottom=bottom,
+                             # (the stalk's own vein would take the blade's texels at the midrib's base)
+                             without=~self.model.blade_particles if veins_textured else None)
             if v is not None:
                 out["veins"] = v
         if self.texture == "photo":  # the ageing as a factor on the photo, per vertex of each surface

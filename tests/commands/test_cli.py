@@ -264,15 +264,16 @@ def test_export_names_the_blender_addon_for_the_formats_it_reads(capsys, tmp_pat
 
 
 def test_an_exported_gltf_says_which_leaf_it_is(capsys, tmp_path):
-    """Leaves imported side by side all have surfaces called blade and veins: the glTF's root
-    node is named after the leaf and says in its extras what it is (species, seed, frame, water)."""
+    """Leaves imported side by side all have surfaces called blade, stalk and veins: the glTF's
+    root node is named after the leaf and says in its extras what it is (species, seed, frame,
+    water)."""
     out = tmp_path / "leaf.glb"
     code, _, _ = run(capsys, "export", "--species", "oak", "--seed", "2", "--set", "mesh.spacing=0.06", "--frames", "4",
                      "--veins", "--out", str(out), "--json")
     data = out.read_bytes()
     doc = json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
     (root,) = [doc["nodes"][i] for i in doc["scenes"][0]["nodes"]]
-    assert code == 0 and root["name"] == "oak-seed2" and [doc["nodes"][i]["name"] for i in root["children"]] == ["blade", "veins"]
+    assert code == 0 and root["name"] == "oak-seed2" and [doc["nodes"][i]["name"] for i in root["children"]] == ["blade", "stalk", "veins"]
     about = root["extras"]["leafsim"]
     assert about["species"] == "oak" and about["seed"] == 2 and about["frame"] == 4 and 0 < about["water_fraction"] <= 1
 
