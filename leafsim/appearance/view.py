@@ -66,8 +66,18 @@ class LeafView:
         and the photo as the young colour where the species says so (``photo_colour``).  Other
         keywords go to the constructor (``photo_tint``, ``blade_only``)."""
         from leafsim.appearance.photo import species_photo_rgba
-        from leafsim.sim.simulator import young_state
+        from leafsim.base.errors import LeafsimError
+        from leafsim.config.params import as_params
+        from leafsim.config.species import Species
+        from leafsim.sim.simulator import check_built_with, young_state
 
+        if not isinstance(sp, Species):
+            raise LeafsimError(f"LeafView.of_species: sp is a {type(sp).__name__}, expected a Species (get_species(key))")
+        if not isinstance(model, Model):
+            hint = " (pass leaf.model, the model of build_leaf's result)" if hasattr(model, "model") else ""
+            raise LeafsimError(f"LeafView.of_species: model is a {type(model).__name__}, expected a Model{hint}")
+        params = as_params(params, "LeafView.of_species")
+        check_built_with(model, params, "LeafView.of_species")
         photo = species_photo_rgba(sp, params) if sp.image is not None else None
         if pigments0 is None:
             pigments0 = young_state(model, params, seed).pigments

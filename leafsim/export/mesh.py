@@ -367,7 +367,20 @@ def export_mesh(model: Model, states, path, format: str | None = None, params=No
         raise LeafsimError("export: no state to write")
     for k, s in enumerate(states):
         check_state(s, model, f"export: state {k}", physical=False)
-    params = as_params(params, "export") if params is not None else ParamSet()
+    if params is not None:
+        from leafsim.sim.simulator import check_built_with
+
+        params = as_params(params, "export")
+        check_built_with(model, params, "export")  # another leaf's params: its colours on this model, silently
+    else:
+        params = ParamSet()
+    if extras is not None:
+        import json
+
+        try:  # (a NaN became the token NaN in the glTF's JSON, which strict parsers refuse)
+            json.dumps(extras, allow_nan=False)
+        except (TypeError, ValueError) as e:
+            raise LeafsimError(f"export: extras: expected JSON values (strings, finite numbers, lists, dicts): {e}") from None
     if times is not None:
         try:
             times = [float(t) for t in times]

@@ -27,7 +27,7 @@ from leafsim.base.errors import LeafsimError
 from leafsim.base.fileio import atomic_write_bytes
 from leafsim.config.params import PARAMS
 from leafsim.sim.layout import PIGMENT_ARRAYS as _PIGMENT_ARRAYS
-from leafsim.sim.model import Model, State
+from leafsim.sim.model import NOT_ARRAYS, Model, State
 from leafsim.sim.pigments import PigmentState
 
 FORMAT = "leafsim-checkpoint/1"
@@ -40,12 +40,9 @@ MAX_PIGMENT = 100.0
 
 
 def model_fingerprint(model: Model) -> str:
-    """Short hash of the model's geometry and topology (a rebuilt model must match it)."""
-    h = hashlib.sha256()
-    for a in (model.particle_rest, model.spring_ij, model.spring_rest0, model.hinge_idx, model.vol_idx,
-              model.particle_cytosol, model.particle_water0):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()[:20]
+    """Short hash of the model's geometry and topology (a rebuilt model must match it):
+    :attr:`Model.fingerprint`."""
+    return model.fingerprint
 
 
 def save_checkpoint(path, model: Model, state: State, meta: dict, carry: dict | None = None) -> None:
@@ -56,7 +53,7 @@ def save_checkpoint(path, model: Model, state: State, meta: dict, carry: dict | 
     and it would replace the last good checkpoint."""
     where = f"checkpoint {path}: the state to save"
     check_state(state, model, where, physical=False)
-    arrays = {f"state_{f.name}": getattr(state, f.name) for f in fields(State) if f.name not in ("pigments", "path")}
+    arrays = {f"state_{f.name}": getattr(state, f.name) for f in fields(State) if f.name not in NOT_ARRAYS}
     arrays.update({f"carry_{k}": np.asarray(v) for k, v in (carry or {}).items()})
     # the drying-path mesh's state (leafsim.sim.path), and its own path mesh's (dynamics.path = fine)
     s, m, prefix = state, model, "path_"
@@ -66,7 +63,7 @@ def save_checkpoint(path, model: Model, state: State, meta: dict, carry: dict | 
             raise _fail(where, f"has no {which} state" if m.path is not None else f"has a {which} state this model has not")
         if s.path is not None:
             check_state(s.path, m.path, f"{where} (drying-path mesh)", physical=False)
-            arrays.update({f"{prefix}{f.name}": getattr(s.path, f.name) for f in fields(State) if f.name not in ("pigments", "path")})
+            arrays.update({f"{prefix}{f.name}": getattr(s.path, f.name) for f in fields(State) if f.name not in NOT_ARRAYS})
         s, m, prefix = s.path, m.path, "path_" + prefix
     record = dict(meta, format=FORMAT, frame=state.frame, model=model_fingerprint(model))
     pig = state.pigments
@@ -146,7 +143,7 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
     if meta.get("model") != model_fingerprint(model):
         raise LeafsimError(f"--resume: the model built now differs from the one in {path} (species config or code changed)")
     try:
-        arrays = {f.name: np.array(data[f"state_{f.name}"]) for f in fields(State) if f.name not in ("pigments", "path")}
+        arrays = {f.name: np.array(data[f"state_{f.name}"]) for f in fields(State) if f.name not in NOT_ARRAYS}
         if arrays["scalars"].shape == (2,):  # written before the weather clock: no weather time yet
             arrays["scalars"] = np.append(arrays["scalars"], 0.0)
         coarse = _path_state(data, model.path, "path_")
@@ -164,7 +161,7 @@ def load_checkpoint(path, model: Model, expect: dict) -> State:
         raise LeafsimError(f"{path}: checkpoint is missing the array {str(e.args[0]).split()[0]}") from None
     except Exception as e:  # a damaged member: zlib, numpy or a wrong type
         raise LeafsimError(f"{path}: cannot read checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:80]})") from None
-    state = State(**arrays, pigments=pig, path=coarse)
+    state = State(**arrays, pigments=pig, path=coarse, model_key=model.fingerprint)
     check_state(state, model, f"{path}: checkpoint", frame=meta.get("frame"))
     return state
 
@@ -173,8 +170,8 @@ def _path_state(data, model: Model | None, prefix: str) -> State | None:
     """The saved state of the drying-path mesh ``model`` (None: none), with its own path mesh's."""
     if model is None:
         return None
-    return State(**{f.name: np.array(data[f"{prefix}{f.name}"]) for f in fields(State) if f.name not in ("pigments", "path")},
-                 path=_path_state(data, model.path, "path_" + prefix))
+    return State(**{f.name: np.array(data[f"{prefix}{f.name}"]) for f in fields(State) if f.name not in NOT_ARRAYS},
+                 path=_path_state(data, model.path, "path_" + prefix), model_key=model.fingerprint)
 
 
 def load_carry(path, model: Model) -> dict:
@@ -284,13 +281,16 @@ def check_state(state: State, model: Model, where: str, frame=None, physical: bo
     and finiteness, the time and the pigments; the drying-path mesh's state is not looked at."""
     if not isinstance(state, State):
         raise _fail(where, f"is a {type(state).__name__}, expected a leafsim.sim.model.State (e.g. run.state)")
+    if state.model_key and state.model_key != model.fingerprint:
+        raise _fail(where, "is a state of another model (another build: its seed, mesh or species differ), "
+                           "expected one of this model (run.state, or Simulator(model, ...).state())")
     fresh = model.state()
     if physical and (state.path is None) != (model.path is None):
         raise _fail(where, "the drying-path mesh's state " + ("is missing" if state.path is None else "belongs to no path mesh"))
     if physical and state.path is not None:
         check_state(state.path, model.path, f"{where} (drying-path mesh)")
     for f in fields(State):
-        if f.name in ("pigments", "path"):
+        if f.name in NOT_ARRAYS:
             continue
         a, ref = getattr(state, f.name), getattr(fresh, f.name)
         if not isinstance(a, np.ndarray) or a.shape != ref.shape or a.dtype != ref.dtype:
@@ -298,9 +298,35 @@ def check_state(state: State, model: Model, where: str, frame=None, physical: bo
             raise _fail(where, f"array {f.name} is {got}, expected {ref.dtype} {ref.shape} for this model")
         if not np.isfinite(a).all():
             raise _fail(where, f"array {f.name} holds NaN or infinite values")
+        if physical and not a.flags.writeable:  # a state to step: the kernels write every array in place
+            raise _fail(where, f"array {f.name} is read-only (a broadcast or a view of a read-only array), expected a "
+                               "writeable array (np.array(...) makes a copy)")
     if physical:
         _check_physical(state, model, where, frame)
     _check_pigments(state, model, where)
+
+
+def check_edited(state: State, model: Model, where: str) -> None:
+    """The cheap part of :func:`check_state` for a state a run stepped to itself and may have been
+    edited in place since (``State`` is frozen, its arrays are not): every array finite and
+    writeable, water ≥ 0 and at most the fresh leaf's, time and frame non-negative.  Not the
+    leaf's reach or speed: a free leaf may fall far and fast."""
+    for f in fields(State):
+        if f.name in NOT_ARRAYS:
+            continue
+        a = getattr(state, f.name)
+        if not np.isfinite(a).all():
+            raise _fail(where, f"array {f.name} holds NaN or infinite values (edited since the last frame?)")
+        if not a.flags.writeable:
+            raise _fail(where, f"array {f.name} is read-only, expected a writeable array")
+    w = state.particle_water
+    if (w < 0).any() or w.sum() > model.particle_water0.sum() * (1 + 1e-6):
+        what = "negative water" if (w < 0).any() else "more water than the fresh leaf"
+        raise _fail(where, f"array particle_water holds {what} (edited since the last frame?)")
+    if (state.scalars < 0).any():
+        raise _fail(where, "time, frame and weather time must be non-negative (scalars edited since the last frame?)")
+    if state.path is not None and model.path is not None:
+        check_edited(state.path, model.path, f"{where} (drying-path mesh)")
 
 
 def _check_physical(state: State, model: Model, where: str, frame) -> None:

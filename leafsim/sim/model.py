@@ -9,6 +9,7 @@ projected in parallel (Gauss–Seidel between colours, no write conflicts inside
 from __future__ import annotations
 
 import functools
+import hashlib
 
 from dataclasses import dataclass, field
 from typing import Any
@@ -44,6 +45,9 @@ class State:
     scalars: np.ndarray = field(default_factory=lambda: np.zeros(3))  # [time, frame, weather time]
     pigments: Any = None
     path: Any = None  # the State of the drying-path mesh (Model.path), while it carries the mechanics
+    #: the :attr:`Model.fingerprint` of the model this state is of ("" unknown): a state of another
+    #: build of the same size (another seed) fits every array's shape, and gave wrong numbers
+    model_key: str = ""
 
     @property
     def time(self) -> float:
@@ -60,9 +64,13 @@ class State:
         return int(self.scalars[1])
 
     def copy(self) -> "State":
-        arrays = {f: np.array(getattr(self, f)) for f in self.__dataclass_fields__ if f not in ("pigments", "path")}
+        arrays = {f: np.array(getattr(self, f)) for f in self.__dataclass_fields__ if f not in NOT_ARRAYS}
         return State(**arrays, pigments=None if self.pigments is None else self.pigments.copy(),
-                     path=None if self.path is None else self.path.copy())
+                     path=None if self.path is None else self.path.copy(), model_key=self.model_key)
+
+
+#: the fields of a :class:`State` that are not its own arrays
+NOT_ARRAYS = ("pigments", "path", "model_key")
 
 
 @dataclass(frozen=True)
@@ -249,7 +257,19 @@ class Model:
             hinge_plastic=np.zeros(self.hinge_count),
             vol_rest=self.vol_rest0.copy(),
             path=None if self.path is None else self.path.state(),
+            model_key=self.fingerprint,
         )
+
+    @functools.cached_property
+    def fingerprint(self) -> str:
+        """Short hash of the model's geometry and topology: two builds that differ in anything
+        a state depends on (seed, mesh, species) differ here; a rebuild of the same model does
+        not (a checkpoint must match it)."""
+        h = hashlib.sha256()
+        for a in (self.particle_rest, self.spring_ij, self.spring_rest0, self.hinge_idx, self.vol_idx,
+                  self.particle_cytosol, self.particle_water0):
+            h.update(np.ascontiguousarray(a).tobytes())
+        return h.hexdigest()[:20]
 
     def water_fraction(self, water: np.ndarray) -> float:
         """The blade's water now / fresh (``water`` the (n,) particle water [kg]).  "Dry"

@@ -188,8 +188,8 @@ class Run:
         :class:`Diverged` (NaN/Inf in the state is reported by :meth:`frames`)."""
         try:
             self.last_ms = self.sim.step(self.state)
-        except ArithmeticError as e:  # a kernel met NaN/Inf (division by zero, overflow)
-            raise Diverged(f"{self._prefix}the simulation blew up at frame {self.state.frame + 1} ({type(e).__name__}: {e})") from None
+        except Diverged as e:  # (Simulator.step's: a kernel met NaN/Inf, division by zero, overflow)
+            raise Diverged(f"{self._prefix}{e}") from None
         return self.last_ms
 
     def frames(self, stop: Stop | None = None, until: Callable[[State], bool] | None = None) -> Iterator[dict]:
@@ -201,14 +201,19 @@ class Run:
         at the frame just yielded."""
         if stop is not None and not isinstance(stop, Stop):
             raise LeafsimError(f"Run.frames: stop {show(stop)}: expected a Stop(...) or None")
-        from leafsim.sim.checkpoint import check_state
+        from leafsim.sim.checkpoint import check_edited, check_state
 
         # the state as it stands now (run.state may have been replaced or edited since the Run was
         # made): a NaN put there was reported as the simulation's, water × 5 was taken as found
+        if until is not None and not callable(until):
+            raise LeafsimError(f"{self._prefix}Run.frames: until {show(until)}: expected a function of the state "
+                               "(until=lambda state: ...) or None; a frame count or water level is a Stop(...)")
         if self._produced != (id(self.state), self.state.frame):
             # (a state this run stepped to is its own: a free leaf that has fallen 100 leaf lengths
             # is no damaged state, and checking it in full each call cost a fresh state's arrays)
             check_state(self.state, self.model, f"{self._prefix}Run.frames: state")
+        else:  # its own, but edited in place since (water × 5, a NaN put in by hand): the cheap checks
+            check_edited(self.state, self.model, f"{self._prefix}Run.frames: state")
         if self.sim.effects["colour"] and self.state.pigments is None:
             # (the colour effect then did nothing, and a season stop waited for ever)
             raise LeafsimError(f"{self._prefix}Run.frames: the state has no pigments, yet effects.colour is on: make the "

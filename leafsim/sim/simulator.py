@@ -20,13 +20,13 @@ import time
 
 import numpy as np
 
-from leafsim.base.errors import LeafsimError
+from leafsim.base.errors import Diverged, LeafsimError
 from leafsim.config.params import ParamSet, as_params, check_seed
 from leafsim.sim.effects import EFFECTS, Colour, Dynamics, Osmosis, Shrink
 from leafsim.sim.effects.dynamics import held
 from leafsim.sim.layout import check_layout, state_layout
 from leafsim.sim.model import Model, State
-from leafsim.sim.path import PATH_EFFECTS, DryingPath, path_allowed, path_params, work_done
+from leafsim.sim.path import PATH_EFFECTS, PATH_LEVELS, DryingPath, path_allowed, path_params, work_done
 
 #: the stage clock: CPU seconds of the calling thread (about 1 µs a call, 6 calls a frame)
 _clock = time.thread_time
@@ -231,6 +231,12 @@ class Simulator:
             if self._path_layout is None:
                 self._path_layout = state_layout(self.model.path)
             check_layout(state.path, self._path_layout, "Simulator.step: state (drying-path mesh)")
+        try:
+            return self._step(state)
+        except ArithmeticError as e:  # a kernel met NaN/Inf (division by zero, overflow)
+            raise Diverged(f"the simulation blew up at frame {state.frame + 1} ({type(e).__name__}: {e})") from None
+
+    def _step(self, state: State) -> dict:
         ms = {}
         t0 = _clock()
         if self.effects["osmosis"] and state.frame % self.osmosis_every == 0:
@@ -298,3 +304,23 @@ def check_built_with(model: Model, params: ParamSet, who: str) -> None:
         shown = ", ".join(f"{k} = {a!r} (built with {b!r})" for k, a, b in diff[:3]) + (" ..." if len(diff) > 3 else "")
         raise LeafsimError(f"{who}: params set {shown}, which the model is built from: build it again with these "
                            "params (build_leaf) for them to take effect")
+    _check_path_built(model, params, who)
+
+
+def _check_path_built(model: Model, params: ParamSet, who: str) -> None:
+    """``dynamics.path`` asks for a drying-path mesh the model was not built with (none, or the
+    other level's): the simulator ran the leaf's own mesh throughout, or the other mesh with this
+    level's solver, without a word.  ``own`` on a model with a path mesh leaves it unused: fine."""
+    level = params["dynamics.path"]
+    if not path_allowed(params):  # own, or solver settings the path does not stand in for: the own mesh runs
+        return
+    want = path_params(params, level)["mesh.spacing"] * model.length
+    if want <= model.spacing * 1.001:
+        want = None  # the mesh is not finer than this level's: no path mesh (the own mesh carries the drying)
+    have = model.path.spacing if model.path is not None else None
+    if (want is None) != (have is None) or (want is not None and abs(have - want) > 1e-6 * want):
+        built = ("'own' (no drying-path mesh)" if have is None else
+                 next((repr(k) for k in PATH_LEVELS if abs(path_params(params, k)["mesh.spacing"] * model.length - have)
+                       <= 1e-6 * have), "another drying-path mesh"))
+        raise LeafsimError(f"{who}: params set dynamics.path = {level!r}, but the model was built with {built}: build it "
+                           "again with these params (build_leaf) for the drying path to take effect")

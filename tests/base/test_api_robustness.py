@@ -183,7 +183,7 @@ def test_state_of_another_model_does_not_crash():
                 print(name, "refused:", e)
     """)
     assert out.returncode == 0, out.stderr[-500:]
-    assert out.stdout.count("refused: Run: state array") == 3, out.stdout
+    assert out.stdout.count("refused: Run: state ") == 3 and "other model refused: Run: state is a state of another model" in out.stdout, out.stdout
 
 
 def test_a_state_swapped_in_after_the_run_was_made_does_not_crash():
@@ -216,7 +216,7 @@ def test_a_state_swapped_in_after_the_run_was_made_does_not_crash():
     assert out.returncode == 0, out.stderr[-500:]
     lines = out.stdout.strip().splitlines()
     assert [ln.split(" refused: ")[0] for ln in lines] == ["swapped", "stepped", "cut", "cut pigments"], out.stdout
-    assert "Run.frames: state array particle_q" in lines[0] and "Simulator.step: state array particle_q" in lines[1]
+    assert "Run.frames: state is a state of another model" in lines[0] and "Simulator.step: state is a state of another model" in lines[1]
     assert "pigment array chlorophyll" in lines[3]
 
 
@@ -302,7 +302,7 @@ def test_export_states_of_another_model(oak, other, tmp_path):
             export_mesh(model, states, tmp_path / "a.glb", params=params)
         one_line(e)
     # the other way round the indices fit, and the file was another leaf's geometry
-    with pytest.raises(LeafsimError, match="export: state 0 array particle_q"):
+    with pytest.raises(LeafsimError, match="export: state 0 is a state of another model"):
         export_mesh(m2, [state], tmp_path / "b.glb", params=params)
     assert not list(tmp_path.iterdir())
 
@@ -408,7 +408,7 @@ def test_save_checkpoint_refuses_foreign_or_nan_states(oak, other, tmp_path):
     bad_states = [other[1], _mod(state, particle_q=np.full_like(state.particle_q, np.nan)),
                   _mod(state, particle_water=np.where(np.arange(state.particle_water.size) == 3, np.inf, state.particle_water))]
     for bad in bad_states:
-        with pytest.raises(LeafsimError, match=r"checkpoint .*the state to save array particle_(q|water)") as e:
+        with pytest.raises(LeafsimError, match=r"checkpoint .*the state to save (array particle_(q|water)|is a state of another model)") as e:
             save_checkpoint(ck, model, bad, meta)
         one_line(e)
         assert ck.read_bytes() == good
@@ -537,3 +537,131 @@ def test_a_run_that_blows_up_raises_diverged(oak):
             if run.state.frame == 10:
                 run.state.particle_qd[100, 2] = 1e30
     assert isinstance(e.value, LeafsimError) and "simulation unstable" in one_line(e)
+
+
+def test_a_state_of_another_build_of_the_same_size_is_refused():
+    """Two oaks of one draft config and two seeds have arrays of the same shapes, so the shapes
+    cannot tell their states apart: measured on the other model the fold read −37.7° (3.7°),
+    and an export put one leaf's positions on the other's triangles.  Each state names its
+    model (``State.model_key``, the model's fingerprint): a state of the other build is refused
+    by Run, Simulator.step, export and leaf_measures, in one line; a copy keeps the name."""
+    from leafsim.config.presets import quality_overrides
+    from leafsim.sim import leaf_measures
+    from leafsim.sim.simulator import Simulator
+
+    sp = get_species("oak")
+    p = sp.params.with_overrides(quality_overrides("draft"))
+    a, b = build_leaf(sp, p, seed=15).model, build_leaf(sp, p, seed=29).model
+    st = Run(a, p).state
+    assert st.particle_q.shape == b.particle_rest.shape and st.spring_rest.shape == b.spring_rest0.shape
+    assert a.fingerprint != b.fingerprint and st.copy().model_key == a.fingerprint
+    for call in (lambda: Run(b, p, state=st.copy()), lambda: Simulator(b, p).step(st.copy()),
+                 lambda: export_mesh(b, st, "never.glb", params=p), lambda: leaf_measures(b, st, p)):
+        with pytest.raises(LeafsimError, match="state of another model") as e:
+            call()
+        one_line(e)
+    leaf_measures(a, st, p)  # its own model's: fine
+
+
+def test_a_drying_path_the_model_was_not_built_with_is_refused(oak):
+    """``dynamics.path`` builds the drying-path mesh: a model built without it and run with the
+    default (draft) path ran its own mesh throughout, 5× slower, and one built with the draft
+    path run with ``fine`` ran the draft mesh with fine's solver settings, without a word.  Both
+    are refused naming the parameter; ``own`` on a model with a path mesh leaves it unused."""
+    sp = get_species("oak")
+    own = build_leaf(sp, sp.params.with_overrides({"dynamics.path": "own"}), seed=3).model
+    with pytest.raises(LeafsimError, match="dynamics.path = 'draft', but the model was built with 'own'") as e:
+        Run(own, sp.params)
+    one_line(e)
+    built = build_leaf(sp, sp.params, seed=3).model
+    assert built.path is not None
+    with pytest.raises(LeafsimError, match="dynamics.path = 'fine'.*built with 'draft'"):
+        Run(built, sp.params.with_overrides({"dynamics.path": "fine"}))
+    Run(built, sp.params.with_overrides({"dynamics.path": "own"}))
+    Run(built, sp.params)
+
+
+def test_read_only_arrays_are_refused_before_anything_moves(oak):
+    """A state whose velocities are a read-only broadcast ("start at rest") met a numba typing
+    error after the osmosis had already moved its water: now refused, naming the array, with
+    the state untouched."""
+    from leafsim.sim.simulator import Simulator
+
+    _, params, model, state = oak
+    st = dataclasses.replace(state.copy(), particle_qd=np.broadcast_to(0.0, state.particle_qd.shape))
+    with pytest.raises(LeafsimError, match="particle_qd is read-only") as e:
+        Run(model, params, state=st)
+    one_line(e)
+    water = st.particle_water.copy()
+    with pytest.raises(LeafsimError, match="particle_qd is read-only"):
+        Simulator(model, params).step(st)
+    assert np.array_equal(st.particle_water, water) and st.frame == state.frame
+    st = state.copy()
+    st.pigments.chlorophyll.flags.writeable = False
+    with pytest.raises(LeafsimError, match="pigment array chlorophyll is read-only"):
+        Simulator(model, params).step(st)
+
+
+def test_a_run_s_own_state_edited_between_calls_is_checked(oak):
+    """The state a run stepped to, edited in place before the next ``frames`` call (State is
+    frozen, its arrays are not): water × 5 was taken as found, and a NaN was reported as the
+    simulation's own divergence.  Both refused, naming the array; ``until`` that is not a
+    function is named too."""
+    _, params, model, state = oak
+    run = Run(model, params, state=state.copy())
+    for _ in run.frames(Stop(frames=state.frame + 1)):
+        pass
+    run.state.particle_water[:] *= 5
+    with pytest.raises(LeafsimError, match="particle_water holds more water than the fresh leaf") as e:
+        next(run.frames(Stop(frames=state.frame + 3)))
+    one_line(e)
+    run.state.particle_water[:] /= 5
+    run.state.particle_q[3, 1] = np.nan
+    with pytest.raises(LeafsimError, match="particle_q holds NaN"):
+        next(run.frames(Stop(frames=state.frame + 3)))
+    with pytest.raises(LeafsimError, match="until 5: expected a function"):
+        next(run.frames(Stop(frames=state.frame + 3), until=5))
+
+
+def test_a_simulator_stepping_nan_water_raises_diverged(oak):
+    """Simulator.step called directly on water holding NaN: the shrink's ZeroDivisionError came out
+    bare; it is a Diverged, as from Run."""
+    from leafsim.sim.run import Diverged
+    from leafsim.sim.simulator import Simulator
+
+    _, params, model, state = oak
+    st = state.copy()
+    st.particle_water[:] = np.nan
+    with pytest.raises(Diverged):
+        Simulator(model, params).step(st)
+
+
+def test_measures_views_and_exports_check_their_arguments(oak, other, tmp_path):
+    """leaf_measures, LeafView.of_species and export_mesh as a careless script calls them: one
+    line each, naming what is wrong; a state holding NaN gives every measure, as None."""
+    from leafsim.appearance.view import LeafView
+    from leafsim.sim import leaf_measures
+
+    sp, params, model, state = oak
+    maple = get_species("maple").params
+    cases = [(lambda: leaf_measures(build_leaf(sp, params, seed=0), state, params), "expected a Model"),
+             (lambda: leaf_measures(model, state, None), "params"),
+             (lambda: leaf_measures(other[0], state, params), "state of another model"),
+             (lambda: leaf_measures(model, state, maple), "which the model is built from"),
+             (lambda: LeafView.of_species("oak", model, params), "expected a Species"),
+             (lambda: LeafView.of_species(sp, build_leaf(sp, params, seed=0), params), "expected a Model"),
+             (lambda: export_mesh(model, state, tmp_path / "a.glb", params=maple), "which the model is built from"),
+             (lambda: export_mesh(model, state, tmp_path / "b.glb", params=params, extras={"a": float("nan")}),
+              "extras: expected JSON values"),
+             (lambda: export_mesh(model, state, tmp_path / "c.glb", params=params, extras={"a": object()}),
+              "extras: expected JSON values")]
+    for call, words in cases:
+        with pytest.raises(LeafsimError, match=words) as e:
+            call()
+        one_line(e)
+    assert not list(tmp_path.iterdir())
+    good = leaf_measures(model, state, params)
+    st = state.copy()
+    st.particle_q[0, 0] = np.nan
+    bad = leaf_measures(model, st, params)
+    assert set(bad) == set(good) and bad["shape_midrib_fold_deg"] is None and good["shape_midrib_fold_deg"] is not None
