@@ -29,7 +29,7 @@ from leafsim.config.params import GROUPS, PARAMS  # noqa: E402
 pytestmark = pytest.mark.usefixtures("xdisplay")
 
 
-def run_gui(test_fn, species="oak", overrides=None, play=False):
+def run_gui(test_fn, species="oak", overrides=None, play=False, window_size=(1280, 800)):
     """Run the app with ``test_fn(ctx, app)`` driving it; returns the app afterwards."""
     from imgui_bundle.immapp import testing
 
@@ -38,7 +38,7 @@ def run_gui(test_fn, species="oak", overrides=None, play=False):
 
     _configure_threads()
     session = Session(species, overrides=overrides)
-    app = LeafApp(session, play=play)
+    app = LeafApp(session, play=play, window_size=window_size)
     # under llvmpipe the app starts with a cheap view (half size, no ground): fast test frames
     rp = app.runner_params()
     without_test_time_limit(rp)  # the tests wait for progress; a busy machine may take minutes
@@ -742,3 +742,22 @@ def test_the_quality_tooltip_is_wrapped_inside_the_window():
     run_gui(body, species="maple")
     assert seen["found"], "no tooltip over the quality combo"
     assert seen["width"] <= 48 * seen["font"] and seen["width"] < 0.6 * seen["display"], seen
+
+
+def test_the_photo_keeps_its_size_in_a_short_window():
+    """The stats panel's photo is at least three quarters of the panel's width tall: in a
+    1024 x 700 window the plots above it left it an 80 px stamp; the panel scrolls to it now.
+    In the default window it takes the rest of the panel, as before."""
+    from leafsim.gui.panels.stats import PHOTO_MAX, PHOTO_MIN
+
+    seen = {}
+
+    def body(ctx, app):
+        wait_until(ctx, lambda: app.session.ready and app.stats.photo_size is not None)
+        ctx.yield_(2)
+        seen["size"] = app.stats.photo_size
+
+    for window in ((1024, 700), (1280, 800)):
+        run_gui(body, window_size=window)
+        w, h = seen["size"]
+        assert w > 200 and h >= min(PHOTO_MIN * w, PHOTO_MAX) - 0.5, (window, w, h)

@@ -10,6 +10,9 @@ from leafsim.gui.layout import DRY_UI_HZ
 from leafsim.gui.photo import UV_CORNERS, leaf_axes, panel_quad, screen_rotation
 from leafsim.sim.environment import clock_text
 
+#: the photo's least height as a share of the panel's width, and at most [px]
+PHOTO_MIN, PHOTO_MAX = 0.75, 260.0
+
 
 
 def grams(g: float) -> str:
@@ -24,6 +27,7 @@ class StatsPanel:
         self.app = app
         self._axes_key = None
         self._axes_val = None
+        self.photo_size = None  # (w, h) px the photo was last drawn at
 
     def _axes(self):
         """Where the leaf's rest x and y point now (its blade's best-fit rotation), per snapshot."""
@@ -140,7 +144,10 @@ class StatsPanel:
                 imgui.text_disabled("no photo (drawn outline species)")
             return
         avail = imgui.get_content_region_avail()
-        size = (avail.x, max(avail.y - 4.0, 80.0))
+        # the rest of the panel, but at least PHOTO_MIN of its width (≤ PHOTO_MAX px) tall: in a
+        # short window the panel scrolls to it (at 1024 × 700 it was an 80 px stamp)
+        size = (avail.x, max(avail.y - 4.0, min(PHOTO_MIN * avail.x, PHOTO_MAX)))
+        self.photo_size = size
         p0 = imgui.get_cursor_screen_pos()
         r = app.renderer
         R = screen_rotation(app.view_proj(), app.leaf_rect_px, r.center, max(r.radius, 1e-4), self._axes())
