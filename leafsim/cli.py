@@ -267,6 +267,26 @@ def _path_error(e: OSError) -> str:
     return f"{name}: {e.strerror or type(e).__name__}"
 
 
+def _show_warnings() -> None:
+    """A :class:`LeafsimWarning` (from the library: a base guessed from the shape) as the
+    commands' own warnings read: ``leafsim: warning: ...``, one line on stderr."""
+    import warnings
+
+    from leafsim.base.errors import LeafsimWarning
+    from leafsim.commands.common import warn
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, LeafsimWarning):
+            warn(str(message))
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    if getattr(warnings.showwarning, "__name__", "") != "show":
+        warnings.showwarning = show
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version"):
@@ -276,6 +296,7 @@ def main(argv: list[str] | None = None) -> int:
     args = None
     from leafsim.commands.common import EMITTED, RESOLVED
 
+    _show_warnings()
     EMITTED[0] = False  # this command's object not printed yet (main may run many times in one process)
     RESOLVED.clear()  # nor its species (main may run many times in one process)
     try:

@@ -11,12 +11,13 @@ the GUI's session) builds a leaf with :func:`build_leaf` and simulates it with
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
 
-from leafsim.base.errors import LeafsimError
+from leafsim.base.errors import LeafsimError, LeafsimWarning
 from leafsim.base.geometry import (
     OUTLINE_END_TOLERANCE,
     LeafShape,
@@ -64,9 +65,11 @@ def leaf_shape(sp: Species, params: ParamSet | None = None) -> LeafShape:
     else:
         traced = species_trace(sp, params)
         try:
-            refuse_non_leaf(traced)
+            found = refuse_non_leaf(traced)
         except LeafsimError as e:
             raise sp.error("image", str(e)) from None
+        for text in found:  # (once per message and process: Python's warning registry)
+            warnings.warn(LeafsimWarning(str(sp.error("image", text))), stacklevel=1)
         _check_given_ends(sp, traced)
         shape = to_leaf_shape(traced, sp.length_m)
         key = "image"

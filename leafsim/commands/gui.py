@@ -19,6 +19,12 @@ def cmd_gui(args):
     if args.screenshot:  # never over the photo or config the window reads
         sp = get_species(DEFAULT_SPECIES if args.species is None else args.species, args.config)
         png_output("--screenshot", args.screenshot, species_inputs(sp))
+    from leafsim.interactive.warmup import MESSAGE, is_warm
+
+    if not is_warm():  # the window shows the compile in its status bar; a terminal sat silent for a minute
+        import sys
+
+        print(f"leafsim: {MESSAGE}; the window opens meanwhile and shows its progress", file=sys.stderr, flush=True)
     from leafsim.gui.app import run_app  # imgui and OpenGL load only when the window opens
 
     return run_app(species=args.species, config=args.config, seed=args.seed, overrides=overrides(args),

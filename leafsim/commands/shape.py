@@ -26,7 +26,8 @@ def cmd_outline(args):
     traced = trace_outline(args.image, params)
     rep = outline_report(traced)
     for problem in rep["leafness"]["problems"]:  # reported, never silent (build and compare refuse them)
-        warn(f"{args.image}: {problem['text']}")
+        refused = " (veins, build, run, compare and the window refuse this photo)" if problem["level"] == "refuse" else ""
+        warn(f"{args.image}: {problem['text']}{refused}")
     if args.out:
         draw_outline(traced, load_image(args.image), args.out)
     emit(args, rep, f"{args.image}: {rep['points']} points, area {rep['area_px']:.0f} px, base {rep['base']}, apex {rep['apex']}, "

@@ -343,6 +343,15 @@ def _image(path: Path, key: str, name: str, value: Any) -> Path:
 
         shipped = (data_root() / value).resolve()
         if shipped.is_file():
+            mine = base_dir / Path(value).parts[0]
+            if len(Path(value).parts) > 1 and mine.is_dir() and mine.resolve() != (data_root() / Path(value).parts[0]).resolve():
+                # the user keeps photos in that folder, yet not this one (a typo?): say which file is read
+                import warnings
+
+                from leafsim.base.errors import LeafsimWarning
+
+                warnings.warn(LeafsimWarning(str(_err(path, key, name, f"{value} is not in {mine}; using leafsim's own "
+                                                                        f"photo of that name ({shipped})"))), stacklevel=2)
             return shipped
     if not image.is_file():
         where = "" if Path(value).is_absolute() else f" (a relative path is read from {base_dir}, then from leafsim's own data)"

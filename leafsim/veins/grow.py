@@ -59,7 +59,7 @@ def grow_veins(
     traced = None
     if given is not None and given.get("mains"):
         reached, traced = given_main_veins(g, graph, shape, p, given["mains"], main_origin, taper)
-        auto = False
+        auto = "photo"  # (the stats read "config" for main veins traced from the photo)
     else:
         reached = grow_main_veins(g, graph, shape, p, apex_t, others, main_origin, taper)
     if p["veins.lateral.enabled"] and given is not None and given.get("laterals"):

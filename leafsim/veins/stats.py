@@ -48,6 +48,6 @@ def vein_stats(graph: VeinGraph, shape: LeafShape, main_targets=None, auto=True)
     mains = graph.of_order(MAIN)
     stats["main_target_error_m"] = round(max((float(np.linalg.norm(v.points[-1] - v.target)) for v in mains), default=0.0), 9)
     stats["main_last_step_m"] = round(max((float(np.linalg.norm(v.points[-1] - v.points[-2])) for v in mains if len(v.points) > 1), default=0.0), 9)
-    stats["targets"] = "auto" if auto else "config"
+    stats["targets"] = auto if isinstance(auto, str) else ("auto" if auto else "config")  # or "photo": traced
     stats["main_targets"] = [[round(float(x), 6) for x in t] for t in (main_targets or [])]
     return stats

@@ -314,3 +314,54 @@ def test_an_animation_of_very_many_key_frames_says_so(capsys, tmp_path):
     code, _, err = run(capsys, "export", "--species", "oak", "--set", "mesh.spacing=0.08", "--frames", "20", "--every", "1",
                        "--out", str(tmp_path / "b.glb"), "--json")
     assert code == 0 and "morph targets" not in err
+
+
+def test_the_window_says_on_the_terminal_that_it_compiles(capsys, monkeypatch):
+    """A first run of the window compiled the kernels for up to a minute with nothing on the
+    terminal (the status bar said it, the other commands print a line): it prints the line too,
+    once, when the kernels are not compiled yet, and nothing when they are."""
+    import leafsim.gui.app as gui_app
+    import leafsim.interactive.warmup as warmup
+
+    opened = []
+    monkeypatch.setattr(gui_app, "run_app", lambda **kw: opened.append(kw) or 0)
+    for warm in (False, True):
+        monkeypatch.setattr(warmup, "is_warm", lambda w=warm: w)
+        code, out, err = run(capsys, "gui", "--species", "oak")
+        assert code == 0 and out == ""
+        assert (err.count("leafsim: compiling the simulation kernels") == 1) is (not warm), err
+    assert len(opened) == 2
+
+
+def test_a_photo_missing_from_the_user_s_own_folder_is_named(capsys, tmp_path):
+    """A species' photo path that is not in the user's images folder (a typo) but names a shipped
+    photo was read from leafsim's own data without a word: one warning names both; a copy of the
+    shipped config kept without an images folder of its own still finds the shipped photos
+    quietly."""
+    import warnings
+
+    from leafsim.base.errors import LeafsimWarning
+    from leafsim.config.species import load_library
+
+    cfg = tmp_path / "leaves.json"
+    cfg.write_text(json.dumps({"species": {"mine": {"name": "Mine", "image": "images/quercus_01.png", "length_m": 0.1}}}))
+    for own_folder in (False, True):
+        if own_folder:
+            (tmp_path / "images").mkdir()
+            (tmp_path / "images" / "other.png").write_bytes(b"")
+        with warnings.catch_warnings(record=True) as got:
+            warnings.simplefilter("always")
+            assert load_library(cfg)["mine"].image.name == "quercus_01.png"
+        texts = [str(w.message) for w in got if issubclass(w.category, LeafsimWarning)]
+        assert len(texts) == int(own_folder), texts
+    assert f"species 'mine', key 'image': images/quercus_01.png is not in {tmp_path / 'images'}" in texts[0]
+    code, _, err = run(capsys, "species", "--config", str(cfg))
+    assert code == 0 and err.startswith("leafsim: warning: ") and err.count("\n") == 1
+
+
+def test_veins_say_where_the_main_veins_came_from(capsys):
+    """``veins --json``'s targets: "photo" when the main veins are traced from the photo (it said
+    "config", which the config did not give), "auto" for a drawn leaf's."""
+    for key, want in (("oak", "photo"), ("maple", "auto")):
+        code, out, _ = run(capsys, "veins", "--species", key, "--quality", "draft", "--json")
+        assert code == 0 and json.loads(out)["targets"] == want

@@ -453,3 +453,42 @@ def test_a_leaf_too_few_pixels_long_is_refused_in_one_line(tmp_path):
             with pytest.raises(LeafsimError) as e:
                 refuse_non_leaf(t)
             assert f"leaf{side}.png" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_base_guessed_from_the_shape_is_said(tmp_path, capsys):
+    """Without a stalk in the photo the base is guessed from the shape, and an obovate leaf
+    (widest towards its tip, as an oak) comes out upside down: the trace says so (a "warn"
+    leafness problem), ``leafsim outline`` prints it, and a species built from the photo warns
+    once (LeafsimWarning, naming the config, the species and the key).  With its stalk, nothing
+    is said."""
+    import warnings
+
+    from leafsim.base.errors import LeafsimWarning
+    from leafsim.cli import main
+    from leafsim.config.species import get_species
+    from leafsim.outline.checks import problems
+    from leafsim.pipeline import leaf_shape
+
+    rng = np.random.default_rng(0)
+    grain = rng.normal(0.0, 4.0, (600, 600, 1))  # (a flat colour is warned about too: not a photo)
+    bare, stalked = (np.clip(photo(600, obovate=True, **kw)[0] + grain, 0, 255).astype(np.uint8)
+                     for kw in ({"petiole": 0.0}, {"petiole_width": 0.006}))
+    t = _trace_img(tmp_path, bare, "bare.png")
+    assert t.base_method == "shape"
+    warned = [text for level, text in problems(t.leafness) if level == "warn"]
+    assert len(warned) == 1 and "base was guessed from the leaf's shape" in warned[0]
+    s = _trace_img(tmp_path, stalked, "stalked.png")
+    assert s.base_method == "petiole" and not problems(s.leafness)
+    capsys.readouterr()
+    assert main(["outline", str(tmp_path / "bare.png")]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("leafsim: warning: ") and "base_px and apex_px" in err[0]
+    assert main(["outline", str(tmp_path / "stalked.png")]) == 0 and capsys.readouterr().err == ""
+    cfg = tmp_path / "leaves.json"
+    cfg.write_text(json.dumps({"species": {"bare": {"name": "Bare", "image": "bare.png", "length_m": 0.08}}}))
+    sp = get_species("bare", cfg)
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        leaf_shape(sp, sp.params)
+    texts = [str(w.message) for w in got if issubclass(w.category, LeafsimWarning)]
+    assert len(texts) == 1 and f"{cfg}: species 'bare', key 'image': no stalk was found" in texts[0]
