@@ -41,7 +41,7 @@ def leafness(traced, img: np.ndarray | None = None) -> dict:
            "area_fraction": area / float(h * w),
            "rectangularity": poly_area / max(float(rw * rh), 1e-9),
            "size_px": float(max(rw, rh)),  # at the working size: the caller scales it to the photo's
-           "base_guessed": getattr(traced, "base_method", "") == "shape"}
+           "base_guessed": getattr(traced, "base_method", "") in ("shape", "veins")}
     if img is not None and img.shape[:2] == mask.shape and area > 0:
         lab = cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_BGR2LAB)
         inner = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
@@ -66,9 +66,9 @@ def problems(m: dict) -> list[tuple[str, str]]:
         out.append(("refuse", f"the traced shape is a rectangle (it fills {100 * m['rectangularity']:.0f} % of its "
                               "bounding box), not a leaf"))
     if m.get("base_guessed"):  # an obovate leaf (oak) is blunter at its tip: upside down, without a word
-        out.append(("warn", "no stalk was found, so the base was guessed from the leaf's shape and may be its tip: "
-                            "check the outline picture (leafsim outline: base red, apex green) and give base_px and "
-                            "apex_px in the species entry if they are swapped"))
+        out.append(("warn", "no stalk was found, so the base was guessed from the leaf's shape and the direction of "
+                            "its side veins and may be its tip: check the outline picture (leafsim outline: base red, "
+                            "apex green) and give base_px and apex_px in the species entry if they are swapped"))
     if m.get("texture") is not None and m["texture"] < MIN_TEXTURE:
         out.append(("warn", f"the traced region is one flat colour (lightness varies by {m['texture']:.2g}): "
                             "no veins or shading, perhaps not a photographed leaf"))

@@ -333,3 +333,50 @@ def _lobe_tips(P: np.ndarray, base: np.ndarray, apex: np.ndarray, thr: float) ->
         if edge <= q <= len(idx) - 1 - edge:
             tips.append(P[idx[q]])
     return np.array(tips, float).reshape(-1, 2)
+
+
+#: below this score (:func:`vein_direction`), the veins say the apex lies at the other end
+VEINS_AGAINST = -0.1
+
+
+def vein_direction(img: np.ndarray, mask: np.ndarray, base: np.ndarray, apex: np.ndarray) -> float:
+    """How much the photo's veins say the apex lies at ``apex`` rather than at ``base``, in
+    [−1, 1] (0: they say nothing, a flat or veinless picture).  Side veins leave the midrib at
+    an acute angle opening towards the apex (pinnate laterals, a palmate leaf's main veins):
+    seen from the base→apex axis, a ridge on either side runs outwards and forwards.  The
+    ridges are the Hessian's of the lightness at 0.8 % of the leaf's length (veins lighter or
+    darker than the lamina alike), weighted by their strength, over the blade between 10 and
+    90 % of the axis, off the midrib band (5 %) and the margin (4 %: its own edge, blurred).  On
+    the photos of oak, aspen, hornbeam and grapevine it gives +0.14 to +0.80 with the true ends,
+    and −0.37 to −0.38 on an oak photo (on grey, JPEG, upright or turned 35°) that
+    :func:`_base_from_shape` put upside down (its wide end is the tip)."""
+    t = np.asarray(apex, float) - np.asarray(base, float)
+    L = float(np.linalg.norm(t))
+    if L < 10.0:
+        return 0.0
+    t /= L
+    n = np.array([-t[1], t[0]])
+    g = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_BGR2Lab)[..., 0].astype(np.float32)
+    g = cv2.GaussianBlur(g, (0, 0), max(0.008 * L, 1.0))
+    dxx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3)
+    dyy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3)
+    dxy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3)
+    half = np.sqrt(0.25 * (dxx - dyy) ** 2 + dxy ** 2)
+    l1, l2 = 0.5 * (dxx + dyy) + half, 0.5 * (dxx + dyy) - half
+    first = np.abs(l1) >= np.abs(l2)
+    strength = np.abs(np.where(first, l1, l2)) - np.abs(np.where(first, l2, l1))
+    across = 0.5 * np.arctan2(2.0 * dxy, dxx - dyy) + np.where(first, 0.0, 0.5 * np.pi)  # the larger curvature's direction
+    dx, dy = -np.sin(across), np.cos(across)  # along the ridge
+    H, W = g.shape
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    rx, ry = xx - float(base[0]), yy - float(base[1])
+    along, side = rx * t[0] + ry * t[1], rx * n[0] + ry * n[1]
+    k = max(int(0.08 * L) | 1, 3)  # the margin's own edge blurred: 5 σ off it
+    inner = cv2.erode((mask > 0).astype(np.uint8), np.ones((k, k), np.uint8)) > 0
+    sel = inner & (np.abs(side) > 0.05 * L) & (along > 0.1 * L) & (along < 0.9 * L)
+    if not sel.any():
+        return 0.0
+    score = (dx * t[0] + dy * t[1]) * (dx * n[0] + dy * n[1]) * np.sign(side)
+    w = strength[sel]
+    den = float((w * np.abs(score[sel])).sum())
+    return float((w * score[sel]).sum() / den) if den > 0 else 0.0

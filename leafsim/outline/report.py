@@ -30,6 +30,7 @@ def outline_report(traced: TracedOutline) -> dict:
         "length_px": round(traced.length_px, 2),
         "lobes": [r2(q) for q in traced.lobes_px],
         "base_method": traced.base_method,
+        "vein_direction": None if traced.vein_direction is None else round(float(traced.vein_direction), 4),
         "petiole": None if traced.petiole_px is None else [r2(q) for q in traced.petiole_px],
         "iou": round(float(traced.iou), 5),
         "holes": [round(abs(polygon_area(hp)), 1) for hp in traced.holes_px],

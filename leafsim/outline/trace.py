@@ -30,7 +30,7 @@ from leafsim.config.params import ParamSet
 from leafsim.outline.checks import leafness, problems
 from leafsim.outline.holes import hole_polygons, kept_holes, petiole_band, sinus_junction, without_band
 from leafsim.outline.image import _disk, _fill_holes, _largest_component, edge_contours, load_image, working_image
-from leafsim.outline.landmarks import _base_from_shape, _find_petiole, _lobe_tips
+from leafsim.outline.landmarks import VEINS_AGAINST, _base_from_shape, _find_petiole, _lobe_tips, vein_direction
 from leafsim.outline.segment import HOLE_MIN_FRACTION, segment_with_holes
 
 __all__ = ["TracedOutline", "trace_outline", "to_leaf_shape"]
@@ -55,7 +55,10 @@ class TracedOutline:
     image_size : (w, h) of the photo.
     path : str — the photo path as given.
     petiole_px : (2, 2) float64 [junction, tip] of the detected petiole, or None.
-    base_method : "given", "petiole" or "shape" (how the base was found).
+    base_method : "given", "petiole", "shape" or "veins" (how the base was found: given,
+        the stalk's junction, the shape's guess, or that guess turned end for end because the
+        photo's side veins open towards the other end: :func:`~leafsim.outline.landmarks.vein_direction`).
+    vein_direction : that score for the shape's guess (None: not asked, the base was given or found).
     seconds : wall-clock time of the trace.
     work_scale : the photo was traced downscaled by this factor (1.0: at full size); ``mask``
         has the working size, every coordinate is in full-photo pixels.
@@ -80,6 +83,7 @@ class TracedOutline:
     path: str
     petiole_px: np.ndarray | None = None
     base_method: str = "shape"
+    vein_direction: float | None = None
     seconds: float = 0.0
     work_scale: float = 1.0
     border_fraction: float = 0.0
@@ -298,6 +302,12 @@ def _trace(img: np.ndarray, p: ParamSet, where: str, base_px, apex_px) -> Traced
     else:
         base = _base_from_shape(dense, b.mask, L_est)
     apex0 = np.asarray(apex_px, float).reshape(2) if apex_px is not None else dense[int(np.argmax(np.linalg.norm(dense - base, axis=1)))]
+    veins_say = None
+    if method == "shape":  # the shape's guess (the blunter end) turns an obovate leaf upside down: ask the veins
+        veins_say = vein_direction(img, b.mask, base, apex0)
+        if veins_say < VEINS_AGAINST:
+            base, method = apex0.copy(), "veins"
+            apex0 = dense[int(np.argmax(np.linalg.norm(dense - base, axis=1)))]
     _lay_petiole_off(b, lab, base, apex0)
     if b.band is not None:
         simp, dense = _polygon(b.mask, eps)
@@ -317,7 +327,7 @@ def _trace(img: np.ndarray, p: ParamSet, where: str, base_px, apex_px) -> Traced
     return TracedOutline(
         mask=mask, contour_px=contour, area_px=float(np.count_nonzero(mask)), base_px=base, apex_px=apex,
         lobes_px=np.asarray(tips, float).reshape(-1, 2), iou=_iou(contour, mask), image_size=(int(w), int(h)),
-        path=where, petiole_px=b.petiole, base_method=method,
+        path=where, petiole_px=b.petiole, base_method=method, vein_direction=veins_say,
         border_fraction=float(np.mean(np.concatenate([mask[0], mask[-1], mask[1:-1, 0], mask[1:-1, -1]]) > 0)),
         border_sides={side: float(np.mean(edge > 0)) for side, edge in
                       (("top", mask[0]), ("bottom", mask[-1]), ("left", mask[:, 0]), ("right", mask[:, -1]))},

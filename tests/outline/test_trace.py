@@ -492,3 +492,41 @@ def test_a_base_guessed_from_the_shape_is_said(tmp_path, capsys):
         leaf_shape(sp, sp.params)
     texts = [str(w.message) for w in got if issubclass(w.category, LeafsimWarning)]
     assert len(texts) == 1 and f"{cfg}: species 'bare', key 'image': no stalk was found" in texts[0]
+
+
+def test_an_obovate_leaf_without_a_stalk_is_turned_by_its_veins(tmp_path):
+    """The shape's guess puts the base at the blunter end, an obovate leaf's tip.  Its side
+    veins, which leave the midrib opening towards the apex, turn it the right way up
+    (``base_method`` "veins"); a leaf whose picture shows no veins keeps the shape's guess (the
+    veins say nothing), and so does an ovate leaf, whose guess they confirm.  Turned by 35°
+    too.  (Shipped photos: :func:`vein_direction` is +0.14 to +0.80 with the true ends.)"""
+    from helpers.leafimg import leaf_polygon
+    from leafsim.outline.landmarks import vein_direction
+
+    size, rng = 600, np.random.default_rng(1)
+    for angle in (0.0, 35.0):
+        for obovate in (True, False):
+            img, _ = photo(size, obovate=obovate, petiole=0.0, angle=angle)
+            a = np.radians(angle)
+            up = np.array([-np.sin(a), -np.cos(a)])  # towards the apex (y down)
+            right = np.array([np.cos(a), -np.sin(a)])
+            base = (np.array([0.5, 0.45]) + 0.5 * 0.62 * np.array([np.sin(a), np.cos(a)])) * size
+            poly = leaf_polygon(size, obovate=obovate, angle=angle)
+            inside = lambda q: cv2.pointPolygonTest(poly.astype(np.float32), (float(q[0]), float(q[1])), False) > 0  # noqa: E731
+            cv2.line(img, tuple(base.astype(int)), tuple((base + up * 0.6 * size).astype(int)), (120, 200, 140), 3)
+            for s in np.linspace(0.12, 0.5, 7) * size:  # laterals: outwards and forwards, on both sides
+                for side in (-1.0, 1.0):
+                    p0 = base + up * s
+                    p1 = p0 + (side * right * 0.9 + up * 0.55) * 0.2 * size
+                    while not inside(p1) and np.linalg.norm(p1 - p0) > 5:
+                        p1 = p0 + 0.9 * (p1 - p0)
+                    cv2.line(img, tuple(p0.astype(int)), tuple(p1.astype(int)), (110, 190, 130), 2)
+            img = np.clip(img + rng.normal(0.0, 3.0, (size, size, 1)), 0, 255).astype(np.uint8)
+            t = _trace_img(tmp_path, img, f"veined_{obovate}_{angle:g}.png")
+            assert t.base_method == ("veins" if obovate else "shape"), (angle, obovate, t.base_method, t.vein_direction)
+            assert np.linalg.norm(t.base_px - base) < 0.05 * size, (angle, obovate, t.base_px, base)
+            assert vein_direction(img, t.mask, t.base_px, t.apex_px) > 0.1
+    flat, _ = photo(size, obovate=True, petiole=0.0)
+    t = _trace_img(tmp_path, flat, "flat.png")
+    assert t.base_method == "shape" and abs(t.vein_direction) < 0.1
+    assert t.apex_px[1] > 0.6 * size  # the shape's guess, upside down, and said (the warning)
