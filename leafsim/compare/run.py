@@ -13,6 +13,7 @@ for that stage (``young``, ``dried`` = 2 % of the water left, or a frame number)
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,7 +22,7 @@ import numpy as np
 
 from leafsim.appearance.photo import species_photo_rgba
 from leafsim.appearance.view import LeafView
-from leafsim.base.errors import LeafsimError
+from leafsim.base.errors import LeafsimError, LeafsimWarning
 from leafsim.base.resources import display_path
 from leafsim.compare import metrics as C
 from leafsim.outline.trace import refuse_non_leaf, to_leaf_shape
@@ -109,7 +110,8 @@ def _reference(path, params, frame, length_m, base_px=None, apex_px=None, key: s
     # a given end on the background (or another leaf) would match the wrong leaf axis
     error = error or (lambda name, msg: LeafsimError(f"{key}{name} {msg}"))
     check_given_ends(traced, path, {"base_px": base_px, "apex_px": apex_px}, lambda name, msg: error(key + name, msg))
-    refuse_non_leaf(traced)  # a cut leaf, the background or a rectangle would give a meaningless IoU
+    for text in refuse_non_leaf(traced):  # refuses a cut leaf, the background or a rectangle (a meaningless IoU)
+        warnings.warn(LeafsimWarning(f"{path}: {text}"), stacklevel=1)  # and says what only warns (a guessed base)
     return C.reference(traced, to_leaf_shape(traced, length_m), frame)
 
 

@@ -55,9 +55,10 @@ class TracedOutline:
     image_size : (w, h) of the photo.
     path : str — the photo path as given.
     petiole_px : (2, 2) float64 [junction, tip] of the detected petiole, or None.
-    base_method : "given", "petiole", "shape" or "veins" (how the base was found: given,
-        the stalk's junction, the shape's guess, or that guess turned end for end because the
-        photo's side veins open towards the other end: :func:`~leafsim.outline.landmarks.vein_direction`).
+    base_method : "given", "petiole", "apex", "shape" or "veins" (how the base was found: given,
+        the stalk's junction, the end opposite a given apex, the shape's guess, or that guess
+        turned end for end because the photo's side veins open towards the other end:
+        :func:`~leafsim.outline.landmarks.vein_direction`).
     vein_direction : that score for the shape's guess (None: not asked, the base was given or found).
     seconds : wall-clock time of the trace.
     work_scale : the photo was traced downscaled by this factor (1.0: at full size); ``mask``
@@ -292,13 +293,16 @@ def _trace(img: np.ndarray, p: ParamSet, where: str, base_px, apex_px) -> Traced
     b = _petiole(lab, mask, holes, where, base_px is not None)
     simp, dense = _polygon(b.mask, eps)
     L_est = float(max(np.ptp(dense[:, 0]), np.ptp(dense[:, 1]), 1.0))
-    method = "given" if base_px is not None else ("petiole" if b.junction is not None else "shape")
+    method = ("given" if base_px is not None else "petiole" if b.junction is not None
+              else "apex" if apex_px is not None else "shape")
     if base_px is not None:
         base = np.asarray(base_px, float).reshape(2)
     elif b.junction is not None:
         near = dense[int(np.argmin(np.linalg.norm(dense - b.junction, axis=1)))]
         # on the margin, or on a sinus behind overlapping lobes (inside the silhouette)
         base = near.copy() if np.linalg.norm(near - b.junction) < 2.0 * (b.width or 1.0) + 2.0 else b.junction.copy()
+    elif apex_px is not None:  # the end opposite the given apex (the shape's guess could be the apex itself)
+        base = dense[int(np.argmax(np.linalg.norm(dense - np.asarray(apex_px, float).reshape(2), axis=1)))].copy()
     else:
         base = _base_from_shape(dense, b.mask, L_est)
     apex0 = np.asarray(apex_px, float).reshape(2) if apex_px is not None else dense[int(np.argmax(np.linalg.norm(dense - base, axis=1)))]

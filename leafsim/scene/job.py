@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -21,7 +22,7 @@ import numpy as np
 
 from leafsim import __version__
 from leafsim.appearance.view import LeafView
-from leafsim.base.errors import LeafsimError
+from leafsim.base.errors import LeafsimError, LeafsimWarning
 from leafsim.base.fileio import atomic_write_bytes, npz_bytes, read_json
 from leafsim.config.species import get_species
 from leafsim.export.mesh import export_mesh
@@ -247,7 +248,9 @@ def run_leaf(job: LeafJob, out: str | Path) -> dict:
     folder = leaf_dir(Path(out), job.name)
     try:
         _single_thread()
-        result = _run(job, folder)
+        with warnings.catch_warnings():  # the scene's planner said them once, for every leaf of the species
+            warnings.simplefilter("ignore", LeafsimWarning)
+            result = _run(job, folder)
         result.update(name=job.name, ok=True, seconds=time.perf_counter() - t0, cpu_s=time.process_time() - c0)
         return result
     except Exception as e:  # every failure is this leaf's only

@@ -539,7 +539,7 @@ def test_a_run_that_blows_up_raises_diverged(oak):
     assert isinstance(e.value, LeafsimError) and "simulation unstable" in one_line(e)
 
 
-def test_a_state_of_another_build_of_the_same_size_is_refused():
+def test_a_state_of_another_build_of_the_same_size_is_refused(tmp_path):
     """Two oaks of one draft config and two seeds have arrays of the same shapes, so the shapes
     cannot tell their states apart: measured on the other model the fold read −37.7° (3.7°),
     and an export put one leaf's positions on the other's triangles.  Each state names its
@@ -556,7 +556,7 @@ def test_a_state_of_another_build_of_the_same_size_is_refused():
     assert st.particle_q.shape == b.particle_rest.shape and st.spring_rest.shape == b.spring_rest0.shape
     assert a.fingerprint != b.fingerprint and st.copy().model_key == a.fingerprint
     for call in (lambda: Run(b, p, state=st.copy()), lambda: Simulator(b, p).step(st.copy()),
-                 lambda: export_mesh(b, st, "never.glb", params=p), lambda: leaf_measures(b, st, p)):
+                 lambda: export_mesh(b, st, tmp_path / "never.glb", params=p), lambda: leaf_measures(b, st, p)):
         with pytest.raises(LeafsimError, match="state of another model") as e:
             call()
         one_line(e)

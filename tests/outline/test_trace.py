@@ -530,3 +530,18 @@ def test_an_obovate_leaf_without_a_stalk_is_turned_by_its_veins(tmp_path):
     t = _trace_img(tmp_path, flat, "flat.png")
     assert t.base_method == "shape" and abs(t.vein_direction) < 0.1
     assert t.apex_px[1] > 0.6 * size  # the shape's guess, upside down, and said (the warning)
+
+
+def test_a_given_apex_alone_puts_the_base_at_the_other_end(tmp_path):
+    """``apex_px`` without ``base_px`` and without a stalk: the base is the margin point farthest
+    from the given apex.  The shape's guess (the blunter end) put an obovate leaf's base on its
+    own apex, a leaf about a pixel long or "base and apex coincide"; the veins are not asked."""
+    img, _ = photo(600, obovate=True, petiole=0.0)
+    img = np.clip(img + np.random.default_rng(2).normal(0.0, 3.0, (600, 600, 1)), 0, 255).astype(np.uint8)
+    p = tmp_path / "leaf.png"
+    cv2.imwrite(str(p), img)
+    apex = (300.0, 0.45 * 600 - 0.31 * 600 + 2.0)  # the top of the blade (centre 0.45, half length 0.31)
+    t = trace_outline(p, None, apex_px=apex)
+    assert t.base_method == "apex" and t.vein_direction is None
+    assert t.base_px[1] > 0.7 * 600 and np.linalg.norm(t.apex_px - apex) < 1e-9
+    assert np.linalg.norm(t.apex_px - t.base_px) > 0.55 * 600
