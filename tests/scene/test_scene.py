@@ -527,3 +527,31 @@ def test_the_default_output_folder_is_made(tmp_path):
                        capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "out" / "dflt" / "placement.json").is_file()
+
+
+def test_a_species_warning_is_said_once_by_a_scene_on_two_workers(tmp_path):
+    """A photo without a stalk (its base guessed from the shape) warns once, as the scene plans
+    its leaves, in leafsim's own line; the worker processes that build the same species again
+    printed it once more each in Python's raw form (file, line and source)."""
+    import subprocess
+    import sys
+
+    from helpers.leafimg import photo
+    from helpers.paths import HANG_S, REPO
+
+    import cv2
+
+    img, _ = photo(400, obovate=False, petiole=0.0)
+    img = np.clip(img + np.random.default_rng(0).normal(0.0, 4.0, (400, 400, 1)), 0, 255).astype(np.uint8)
+    cv2.imwrite(str(tmp_path / "bare.png"), img)
+    (tmp_path / "leaves.json").write_text(json.dumps({"species": {"bare": {"name": "Bare", "image": "bare.png",
+                                                                           "length_m": 0.06}}}))
+    scene = _scene(tmp_path, name="bare", config="leaves.json", groups=[
+        {"name": "bare", "species": "bare", "count": 2, "seed": 1, "params": dict(TINY), "stop": {"frames": 3},
+         "output": {"mesh": None}}])
+    out = subprocess.run([sys.executable, "-m", "leafsim", "scene", str(scene), "--out", str(tmp_path / "out"),
+                          "--workers", "2"], capture_output=True, text=True, timeout=HANG_S, cwd=REPO)
+    assert out.returncode == 0, out.stderr[-800:]
+    lines = [ln for ln in out.stderr.splitlines() if "no stalk was found" in ln]
+    assert len(lines) == 1 and lines[0].startswith("leafsim: warning: "), out.stderr[-800:]
+    assert "warnings.warn" not in out.stderr and "LeafsimWarning" not in out.stderr
