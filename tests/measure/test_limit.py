@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from leafsim.base.errors import LeafsimError
 from leafsim.cli import main
 from leafsim.measure.limit import P_MAX, P_MIN, RATIO, extrapolate, richardson
 
@@ -48,8 +49,9 @@ def test_richardson_does_not_extrapolate_outside_the_asymptotic_range():
     assert lim == 1.1 and math.isnan(order) and math.isnan(raw)
     f = np.array([[1.0, -1.0], [1.2, -1.2], [1.1, -1.1]])
     lim, order, _, _ = richardson(list(f))
-    np.testing.assert_array_equal(lim, f[2]) and math.isnan(order)
-    with pytest.raises(Exception, match="three meshes"):
+    np.testing.assert_array_equal(lim, f[2])
+    assert math.isnan(order)
+    with pytest.raises(LeafsimError, match="three meshes"):
         richardson([1.0, 2.0])
 
 
