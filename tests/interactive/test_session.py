@@ -140,9 +140,25 @@ def test_reset(s):
 
 def test_seed_and_species_changes_need_rebuild(s):
     seed = s.seed
-    assert s.set_seed(seed + 1) is True
+    assert not s.pending_rebuild
+    assert s.set_seed(seed + 1) is True and s.pending_rebuild
     s.set_seed(seed)
     assert not s.pending_rebuild
+    built, model = s.built_species, s.model
+    assert built == s.species_key == "oak"
+    try:
+        s.set_species("maple", rebuild=False)  # staged: the oak stays on screen
+        assert s.species_key == "maple" and s.pending_rebuild and s.model is model and not s.building
+        # the species alone needs a rebuild, even with the built parameters in place
+        s.set_params(s.built_params)
+        assert not s.params.rebuild_differs(s.built_params) and s.seed == s.built_seed and s.pending_rebuild
+        s.set_species(built, rebuild=False)
+        assert s.species_key == built and not s.pending_rebuild
+    finally:
+        if s.species_key != built:
+            s.set_species(built, rebuild=False)
+        s.set_params(s.species.params)
+    assert s.model is model and not s.pending_rebuild
 
 
 def test_save_load_roundtrip(s, tmp_path):
