@@ -20,16 +20,58 @@ from leafsim.interactive.eta import (
     time_left,
     time_left_from_decay,
 )
+from helpers.paths import HANG_S
 from leafsim.sim.run import DRY_END_FRACTION
 
 
-def until(cond, timeout=600.0):
+def until(cond, timeout=HANG_S):
+    """Poll ``cond`` until it holds; ``timeout`` only bounds a hang (never a speed requirement)."""
     t0 = time.time()
     while time.time() - t0 < timeout:
         if cond():
             return True
         time.sleep(0.005)
     return cond()
+
+
+def idle_waits(w) -> int:
+    """How often the worker thread has gone to wait on its condition with nothing wanted
+    (counted from the first call for ``w``, which wraps the wait).  ``_turn`` waits there when
+    there is nothing to do (``_pace`` waits while playing, counted only once paused): the count
+    rising after a pause means the step that was in flight has finished and the worker steps
+    again only when asked."""
+    n = getattr(w, "_test_idle_waits", None)
+    if n is None:
+        n = w._test_idle_waits = [0]
+        real = w._cond.wait
+
+        def wait(timeout=None):
+            if not w._wanted():  # called holding the condition's lock
+                n[0] += 1
+            return real(timeout)
+
+        w._cond.wait = wait
+    return n[0]
+
+
+def assert_stays_paused(pb):
+    """The worker, told to stop stepping (paused, an error, a pause frame reached), steps at most
+    the one step already in flight, then goes idle; after waking once more with nothing to do
+    (its idle wait times out every 0.25 s) it has not stepped and published nothing new.
+    Synchronised on the worker's own idle waits (progress), never on a clock."""
+    w = pb.worker
+    f_pause = w.run.state.frame  # read after the pause: at most one step can still be in flight
+    n = idle_waits(w)
+    assert until(lambda: idle_waits(w) > n or w.run.state.frame > f_pause + 1)
+    f = w.run.state.frame
+    assert f <= f_pause + 1, (f_pause, f)
+    pb.take_snapshot()
+    shown = pb.state.frame
+    n = idle_waits(w)
+    assert until(lambda: idle_waits(w) > n or w.run.state.frame != f)  # woke, nothing to do, waits again
+    assert w.run.state.frame == f
+    assert not pb.take_snapshot() and pb.state.frame == shown  # nothing new published either
+    return f
 
 
 @pytest.fixture()
@@ -74,12 +116,8 @@ def test_plays_in_background_and_snapshots_stay_consistent(s):
     fr = list(s.playback.history["frame"])
     assert fr == sorted(fr) and fr[0] == 0 and fr[-1] == s.frame
     s.playback.play(False)
-    time.sleep(0.1)
-    s.playback.take_snapshot()
-    f = s.frame
-    time.sleep(0.2)
-    s.playback.take_snapshot()
-    assert s.frame == f and not s.playback.playing
+    assert_stays_paused(s.playback)
+    assert not s.playback.playing
 
 
 def test_sim_rate_reads_zero_once_paused(s):
@@ -107,10 +145,8 @@ def test_live_params_reach_the_worker_while_it_plays(s):
 
 def test_single_steps_while_paused(s):
     s.playback.request_steps(3)
-    assert until(lambda: s.playback.take_snapshot() and s.frame == 3)
-    time.sleep(0.2)
-    s.playback.take_snapshot()
-    assert s.frame == 3
+    assert until(lambda: s.playback.take_snapshot() and s.frame >= 3)  # (== 3 would wait for ever past it)
+    assert assert_stays_paused(s.playback) == 3 and s.frame == 3
 
 
 def test_speed_limits_simulated_time(s):
@@ -128,7 +164,7 @@ def test_speed_limits_simulated_time(s):
     s.playback.set_speed(None)
     f, t1 = s.frame, time.time()
     assert until(lambda: (s.playback.take_snapshot() or True)
-                 and s.frame - f > 5 * (time.time() - t1) * 1.5 + 30, 120), (s.frame - f, time.time() - t1)
+                 and s.frame - f > 5 * (time.time() - t1) * 1.5 + 30), (s.frame - f, time.time() - t1)
 
 
 def test_dry_to_end(s):
@@ -136,7 +172,7 @@ def test_dry_to_end(s):
     assert s.playback.dry_time_left() is None  # not drying: nothing to estimate
     s.playback.dry_to_end()
     assert s.playback.drying
-    assert until(lambda: (s.playback.take_snapshot() or True) and not s.playback.drying, 120)
+    assert until(lambda: (s.playback.take_snapshot() or True) and not s.playback.drying)
     s.playback.take_snapshot()
     assert s.water_fraction() <= DRY_END_FRACTION + 1e-9
     assert s.playback.dry_progress() == pytest.approx(1.0) and not s.playback.playing
@@ -161,10 +197,7 @@ def test_divergence_stops_and_reports(s):
         s.playback.worker.run.state.particle_q[0, 0] = np.nan
     assert until(lambda: (s.playback.take_snapshot() or True) and s.playback.sim_error is not None)
     assert "diverged" in s.playback.sim_error
-    f = s.frame
-    time.sleep(0.2)
-    s.playback.take_snapshot()
-    assert s.frame == f
+    assert_stays_paused(s.playback)
     s.reset()
     assert s.frame == 0 and s.playback.sim_error is None
 
@@ -179,7 +212,7 @@ def test_reset_and_rebuild_while_playing(s):
     s.apply_rebuild()
     assert s.wait(120)
     assert s.playback.worker is not old and s.playback.playing
-    assert until(lambda: not old.running, 10)  # the old worker thread ended
+    assert until(lambda: not old.running)  # the old worker thread ended
     assert until(lambda: s.playback.take_snapshot() and s.frame >= 2)
 
 
@@ -228,10 +261,8 @@ def test_warming_up_until_the_first_step_and_play_until_pauses_there():
         assert not pb.warming_up
         pb.start_worker()
         pb.play_until(7)
-        assert until(lambda: pb.take_snapshot() and s.frame == 7 and not pb.playing)
-        time.sleep(0.2)
-        pb.take_snapshot()
-        assert s.frame == 7 and not pb.playing
+        assert until(lambda: pb.take_snapshot() and s.frame >= 7 and not pb.playing)
+        assert assert_stays_paused(pb) == 7 and s.frame == 7
     finally:
         s.close()
 
@@ -348,7 +379,7 @@ def test_a_reset_asked_for_while_one_fails_is_still_made(s, monkeypatch):
     assert entered.wait(120)
     second = w.request_reset()
     release.set()
-    assert until(lambda: w.epoch >= second, 300)
+    assert until(lambda: w.epoch >= second)
     assert len(calls) == 2 and w.error is None
 
 
@@ -362,14 +393,14 @@ def test_dry_to_end_gives_up_with_a_reason_when_the_water_cannot_fall(s, monkeyp
     s.set_params({"osmosis.evaporation_top": 0.0, "osmosis.evaporation_bottom": 0.0})
     pb = s.playback
     pb.dry_to_end()
-    assert until(lambda: (pb.take_snapshot() or True) and not pb.drying, 120)
+    assert until(lambda: (pb.take_snapshot() or True) and not pb.drying)
     pb.take_snapshot()  # the frame it stopped at (published before "drying" went off)
     assert pb.dry_stalled and "has not fallen in 40 frames" in pb.dry_stalled and "\n" not in pb.dry_stalled
     assert 40 <= s.frame <= 60 and s.water_fraction() > 0.99
     s.set_params({"osmosis.evaporation_top": 50.0, "osmosis.evaporation_bottom": 50.0})
     pb.dry_to_end()
     assert pb.dry_stalled is None
-    assert until(lambda: (pb.take_snapshot() or True) and not pb.drying, 120)
+    assert until(lambda: (pb.take_snapshot() or True) and not pb.drying)
     pb.take_snapshot()
     assert pb.dry_stalled is None and s.water_fraction() <= DRY_END_FRACTION + 1e-9
     s.set_params({"effects.osmosis": False})
