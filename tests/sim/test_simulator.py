@@ -54,6 +54,7 @@ def test_water_conserved_without_loss(model, solver, through):
     rng = np.random.default_rng(0)
     st.particle_water[:] *= rng.uniform(0.2, 1.8, model.particle_count)  # non-uniform start
     tot0 = {l: st.particle_water[model.particle_layer == l].sum() for l in (LAYER_T, LAYER_V)}
+    c0 = st.particle_water / model.particle_cytosol
     for _ in range(1000 if solver == "direct" else 200):
         sim.step(st)
     if through:  # Jacobi converges slowly on the stiff through-thickness coupling (2000-sweep cap)
@@ -61,9 +62,13 @@ def test_water_conserved_without_loss(model, solver, through):
     else:
         for l in (LAYER_T, LAYER_V):
             assert st.particle_water[model.particle_layer == l].sum() == pytest.approx(tot0[l], rel=1e-6)
-    # diffusion evens out the concentration
+    # diffusion evens out the concentration: to a thousandth of its starting spread (1e-4 at most
+    # after these frames), within each layer when they are separate (their totals differ, so
+    # their levels do), over both when water crosses the thickness
     c = st.particle_water / model.particle_cytosol
-    assert c.std() < 0.5 * (rng.uniform(0.2, 1.8, 10).std() + 1)
+    for part in ([model.particle_layer >= 0] if through else [model.particle_layer == l for l in (LAYER_T, LAYER_V)]):
+        assert part.sum() > 100 and c0[part].std() > 0.5
+        assert c[part].std() < 1e-3 * c0[part].std(), (c0[part].std(), c[part].std())
     if through:  # and the layers reach the same concentration
         cT, cV = (c[model.particle_layer == l].mean() for l in (LAYER_T, LAYER_V))
         assert abs(cT - cV) < 1e-3 * cT
