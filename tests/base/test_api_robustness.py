@@ -13,6 +13,7 @@ import textwrap
 import numpy as np
 import pytest
 
+from helpers.paths import HANG_S
 from leafsim.base.errors import LeafsimError
 from leafsim.config.species import get_species
 from leafsim.export.mesh import export_mesh
@@ -138,7 +139,7 @@ def test_nan_frames_does_not_hang():
         except LeafsimError as e:
             print("refused:", e)
     """)
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG_S)
     assert "refused: Stop: frames" in out.stdout, out.stderr
 
 
@@ -166,7 +167,7 @@ def _crash_free(code: str) -> subprocess.CompletedProcess:
         M2 = build_leaf(sp, P2, seed=1).model
         S2 = Run(M2, P2).state
     """)
-    return subprocess.run([sys.executable, "-c", head + textwrap.dedent(code)], capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-c", head + textwrap.dedent(code)], capture_output=True, text=True, timeout=HANG_S)
 
 
 def test_state_of_another_model_does_not_crash():

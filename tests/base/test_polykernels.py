@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.paths import HANG_S
 from leafsim.base.geometry import distance_to_polygon, points_in_polygon
 
 
@@ -98,5 +99,5 @@ def test_listing_the_species_loads_no_compiler():
     code = ("import io, sys, contextlib\nfrom leafsim.cli import main\n"
             "with contextlib.redirect_stdout(io.StringIO()):\n    rc = main(['species'])\n"
             "print(rc, 'numba' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG_S)
     assert out.stdout.split() == ["0", "False"], out.stdout + out.stderr

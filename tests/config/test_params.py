@@ -2,6 +2,7 @@ import math
 
 import pytest
 
+from helpers.paths import HANG_S, REPO
 from leafsim.base.errors import LeafsimError
 from leafsim.config.params import GROUPS, PARAMS, ParamSet, markdown_table, parse_set_args
 
@@ -101,11 +102,9 @@ def test_quality_file_is_what_the_limit_studies_give():
     GUI's quality tooltip and `leafsim params` quote it; it had gone stale)."""
     import subprocess
     import sys
-    from pathlib import Path
 
-    root = Path(__file__).resolve().parents[2]
-    r = subprocess.run([sys.executable, str(root / "tools" / "quality_table.py"), "--check"], cwd=root,
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run([sys.executable, str(REPO / "tools" / "quality_table.py"), "--check"], cwd=REPO,
+                       capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stdout + r.stderr
 
 
