@@ -16,6 +16,7 @@ import pytest
 
 from helpers import leafimg
 from helpers.cli_contract import stdout_of_a_failure
+from helpers.paths import REPO
 from leafsim.cli import main
 
 OAK = ["--species", "oak", "--set", "mesh.spacing=0.06"]
@@ -485,7 +486,9 @@ def test_substeps_coarser_than_every_measured_level_are_named_not_run_silently(t
     from leafsim.commands.scene import _warn_unmeasured_substeps
     from leafsim.scene.run import load_scene
 
-    for scene in sorted(Path("configs/scenes").glob("*.json")):  # (the canopy's dt 0.05 s: colour only, no XPBD)
+    scenes = sorted((REPO / "configs" / "scenes").glob("*.json"))
+    assert len(scenes) >= 3, scenes  # the shipped scenes (an empty glob checked nothing)
+    for scene in scenes:  # (the canopy's dt 0.05 s: colour only, no XPBD)
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
             _warn_unmeasured_substeps(load_scene(scene))
