@@ -14,17 +14,17 @@ import subprocess
 import sys
 from pathlib import Path
 
+# hard dependencies (pyproject.toml): a broken install must fail here, not skip the GUI tests
+import imgui_bundle  # noqa: F401
+import moderngl  # noqa: F401
 import numpy as np
 import pytest
 
-pytest.importorskip("imgui_bundle")
-pytest.importorskip("moderngl")
-
-from helpers.gui import wait_until  # noqa: E402
+from helpers.gui import wait_until
 from helpers.paths import HANG_S
-from helpers.paths import REPO as ROOT  # noqa: E402
-from leafsim.base.errors import LeafsimError  # noqa: E402
-from leafsim.config.params import GROUPS, PARAMS  # noqa: E402
+from helpers.paths import REPO as ROOT
+from leafsim.base.errors import LeafsimError
+from leafsim.config.params import GROUPS, PARAMS
 
 pytestmark = pytest.mark.usefixtures("xdisplay")
 

@@ -11,15 +11,15 @@ from __future__ import annotations
 import json
 import os
 
+# hard dependencies (pyproject.toml): a broken install must fail here, not skip the GUI tests
+import imgui_bundle  # noqa: F401
+import moderngl  # noqa: F401
 import numpy as np
 import pytest
 
-pytest.importorskip("imgui_bundle")
-pytest.importorskip("moderngl")
-
-from helpers.gui import wait_until  # noqa: E402
-from leafsim.base.errors import LeafsimError  # noqa: E402
-from leafsim.config.params import PARAMS  # noqa: E402
+from helpers.gui import wait_until
+from leafsim.base.errors import LeafsimError
+from leafsim.config.params import PARAMS
 
 pytestmark = pytest.mark.usefixtures("xdisplay")
 
