@@ -122,6 +122,8 @@ class SimWorker:
         self._hold_next = 0  # ... the next frame it waits at
         self._held = False  # waiting there until the UI has drawn it (release_hold)
         self._steps_done = 0  # steps finished by this worker (0: the first may be compiling)
+        self._unpublished = False  # a step's frame is not published yet (publishing is paced)
+        self._last_ms: dict = {}  # that step's timings
         self._stop = False
         self._thread: threading.Thread | None = None
         self._records: list = []
@@ -170,14 +172,23 @@ class SimWorker:
                 t_next = time.perf_counter()
 
     def _turn(self, t_next: float) -> float | None:
-        """One request served (a step, a reset); None when asked to stop."""
+        """One request served (a step, a reset, the last step's frame published); None when
+        asked to stop.  Whether a step is wanted and which kind it is are decided in one locked
+        section: decided apart, a pause between the two ran a step as a "single" one and took
+        the count below zero, so the next Step did nothing."""
         with self._cond:
-            while not self._wanted():
+            while not self._wanted() and not self._unpublished:
                 self._cond.wait(0.25)
                 self._apply_params()  # parameters change while paused too
             if self._stop:
                 return None
             reset = self._reset_wanted if self._reset_wanted > self.epoch else 0  # the request served
+            step = not reset and self._wanted()
+            free = (self._playing or self._dry) and self.error is None and not self._held
+            if step and not free:
+                self._steps -= 1
+            speed = None if self._dry else self._speed
+            last_single = not free and self._steps == 0
         if reset:
             try:
                 with self._step_lock:
@@ -185,12 +196,11 @@ class SimWorker:
             except Exception as e:
                 self._failed(e, reset)
             return t_next
-        with self._cond:
-            free = (self._playing or self._dry) and self.error is None and not self._held
-            if not free:
-                self._steps -= 1
-            speed = None if self._dry else self._speed
-            last_single = not free and self._steps == 0
+        if not step:  # paused after free play: its last frame (publishing is paced) is shown
+            with self._step_lock:
+                if self._unpublished:
+                    self._publish(self._last_ms)
+            return time.perf_counter()
         self._step_once(publish_now=last_single)
         return self._pace(speed, t_next) if free else time.perf_counter()
 
@@ -260,6 +270,9 @@ class SimWorker:
             self.error = f"simulation {why} at frame {s.frame}: press Reset or lower dynamics.dt"
         self._rate.append((time.perf_counter(), s.time))
         self._steps_done += n
+        self._last_ms = ms
+        with self._cond:
+            self._unpublished = True
         return ms
 
     def _after_step(self, ms: dict, publish_now: bool) -> None:
@@ -332,6 +345,7 @@ class SimWorker:
                 snap.records = self._snap.records + snap.records
             self._snap = snap
             self._snap_taken = False
+            self._unpublished = False
             self.epoch = snap.epoch  # whoever sees the new epoch finds its snapshot published
 
     # ------------------------------------------------------------------ UI side

@@ -65,12 +65,17 @@ def assert_stays_paused(pb):
     assert until(lambda: idle_waits(w) > n or w.run.state.frame > f_pause + 1)
     f = w.run.state.frame
     assert f <= f_pause + 1, (f_pause, f)
-    pb.take_snapshot()
-    shown = pb.state.frame
     n = idle_waits(w)
     assert until(lambda: idle_waits(w) > n or w.run.state.frame != f)  # woke, nothing to do, waits again
     assert w.run.state.frame == f
-    assert not pb.take_snapshot() and pb.state.frame == shown  # nothing new published either
+    pb.take_snapshot()
+    # the last frame stepped is the one shown (publishing is paced while playing: the frame a
+    # pause stopped at was often never published, and the window showed an older one)
+    assert pb.state.frame == f, (pb.state.frame, f)
+    n = idle_waits(w)
+    assert until(lambda: idle_waits(w) > n or w.run.state.frame != f)
+    assert w.run.state.frame == f
+    assert not pb.take_snapshot() and pb.state.frame == f  # nothing new published either
     return f
 
 
@@ -147,6 +152,31 @@ def test_single_steps_while_paused(s):
     s.playback.request_steps(3)
     assert until(lambda: s.playback.take_snapshot() and s.frame >= 3)  # (== 3 would wait for ever past it)
     assert assert_stays_paused(s.playback) == 3 and s.frame == 3
+
+
+def test_a_pause_as_the_worker_wakes_does_not_swallow_the_next_step(s):
+    """The pause arriving just after the worker woke to play: it used to decide "a step is
+    wanted" and "free play or a single step" in two locked sections, so it ran the step as a
+    single one and took the count of requested steps to -1, and the next Step did nothing."""
+    w = s.playback.worker
+    real = w._wanted
+    paused_at = []
+
+    def wanted():  # called holding the worker's condition, as play(False) takes it
+        r = real()
+        if r and w._playing and not paused_at:
+            paused_at.append(w.run.state.frame)
+            w._playing = False  # the pause, right after the worker saw "playing"
+        return r
+
+    w._wanted = wanted
+    s.playback.play(True)
+    assert until(lambda: paused_at)
+    f = assert_stays_paused(s.playback)
+    assert w._steps == 0
+    s.playback.request_steps(1)
+    assert until(lambda: s.playback.take_snapshot() and s.frame >= f + 1)
+    assert assert_stays_paused(s.playback) == f + 1
 
 
 def test_speed_limits_simulated_time(s):
