@@ -203,52 +203,6 @@ def _restore_petiole(raw: np.ndarray, opened: np.ndarray, leaf: np.ndarray, lab:
     return out
 
 
-#: a removed piece next to the leaf at most this fraction of the leaf's size across is a tooth tip
-TOOTH_MAX = 0.04
-#: the background is clean (no grid lines, no texture) when the opening removed at most this
-#: share of it away from the leaf
-CLEAN_BACKGROUND = 0.005
-
-
-def _clean_background(raw: np.ndarray, opened: np.ndarray, leaf: np.ndarray) -> bool:
-    """Whether the clean-up opening removed (next to) nothing away from the leaf: farther than
-    2 % of the image diagonal from it, at most :data:`CLEAN_BACKGROUND` of the background was
-    thin foreground.  Graph paper's lines are (2.6 % on the grapevine photo); a plain sheet is
-    not (≤ 0.07 % on the shipped photos and on a grey sheet)."""
-    h, w = leaf.shape
-    far = cv2.dilate(leaf, _disk(max(3, int(0.02 * math.hypot(w, h))))) == 0
-    n_far = np.count_nonzero(far)
-    if not n_far:
-        return True
-    removed = (raw > 0) & (opened == 0) & far
-    return np.count_nonzero(removed) <= CLEAN_BACKGROUND * n_far
-
-
-def _restore_teeth(raw: np.ndarray, opened: np.ndarray, leaf: np.ndarray) -> np.ndarray:
-    """Give back the tooth tips the clean-up opening cut off the margin (a doubly serrate
-    hornbeam's are narrower than its disk): every removed piece touching the leaf, away from
-    the image border, at most :data:`TOOTH_MAX` of the leaf's size across.  Only where what
-    the opening removes is no clutter: an alpha cut-out, a clean background
-    (:func:`_clean_background`); on graph paper the pieces at the margin are mostly the grid's
-    line stubs, and their colours are the tooth tips' (brown on a buff sheet)."""
-    removed = (raw > 0) & (opened == 0) & (leaf == 0)
-    if not removed.any():
-        return leaf
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(removed.astype(np.uint8), connectivity=8)
-    ring = cv2.dilate(leaf, _disk(2)) > 0
-    size = math.sqrt(max(np.count_nonzero(leaf), 1))
-    H, W = leaf.shape
-    out = leaf.copy()
-    for k in range(1, n):
-        x, y, w, h, _ = stats[k]
-        if x == 0 or y == 0 or x + w >= W or y + h >= H or max(w, h) > TOOTH_MAX * size:
-            continue
-        piece = labels[y : y + h, x : x + w] == k
-        if np.any(piece & ring[y : y + h, x : x + w]):
-            out[y : y + h, x : x + w][piece] = 255
-    return out
-
-
 def _colour_segments(bgr: np.ndarray, path: str):
     """:func:`_colour_foreground` against one background colour; when that leaves no
     leaf-sized region away from the border (a sheet lit from one side: its darker half joins
@@ -273,9 +227,8 @@ def segment_leaf(img: np.ndarray, path: str = "image") -> np.ndarray:
     Uses the alpha channel when it is informative, else the Lab colour distance to the
     background (estimated from a border strip, or from the corners when the leaf touches the
     frame), thresholded with Otsu; cast shadows are background.  Thin clutter (graph paper
-    grid lines, specks) is removed by a small opening (a petiole it cuts off is given back,
-    and so are the tooth tips it cut when the background is clean or the mask is an alpha
-    cut-out), small gaps are closed, the largest component that does not run along the image border wins
+    grid lines, specks) is removed by a small opening (a petiole it cuts off is given back),
+    small gaps are closed, the largest component that does not run along the image border wins
     (a ruler or colour chart lying at the edge loses), and its holes are filled.
 
     Raises LeafsimError ``<path>: no leaf found (...)`` when nothing leaf-sized stands out, and
@@ -306,10 +259,7 @@ def segment_with_holes(img: np.ndarray, path: str = "image") -> tuple[np.ndarray
     k_close = max(3, int(round(0.006 * diag)))
     opened = cv2.morphologyEx(fg, cv2.MORPH_OPEN, _disk(k_open))
     leaf = _pick_leaf(cv2.morphologyEx(opened, cv2.MORPH_CLOSE, _disk(k_close)), path)
-    whole = _restore_petiole(fg, opened, leaf, lab)
-    if lab is None or _clean_background(fg, opened, leaf):
-        whole = _restore_teeth(fg, opened, whole)
-    filled = _fill_holes(whole)
+    filled = _fill_holes(_restore_petiole(fg, opened, leaf, lab))
     holes = kept_holes(filled, leaf, HOLE_MIN_FRACTION)
     return filled, (holes if lab is None else background_holes(holes, filled, lab))
 

@@ -119,27 +119,6 @@ def test_margin_teeth_kept_on_serrate_photos(species):
     assert silhouette_iou(mask, ref.blade) >= 0.99
 
 
-@pytest.mark.parametrize("species", ["hornbeam", "oak"])
-def test_traced_blade_keeps_the_alpha_cut_outs_margin(species):
-    """Against the photo itself: the traced blade's margin is within 1 % of the alpha channel's
-    (its stalk left out) at the comparison's resolution.  The clean-up opening cut hornbeam's
-    doubly serrate tooth tips (0.969; the teeth are given back on an alpha cut-out and a clean
-    sheet: 0.998), so the margin ratio was taken against a yardstick that shared the blunting."""
-    sp = get_species(species)
-    t = trace_outline(sp.image, sp.params, base_px=sp.base_px, apex_px=sp.apex_px)
-    img = cv2.imread(str(sp.image), cv2.IMREAD_UNCHANGED)
-    assert img.shape[2] == 4
-    alpha = np.where(img[..., 3] >= 128, 255, 0).astype(np.uint8)
-    blade = alpha.copy()
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(cv2.bitwise_and(alpha, cv2.bitwise_not(t.mask)), connectivity=8)
-    size = np.sqrt(np.count_nonzero(t.mask))
-    stalks = [i for i in range(1, n) if max(stats[i][2], stats[i][3]) > 0.04 * size]
-    assert len(stalks) == 1  # the stalk sticking out; nothing else of the cut-out is missing
-    blade[labels == stalks[0]] = 0
-    L = float(np.linalg.norm(np.asarray(t.apex_px) - t.base_px))
-    assert margin_length(t.mask, L) / margin_length(blade, L) >= 0.99
-
-
 def test_petiole_with_given_base_is_cut_and_never_blade():
     """The hornbeam's base is given in the config; its petiole (sticking out below the blade)
     used to stay in the outline as a thin blade strip."""
