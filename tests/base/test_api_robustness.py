@@ -552,7 +552,19 @@ def test_a_state_of_another_build_of_the_same_size_is_refused(tmp_path):
 
     sp = get_species("oak")
     p = sp.params.with_overrides(quality_overrides("draft"))
-    a, b = build_leaf(sp, p, seed=15).model, build_leaf(sp, p, seed=29).model
+
+    def shapes(model):  # every array of its fresh state
+        return tuple((k, v.shape) for k, v in sorted(vars(model.state()).items()) if isinstance(v, np.ndarray))
+
+    seen = {}
+    for seed in range(60):  # the first two seeds whose builds have arrays of the same shapes
+        m = build_leaf(sp, p, seed=seed).model  # (a seed moves the surface particles; 4 and 14 today)
+        if shapes(m) in seen:
+            a, b = seen[shapes(m)], m
+            break
+        seen[shapes(m)] = m
+    else:
+        pytest.fail("no two of 60 seeds build a draft oak of the same size")
     st = Run(a, p).state
     assert st.particle_q.shape == b.particle_rest.shape and st.spring_rest.shape == b.spring_rest0.shape
     assert a.fingerprint != b.fingerprint and st.copy().model_key == a.fingerprint
