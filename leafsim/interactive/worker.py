@@ -220,6 +220,9 @@ class SimWorker:
                 self.error = (f"simulation failed ({type(e).__name__}: {e}) at frame {self.run.state.frame}: "
                               "press Reset or change the parameters")
             self._dry = self._playing = False
+            # the frame is published below or not at all: left "unpublished", a snapshot that
+            # keeps failing (a record or render raising) made _turn retry it without waiting
+            self._unpublished = False
             self._cond.notify_all()
         try:
             with self._step_lock:  # as every other publish: not beside a step of the caller's thread

@@ -438,3 +438,34 @@ def test_dry_to_end_gives_up_with_a_reason_when_the_water_cannot_fall(s, monkeyp
     s.set_params({"effects.osmosis": False})
     pb.dry_to_end()
     assert not pb.drying and "effects.osmosis off" in pb.dry_stalled
+
+
+def test_a_snapshot_that_keeps_failing_leaves_the_worker_idle(s):
+    """A record (or render) that raises: the run stops with the error and the worker waits.
+    The stepped frame stayed "unpublished", so the worker retried publishing it at once, failed
+    again, and spun without ever waiting (a whole core, the GIL taken from the UI thread)."""
+    w = s.playback.worker
+    real = w._record
+
+    def record(state, ms):
+        if state.frame >= 1:
+            raise RuntimeError("record broke")
+        return real(state, ms)
+
+    w._record = record
+    turns = [0]
+    turn = w._turn
+
+    def counted(t):
+        turns[0] += 1
+        return turn(t)
+
+    w._turn = counted
+    s.playback.play(True)
+    assert until(lambda: w.error is not None)
+    assert "record broke" in w.error and not w.playing
+    n, t0 = idle_waits(w), turns[0]
+    # spinning, it served thousands of turns without one idle wait
+    assert until(lambda: idle_waits(w) > n + 1 or turns[0] > t0 + 1000)
+    assert turns[0] <= t0 + 10, turns[0] - t0
+    assert w.running
